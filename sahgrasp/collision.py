@@ -1,0 +1,98 @@
+"""Self-collision of a hand: coal geometry of the URDF collision shapes and the pairs to check.
+
+Adjacent bodies touch by design (a phalanx and its parent), so pairs whose bodies hang from the
+same joint or from a parent/child pair of joints are not checked; a hand description may exclude
+more pairs by link name (e.g. the SAH finger bases with the palm). Every other pair is checked.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+__all__ = ["CollisionPair", "SelfCollision"]
+
+
+@dataclass(frozen=True)
+class CollisionPair:
+    """Two links whose collision shapes are checked against each other."""
+
+    link_a: str
+    link_b: str
+
+
+class SelfCollision:
+    """Self-collision queries on one Pinocchio model and its coal collision geometry.
+
+    Args:
+        model: The hand's Pinocchio model (any root joint).
+        geometry_model: Collision geometry built from the same URDF (pairs are replaced here).
+        excluded_links: Pairs of link names never to check, in either order.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        geometry_model: pin.GeometryModel,
+        excluded_links: Iterable[tuple[str, str]] = (),
+    ) -> None:
+        self.model = model
+        self.geometry_model = geometry_model
+        excluded = {frozenset(p) for p in excluded_links}
+        geometry_model.removeAllCollisionPairs()
+        objects = geometry_model.geometryObjects
+        for a in range(len(objects)):
+            for b in range(a + 1, len(objects)):
+                if self._checked(objects[a], objects[b], excluded):
+                    geometry_model.addCollisionPair(pin.CollisionPair(a, b))
+        self.geometry_data = pin.GeometryData(geometry_model)
+        self.data = model.createData()
+
+    def _link(self, obj: pin.GeometryObject) -> str:
+        return str(self.model.frames[obj.parentFrame].name)
+
+    def _checked(
+        self, a: pin.GeometryObject, b: pin.GeometryObject, excluded: set[frozenset[str]]
+    ) -> bool:
+        ja, jb = a.parentJoint, b.parentJoint
+        parents = self.model.parents
+        if ja == jb or parents[ja] == jb or parents[jb] == ja:
+            return False
+        return frozenset((self._link(a), self._link(b))) not in excluded
+
+    @property
+    def pairs(self) -> tuple[CollisionPair, ...]:
+        """The link pairs that are checked."""
+        objs = self.geometry_model.geometryObjects
+        return tuple(
+            CollisionPair(self._link(objs[p.first]), self._link(objs[p.second]))
+            for p in self.geometry_model.collisionPairs
+        )
+
+    def in_collision(self, q: NDArray[np.float64]) -> bool:
+        """Return True if any checked pair of shapes intersects at configuration ``q``."""
+        return bool(
+            pin.computeCollisions(
+                self.model, self.data, self.geometry_model, self.geometry_data, q, True
+            )
+        )
+
+    def colliding_pairs(self, q: NDArray[np.float64]) -> tuple[CollisionPair, ...]:
+        """Return every checked pair that intersects at ``q``."""
+        pin.computeCollisions(
+            self.model, self.data, self.geometry_model, self.geometry_data, q, False
+        )
+        return tuple(
+            pair
+            for pair, result in zip(self.pairs, self.geometry_data.collisionResults, strict=True)
+            if result.isCollision()
+        )
+
+    def min_distance(self, q: NDArray[np.float64]) -> float:
+        """Smallest signed distance [m] over the checked pairs (negative: penetration)."""
+        pin.computeDistances(self.model, self.data, self.geometry_model, self.geometry_data, q)
+        return float(min(r.min_distance for r in self.geometry_data.distanceResults))

@@ -1,0 +1,41 @@
+"""Typed errors of sahgrasp.
+
+Every error a user can trigger with bad input is a :class:`SahGraspError` subclass whose message
+names what was wrong and what is valid. Unreachable grasps are *not* errors: the IK returns a result
+with ``success=False``.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AtlasError",
+    "HandModelError",
+    "InvalidConfigurationError",
+    "InvalidTargetError",
+    "SahGraspError",
+    "SequenceFileError",
+]
+
+
+class SahGraspError(Exception):
+    """Base class of every error raised on purpose by sahgrasp."""
+
+
+class HandModelError(SahGraspError):
+    """A hand description or URDF is missing, malformed or inconsistent."""
+
+
+class InvalidConfigurationError(SahGraspError):
+    """A joint vector or configuration has the wrong size, or holds NaN/inf."""
+
+
+class InvalidTargetError(SahGraspError):
+    """A contact target is malformed: unknown finger, NaN/inf, non-unit normal, ..."""
+
+
+class SequenceFileError(SahGraspError):
+    """A sequence or checkpoint file is corrupted, foreign, or made for another hand."""
+
+
+class AtlasError(SahGraspError):
+    """The atlas problem is ill-posed: shapes disagree, start point off the manifold, bad k."""
