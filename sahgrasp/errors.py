@@ -11,6 +11,7 @@ __all__ = [
     "AtlasError",
     "HandModelError",
     "InvalidConfigurationError",
+    "InvalidSettingsError",
     "InvalidTargetError",
     "SahGraspError",
     "SequenceFileError",
@@ -27,6 +28,10 @@ class HandModelError(SahGraspError):
 
 class InvalidConfigurationError(SahGraspError):
     """A joint vector or configuration has the wrong size, or holds NaN/inf."""
+
+
+class InvalidSettingsError(SahGraspError):
+    """A solver or search parameter is out of its valid range."""
 
 
 class InvalidTargetError(SahGraspError):

@@ -547,10 +547,10 @@ class Hand:
             if f.type == pin.FrameType.BODY
         }
 
-    def tip_placement(self, q: NDArray[np.float64], finger: str) -> pin.SE3:
-        """World placement of ``finger``'s fingertip-sphere centre frame (its tip link)."""
+    def contact_placement(self, q: NDArray[np.float64], finger: str) -> pin.SE3:
+        """World placement of ``finger``'s contact frame (origin = point, x = outward normal)."""
         pin.forwardKinematics(self.model, self.data, q)
-        frame = self._tip_frames[self.fingers.index(finger)]
+        frame = self._contact_frames[self._finger_index(finger)]
         return pin.updateFramePlacement(self.model, self.data, frame).copy()
 
     def contact_frame_id(self, finger: str) -> int:

@@ -1,0 +1,311 @@
+"""Initial hand configurations of Algorithm 1 (ik-initial-sequence Sections 3.1 and 3.2).
+
+* :class:`PoseBasis` -- the PCA of a set S of sampled hand poses: mean ``m``, principal directions
+  ``c_1, c_2`` and deviations ``sigma_1, sigma_2`` (Eq. (11)). Poses live in the paper's
+  ``Q`` space (Eq. (4)): every finger joint including the coupled (mimic) ones, plus the virtual
+  contact joints -- 25 values for the SAH.
+* :class:`Sequence` -- the lambdas ``SEQ = (lambda_1, ..., lambda_imax)`` and the basis they refer
+  to, with the hand they were made for; read and written as JSON.
+* :func:`hang_from_thumb` -- ``Obtain_Initial_Conf``: the pose ``Q_i`` plus the wrist placed so that
+  the thumb satisfies its contact (Eq. (3)) and the rotation ``psi`` about the thumb normal that
+  aligns the index-ring direction with the target's.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.errors import SequenceFileError
+from sahgrasp.fileio import write_json_atomic
+from sahgrasp.hand import Hand
+
+__all__ = [
+    "PAPER_TABLE1_LAMBDAS",
+    "PoseBasis",
+    "Sequence",
+    "default_sequence",
+    "expansion_matrix",
+    "hang_from_thumb",
+    "pose_basis",
+    "rotation_aligning_x",
+]
+
+PAPER_TABLE1_LAMBDAS: tuple[tuple[float, float], ...] = (
+    (0.517, 0.483), (0.793, 0.552), (0.310, 0.690), (0.0, 0.517),
+    (0.690, 0.448), (0.138, 0.241), (0.034, 0.827), (0.655, 0.241),
+    (0.690, 0.0), (0.690, 0.448), (0.724, 0.276), (0.276, 0.827),
+)  # fmt: skip
+"""Table 1 of ik-initial-sequence: (lambda^1, lambda^2) of the 12 initial poses."""
+
+PCA_SAMPLES = 10_000
+PCA_SEED = 20120101
+
+
+def expansion_matrix(hand: Hand) -> NDArray[np.float64]:
+    """Matrix ``E`` mapping independent coordinates ``q[7:]`` to the paper's pose vector ``Q``.
+
+    ``Q`` lists every coordinate and then every mimic joint (``multiplier * leader``; offsets are
+    added by :meth:`PoseBasis.coordinates`), so for the SAH ``E`` is 25 x 21.
+    """
+    n = len(hand.coordinate_names)
+    rows = [np.eye(n)]
+    for leader, scale, _ in hand.mimic_joints.values():
+        row = np.zeros((1, n))
+        row[0, hand.coordinate_index(leader)] = scale
+        rows.append(row)
+    return np.vstack(rows)
+
+
+def _mimic_offsets(hand: Hand) -> NDArray[np.float64]:
+    n = len(hand.coordinate_names)
+    offsets = [offset for _, _, offset in hand.mimic_joints.values()]
+    return np.concatenate([np.zeros(n), np.asarray(offsets, dtype=np.float64)])
+
+
+@dataclass(frozen=True)
+class PoseBasis:
+    """PCA of sampled hand poses in ``Q`` space (Eq. (11)).
+
+    Attributes:
+        mean: ``m``, shape (dim Q,).
+        directions: ``c_1, c_2`` as rows, unit vectors, shape (2, dim Q).
+        sigmas: ``sigma_1, sigma_2``, standard deviations of S along them [rad].
+    """
+
+    mean: NDArray[np.float64]
+    directions: NDArray[np.float64]
+    sigmas: NDArray[np.float64]
+
+    def pose(self, lambdas: tuple[float, float] | NDArray[np.float64]) -> NDArray[np.float64]:
+        """``Q_i = m + 3 sigma_1 (2 lambda^1 - 1) c_1 + 3 sigma_2 (2 lambda^2 - 1) c_2``, Eq. (11)."""
+        lam = np.asarray(lambdas, dtype=np.float64)
+        return np.asarray(self.mean + (3.0 * self.sigmas * (2.0 * lam - 1.0)) @ self.directions)
+
+    def coordinates(self, hand: Hand, lambdas: tuple[float, float]) -> NDArray[np.float64]:
+        """Independent coordinates ``q[7:]`` of pose ``Q_i``, clamped to the joint limits.
+
+        ``Q_i`` lies in the span of the sampled poses, where coupled joints are equal, so reading
+        the independent entries loses nothing. Extreme lambdas (+-3 sigma) can leave the joint
+        range: those coordinates are clamped to their limits.
+        """
+        n = len(hand.coordinate_names)
+        coords = self.pose(lambdas)[:n]
+        return np.clip(coords, hand.lower, hand.upper)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form."""
+        return {
+            "mean": self.mean.tolist(),
+            "directions": self.directions.tolist(),
+            "sigmas": self.sigmas.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PoseBasis:
+        """Inverse of :meth:`to_dict`."""
+        return cls(
+            np.asarray(data["mean"], dtype=np.float64),
+            np.asarray(data["directions"], dtype=np.float64),
+            np.asarray(data["sigmas"], dtype=np.float64),
+        )
+
+
+def pose_basis(hand: Hand, samples: int = PCA_SAMPLES, seed: int = PCA_SEED) -> PoseBasis:
+    """PCA of ``samples`` hand poses drawn uniformly within the joint limits, collision-free.
+
+    S is sampled as the paper says ("randomly generated"): every independent finger joint and
+    virtual contact joint uniform in its range, coupled joints following their leader, and only
+    poses without self-collision kept (they are the poses an initial configuration should
+    resemble). The PCA is the eigen-decomposition of the covariance of the mean-centred ``Q``.
+    """
+    rng = np.random.default_rng(seed)
+    E, offsets = expansion_matrix(hand), _mimic_offsets(hand)
+    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
+    Q = X @ E.T + offsets
+    mean = Q.mean(axis=0)
+    eigvals, eigvecs = np.linalg.eigh(np.cov(Q - mean, rowvar=False))
+    order = np.argsort(eigvals)[::-1][:2]
+    directions = eigvecs[:, order].T
+    # Sign convention: the largest component of each direction is positive (reproducible files).
+    signs = np.sign(directions[np.arange(2), np.argmax(np.abs(directions), axis=1)])
+    return PoseBasis(mean, directions * signs[:, None], np.sqrt(eigvals[order]))
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """A sequence of initial poses for one hand (ik-initial-sequence Section 3.2).
+
+    Attributes:
+        hand: Hand name.
+        hand_digest: :meth:`HandDescription.digest` of the hand it was made for.
+        basis: The PCA basis the lambdas refer to.
+        lambdas: ``(lambda^1, lambda^2)`` per initial configuration, in order.
+        source: ``"paper-table1"`` or ``"search"``.
+        meta: Search settings (N, M, seed, ...) when ``source == "search"``.
+    """
+
+    hand: str
+    hand_digest: str
+    basis: PoseBasis
+    lambdas: tuple[tuple[float, float], ...]
+    source: str = "search"
+    meta: dict[str, Any] | None = None
+
+    def check_hand(self, hand: Hand) -> None:
+        """Raise :class:`SequenceFileError` unless this sequence was made for ``hand``."""
+        digest = hand.description.digest()
+        if digest != self.hand_digest:
+            raise SequenceFileError(
+                f"sequence made for hand {self.hand!r} (digest {self.hand_digest[:12]}) cannot "
+                f"be used with hand {hand.description.name!r} (digest {digest[:12]}); compute "
+                "one with `sahgrasp sequence --hand ...`"
+            )
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON form (``lambdas`` is the list of chosen pairs)."""
+        return {
+            "format": "sahgrasp-sequence-1",
+            "hand": self.hand,
+            "hand_digest": self.hand_digest,
+            "source": self.source,
+            "lambdas": [list(pair) for pair in self.lambdas],
+            "basis": self.basis.to_dict(),
+            "meta": self.meta or {},
+        }
+
+    def save(self, path: str | os.PathLike[str]) -> None:
+        """Write atomically as JSON."""
+        write_json_atomic(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str]) -> Sequence:
+        """Read a sequence file, raising :class:`SequenceFileError` if it is not one."""
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise SequenceFileError(f"cannot read sequence file {path}: {exc}") from exc
+        return cls.from_dict(data, str(path))
+
+    @classmethod
+    def from_dict(cls, data: Any, origin: str = "sequence") -> Sequence:
+        """Build from the JSON form, raising :class:`SequenceFileError` on anything malformed."""
+        try:
+            if data.get("format") != "sahgrasp-sequence-1":
+                raise ValueError("format is not sahgrasp-sequence-1")
+            basis = PoseBasis.from_dict(data["basis"])
+            lambdas = tuple((float(a), float(b)) for a, b in data["lambdas"])
+            if not lambdas or not all(0.0 <= v <= 1.0 for pair in lambdas for v in pair):
+                raise ValueError("lambdas must be a non-empty list of pairs in [0, 1]")
+            if basis.directions.shape != (2, basis.mean.size) or basis.sigmas.shape != (2,):
+                raise ValueError("basis shapes disagree")
+            return cls(
+                str(data["hand"]), str(data["hand_digest"]), basis, lambdas,
+                str(data.get("source", "search")), dict(data.get("meta", {})),
+            )  # fmt: skip
+        except (AttributeError, KeyError, TypeError, ValueError) as exc:
+            raise SequenceFileError(
+                f"{origin} is not a valid sahgrasp sequence ({exc}); it needs format, hand, "
+                "hand_digest, lambdas and basis {mean, directions, sigmas}"
+            ) from exc
+
+
+def default_sequence(hand: Hand) -> Sequence:
+    """The sequence the IK uses by default for ``hand``.
+
+    The package ships sequences computed by the offline search in ``sahgrasp/data/sequences``;
+    for a hand without one (or whose shipped file was made for another version of the hand), the
+    paper's Table 1 lambdas are applied to this hand's own PCA basis.
+    """
+    return _default_sequence(hand.description.digest(), hand)
+
+
+_DEFAULTS: dict[str, Sequence] = {}
+
+
+def _default_sequence(digest: str, hand: Hand) -> Sequence:
+    if digest in _DEFAULTS:
+        return _DEFAULTS[digest]
+    shipped = resources.files("sahgrasp") / "data" / "sequences" / f"{hand.description.name}.json"
+    sequence = None
+    if shipped.is_file():
+        candidate = Sequence.from_dict(json.loads(shipped.read_text(encoding="utf-8")), "shipped")
+        if candidate.hand_digest == digest:
+            sequence = candidate
+    if sequence is None:
+        sequence = Sequence(
+            hand.description.name, digest, pose_basis(hand), PAPER_TABLE1_LAMBDAS, "paper-table1"
+        )
+    _DEFAULTS[digest] = sequence
+    return sequence
+
+
+def rotation_aligning_x(direction: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A rotation matrix whose x axis is the unit vector ``direction``."""
+    x = direction / np.linalg.norm(direction)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(x[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    y = np.cross(x, helper)
+    y /= np.linalg.norm(y)
+    return np.column_stack([x, y, np.cross(x, y)])
+
+
+def hang_from_thumb(
+    hand: Hand,
+    coordinates: NDArray[np.float64],
+    target: GraspTarget,
+    psi: float | None = None,
+) -> tuple[NDArray[np.float64], float]:
+    """``Obtain_Initial_Conf``: joint coordinates + wrist hung from the thumb contact (Eq. (3)).
+
+    The wrist is placed so that the thumb's contact point is ``p_T*`` and its outward normal is
+    ``-n_T*`` (so ``r_T = r_T*``). The remaining rotation ``psi`` about the thumb normal is
+    ``psi`` if given, else the one that minimises the angle between the projections on the plane
+    ``Pi_T`` of ``p_R* - p_I*`` and ``p_R - p_I`` (first and last non-thumb fingers).
+
+    Returns:
+        The configuration ``q`` and ``psi`` [rad].
+    """
+    thumb = hand.fingers[0]
+    q = hand.configuration(None, coordinates)
+    T_palm_thumb = hand.contact_placement(q, thumb)
+    contact = target.contact(thumb)
+    R_align = rotation_aligning_x(-contact.normal)
+    if psi is None:
+        psi = _best_psi(hand, q, T_palm_thumb, R_align, contact.point, target)
+    T_world_thumb = pin.SE3(R_align @ _rot_x(psi), contact.point)
+    q[:7] = pin.SE3ToXYZQUAT(T_world_thumb * T_palm_thumb.inverse())
+    return q, psi
+
+
+def _best_psi(
+    hand: Hand,
+    q_palm: NDArray[np.float64],
+    T_palm_thumb: pin.SE3,
+    R_align: NDArray[np.float64],
+    p_thumb: NDArray[np.float64],
+    target: GraspTarget,
+) -> float:
+    first, last = hand.fingers[1], hand.fingers[-1]
+    state = hand.contact_state(q_palm)
+    d_palm = state.points[hand.fingers.index(last)] - state.points[hand.fingers.index(first)]
+    # Where that direction points in world when psi = 0; rotating by psi turns it about the axis.
+    T0 = pin.SE3(R_align, p_thumb) * T_palm_thumb.inverse()
+    v2 = T0.rotation @ d_palm
+    v1 = target.contact(last).point - target.contact(first).point
+    axis = R_align[:, 0]
+    v1p, v2p = v1 - (v1 @ axis) * axis, v2 - (v2 @ axis) * axis
+    return float(np.arctan2(axis @ np.cross(v2p, v1p), v2p @ v1p))
+
+
+def _rot_x(angle: float) -> NDArray[np.float64]:
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])

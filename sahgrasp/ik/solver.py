@@ -1,0 +1,390 @@
+"""Algorithm 1 of ik-initial-sequence: fingertip contacts -> wrist pose and joint values.
+
+Two inner solvers share the outer loop (initial configurations from a :class:`Sequence`, or random
+ones) and the acceptance test (Eq. (9) for every finger, joints within limits, no self-collision):
+
+* ``method="paper"`` -- the paper's step. The hand hangs from the thumb contact (Eq. (3)); the
+  unknowns are ``C' = (psi, Q)`` and the step is ``Delta C' = J^+ alpha (P*' - P'_k)`` (Eqs. (7)-(8)).
+  Our model keeps coupled joints equal by construction (Pinocchio mimic joints), so ``C'`` holds the
+  independent coordinates; the pseudo-inverse is weighted so that it equals the paper's augmented
+  22 x 26 pseudo-inverse whenever that matrix has full row rank (each coupled joint counts in the
+  step's norm once per joint it drives). Joint values leaving their range are clamped to it.
+* ``method="auto"`` -- the same structure with a better inner loop: a free wrist (all four
+  contacts in the residual), Levenberg-Marquardt with adaptive damping, joint limits as an active
+  set, early abandonment of starts that stop reducing the error, and refinement of a converged
+  configuration to ``refine_m``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.hand import ContactState, Hand
+from sahgrasp.ik.initial import Sequence, default_sequence, hang_from_thumb
+
+__all__ = ["REASONS", "IKResult", "IKSettings", "solve_ik"]
+
+REASONS = ("converged", "max_inits", "no_progress", "collision", "invalid_input")
+"""Values of :attr:`IKResult.reason`."""
+
+
+@dataclass(frozen=True)
+class IKSettings:
+    """Parameters of Algorithm 1 (defaults: the paper's, plus measured choices; docs/ik.md).
+
+    Attributes:
+        method: ``"auto"`` (default) or ``"paper"``.
+        init: ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas, Fig. 9).
+        max_inits: ``i_max``, initial configurations tried.
+        max_iterations: ``k_max``, Jacobian iterations per initial configuration.
+        d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
+        s_min_m: Eq. (10) threshold of "no progress" [m].
+        stall_iterations: ``n`` of Step 13: consecutive iterations without progress.
+        alpha: Step gain of the paper's method (``Delta P' = alpha (P*' - P'_k)``).
+        refine_m: The auto method keeps iterating a converged start down to this error [m].
+        seed: Seed of the random initial configurations.
+        record_history: Keep every iterate of the returned attempt (for animation).
+    """
+
+    method: str = "auto"
+    init: str = "sequence"
+    max_inits: int = 12
+    max_iterations: int = 100
+    d_min_m: float = 1.5e-3
+    s_min_m: float = 1e-3
+    stall_iterations: int = 3
+    alpha: float = 1.0
+    refine_m: float = 1e-5
+    seed: int = 0
+    record_history: bool = False
+
+    def __post_init__(self) -> None:
+        if self.method not in ("auto", "paper"):
+            raise InvalidSettingsError(f"method must be 'auto' or 'paper', got {self.method!r}")
+        if self.init not in ("sequence", "random"):
+            raise InvalidSettingsError(f"init must be 'sequence' or 'random', got {self.init!r}")
+        for name in ("max_inits", "max_iterations", "stall_iterations"):
+            if int(getattr(self, name)) < 1:
+                raise InvalidSettingsError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("d_min_m", "s_min_m", "alpha", "refine_m"):
+            if not float(getattr(self, name)) > 0.0:
+                raise InvalidSettingsError(f"{name} must be > 0, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class IKResult:
+    """Outcome of :func:`solve_ik`. ``q`` is the solution, or the best configuration found.
+
+    Attributes:
+        name: Problem name.
+        success: Every contact within ``d_min``, limits respected, no self-collision.
+        reason: One of :data:`REASONS`.
+        q: Configuration (wrist + independent coordinates), see :class:`Hand`.
+        position_errors_m: ``|p_i - p_i*|`` per finger [m].
+        centre_errors_m: ``|r_i - r_i*|`` per finger [m].
+        inits_used: Initial configurations generated.
+        iterations: Jacobian iterations over all initial configurations.
+        time_s: Wall time [s], collision checks included.
+        collision_free: No self-collision at ``q``.
+        fingers: Finger names, the order of the error arrays.
+        attempts: How each initial configuration ended.
+        history: Iterates of the returned attempt when recorded, initial configuration first.
+    """
+
+    name: str
+    success: bool
+    reason: str
+    q: NDArray[np.float64]
+    position_errors_m: NDArray[np.float64]
+    centre_errors_m: NDArray[np.float64]
+    inits_used: int
+    iterations: int
+    time_s: float
+    collision_free: bool
+    fingers: tuple[str, ...]
+    attempts: tuple[str, ...] = ()
+    history: tuple[NDArray[np.float64], ...] | None = field(default=None, repr=False)
+
+    @property
+    def max_error_m(self) -> float:
+        """Largest contact-point or centre error [m]."""
+        return float(max(self.position_errors_m.max(), self.centre_errors_m.max()))
+
+    @property
+    def T_world_palm(self) -> pin.SE3:
+        """Wrist pose of the result."""
+        return pin.XYZQUATToSE3(self.q[:7])
+
+    def to_dict(self, hand: Hand) -> dict[str, Any]:
+        """The results-file entry of conventions.md."""
+        return {
+            "name": self.name,
+            "success": self.success,
+            "reason": self.reason,
+            "inits_used": self.inits_used,
+            "iterations": self.iterations,
+            "time_ms": self.time_s * 1e3,
+            "max_position_error_mm": float(self.position_errors_m.max() * 1e3),
+            "max_centre_error_mm": float(self.centre_errors_m.max() * 1e3),
+            "collision_free": self.collision_free,
+            "wrist": {"xyz": self.q[:3].tolist(), "quat": self.q[3:7].tolist()},
+            "joints": hand.joint_values(self.q),
+            "contact_params": {f: list(v) for f, v in hand.contact_parameters(self.q).items()},
+        }
+
+
+@dataclass
+class _Attempt:
+    q: NDArray[np.float64]
+    outcome: str
+    iterations: int
+    error_m: float
+    history: list[NDArray[np.float64]] | None
+
+
+class _Problem:
+    """Targets stacked in the hand's finger order, and the residual of a configuration."""
+
+    def __init__(self, hand: Hand, target: GraspTarget) -> None:
+        target.check_fingers(hand.fingers)
+        self.hand = hand
+        self.target = target
+        contacts = [target.contact(f) for f in hand.fingers]
+        self.points = np.array([c.point for c in contacts])
+        self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
+
+    def errors(self, state: ContactState) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per-finger position and centre errors [m]."""
+        return (
+            np.linalg.norm(state.points - self.points, axis=1),
+            np.linalg.norm(state.centres - self.centres, axis=1),
+        )
+
+    def residual(self, state: ContactState, rows: slice = slice(None)) -> NDArray[np.float64]:
+        """``P* - P`` stacked as (p, r) per finger, for the fingers in ``rows``."""
+        return np.concatenate(
+            [self.points[rows] - state.points[rows], self.centres[rows] - state.centres[rows]],
+            axis=1,
+        ).ravel()
+
+
+def _stack(J_points: NDArray[np.float64], J_centres: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Jacobian rows in the order of :meth:`_Problem.residual`: (p_i, r_i) per finger."""
+    return np.concatenate([J_points, J_centres], axis=1).reshape(-1, J_points.shape[-1])
+
+
+def _coupling_weights(hand: Hand) -> NDArray[np.float64]:
+    """Per coordinate, how many URDF joints it drives (weighted by multiplier^2)."""
+    weights = np.ones(len(hand.coordinate_names))
+    for leader, scale, _ in hand.mimic_joints.values():
+        weights[hand.coordinate_index(leader)] += scale**2
+    return weights
+
+
+def _paper_attempt(
+    hand: Hand, problem: _Problem, coords: NDArray[np.float64], s: IKSettings
+) -> _Attempt:
+    """Inner loop of Algorithm 1 with ``Comp_Nxt_C`` of Eqs. (7)-(8)."""
+    q, psi = hang_from_thumb(hand, coords, problem.target)
+    others = slice(1, None)  # the thumb holds by construction (Eq. (3))
+    # Column scaling equal to the augmented Jacobian's minimum-norm weighting (module docstring).
+    scale = 1.0 / np.sqrt(np.concatenate([[1.0], _coupling_weights(hand)]))
+    history = [q.copy()] if s.record_history else None
+    previous: ContactState | None = None
+    stalled = 0
+    for k in range(s.max_iterations + 1):
+        jac = hand.contact_jacobians(q)
+        state = jac.state
+        pos, cen = problem.errors(state)
+        if max(pos.max(), cen.max()) < s.d_min_m:  # Step 7, Eq. (9)
+            return _Attempt(q, "converged", k, max(pos.max(), cen.max()), history)
+        if previous is not None:  # Step 13, Eq. (10)
+            moved = np.linalg.norm(state.points - previous.points, axis=1).sum()
+            moved += np.linalg.norm(state.centres - previous.centres, axis=1).sum()
+            stalled = stalled + 1 if moved < s.s_min_m else 0
+            if stalled >= s.stall_iterations:
+                return _Attempt(q, "no_progress", k, max(pos.max(), cen.max()), history)
+        if k == s.max_iterations:
+            break
+        previous = state
+        J = _thumb_hanging_jacobian(hand, jac, others)
+        step = scale * (np.linalg.pinv(J * scale) @ (s.alpha * problem.residual(state, others)))
+        psi += step[0]  # Eq. (8)
+        coords = np.clip(coords + step[1:], hand.lower, hand.upper)
+        q, _ = hang_from_thumb(hand, coords, problem.target, psi)
+        if history is not None:
+            history.append(q.copy())
+    pos, cen = problem.errors(hand.contact_state(q))
+    return _Attempt(q, "max_iterations", s.max_iterations, max(pos.max(), cen.max()), history)
+
+
+def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.float64]:
+    """Jacobian of the other fingers' (p, r) w.r.t. ``C' = (psi, coordinates)``.
+
+    The wrist is not free: it moves so that the thumb contact frame stays put except for the
+    rotation ``psi`` about the thumb normal. With ``B``/``Q`` the thumb frame's Jacobian columns
+    of the wrist twist and of the coordinates, the wrist twist is
+    ``v_b = B^-1 ([0; n_T] psi_dot - Q x_dot)``.
+    """
+    thumb = np.vstack([jac.points[0], jac.angular[0]])  # 6 x nv, world-aligned at p_T
+    B, Q = thumb[:, :6], thumb[:, 6:]
+    rhs = np.zeros((6, 1 + Q.shape[1]))
+    rhs[3:, 0] = jac.state.normals[0]
+    rhs[:, 1:] = -Q
+    wrist = np.linalg.solve(B, rhs)  # d(v_b) / d(psi, x)
+    J = _stack(jac.points[others], jac.centres[others])
+    out = J[:, :6] @ wrist
+    out[:, 1:] += J[:, 6:]
+    return out
+
+
+def _lm_attempt(
+    hand: Hand, problem: _Problem, coords: NDArray[np.float64], s: IKSettings
+) -> _Attempt:
+    """Levenberg-Marquardt on all contacts with a free wrist, bounds as an active set."""
+    q, _ = hang_from_thumb(hand, coords, problem.target)
+    history = [q.copy()] if s.record_history else None
+    damping = 1e-3
+    lower, upper = hand.lower, hand.upper
+    jac = hand.contact_jacobians(q)
+    residual = problem.residual(jac.state)
+    cost = float(residual @ residual)
+    costs = [cost]
+    for k in range(s.max_iterations):
+        pos, cen = problem.errors(jac.state)
+        error = max(pos.max(), cen.max())
+        if error < s.refine_m or (error < s.d_min_m and k >= s.max_iterations - 1):
+            return _Attempt(q, "converged", k, error, history)
+        if len(costs) > s.stall_iterations and cost > 0.5 * costs[-1 - s.stall_iterations]:
+            outcome = "converged" if error < s.d_min_m else "no_progress"
+            return _Attempt(q, outcome, k, error, history)
+        J = _stack(jac.points, jac.centres)
+        gradient = J.T @ residual
+        free = np.ones(hand.nv, dtype=bool)
+        x = q[7:]
+        # Active set: coordinates at a bound that the descent direction pushes outwards.
+        free[6:] = ~(((x <= lower + 1e-12) & (gradient[6:] < 0))
+                     | ((x >= upper - 1e-12) & (gradient[6:] > 0)))  # fmt: skip
+        JF = J[:, free]
+        A = JF.T @ JF
+        g = gradient[free]
+        while True:
+            step = np.zeros(hand.nv)
+            step[free] = np.linalg.solve(A + damping * (np.diag(np.diag(A)) + 1e-9), g)
+            candidate = hand.integrate(q, step)
+            candidate[7:] = np.clip(candidate[7:], lower, upper)
+            state = hand.contact_state(candidate)
+            r_new = problem.residual(state)
+            c_new = float(r_new @ r_new)
+            if c_new < cost:
+                damping = max(damping / 3.0, 1e-7)
+                break
+            damping *= 4.0
+            if damping > 1e4:
+                outcome = "converged" if error < s.d_min_m else "no_progress"
+                return _Attempt(q, outcome, k, error, history)
+        q = candidate
+        if history is not None:
+            history.append(q.copy())
+        jac = hand.contact_jacobians(q)
+        residual, cost = problem.residual(jac.state), float(r_new @ r_new)
+        costs.append(cost)
+    pos, cen = problem.errors(jac.state)
+    error = max(pos.max(), cen.max())
+    outcome = "converged" if error < s.d_min_m else "max_iterations"
+    return _Attempt(q, outcome, s.max_iterations, error, history)
+
+
+def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[float, float]]:
+    if settings.init == "random":
+        rng = np.random.default_rng(settings.seed)
+        return [tuple(rng.uniform(0.0, 1.0, 2)) for _ in range(settings.max_inits)]  # type: ignore[misc]
+    lambdas = list(sequence.lambdas)
+    return [lambdas[i % len(lambdas)] for i in range(settings.max_inits)]
+
+
+def solve_ik(
+    hand: Hand,
+    target: GraspTarget,
+    settings: IKSettings | None = None,
+    sequence: Sequence | None = None,
+    **overrides: Any,
+) -> IKResult:
+    """Find wrist pose and joints that put every fingertip on its contact (Algorithm 1).
+
+    Args:
+        hand: The hand model.
+        target: One contact per finger of the hand.
+        settings: Solver parameters (defaults: :class:`IKSettings`).
+        sequence: Initial-pose sequence (default: the hand's shipped or Table-1 sequence).
+        **overrides: Fields of :class:`IKSettings` to change, e.g. ``method="paper"``.
+
+    Returns:
+        The result; an unreachable target gives ``success=False`` with a reason, not an error.
+
+    Raises:
+        InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
+            refused when the target is built).
+        SequenceFileError: ``sequence`` was made for another hand.
+    """
+    start = time.perf_counter()
+    s = replace(settings or IKSettings(), **overrides)
+    problem = _Problem(hand, target)
+    sequence = sequence or default_sequence(hand)
+    sequence.check_hand(hand)
+    attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
+    attempts: list[_Attempt] = []
+    iterations = 0
+    for lambdas in _initial_lambdas(s, sequence):
+        attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), s)
+        iterations += attempt.iterations
+        if attempt.outcome == "converged":
+            if not hand.in_collision(attempt.q):  # Step 8
+                attempts.append(attempt)
+                return _result(hand, problem, attempt, attempts, iterations, start, True)
+            attempt.outcome = "collision"
+        attempts.append(attempt)
+    best = min(attempts, key=lambda a: a.error_m)
+    return _result(hand, problem, best, attempts, iterations, start, False)
+
+
+def _result(
+    hand: Hand,
+    problem: _Problem,
+    chosen: _Attempt,
+    attempts: list[_Attempt],
+    iterations: int,
+    start: float,
+    success: bool,
+) -> IKResult:
+    pos, cen = problem.errors(hand.contact_state(chosen.q))
+    if success:
+        reason, collision_free = "converged", True
+    else:
+        collision_free = not hand.in_collision(chosen.q)
+        reason = {"max_iterations": "max_inits", "converged": "max_inits"}.get(
+            chosen.outcome, chosen.outcome
+        )
+    return IKResult(
+        name=problem.target.name,
+        success=success,
+        reason=reason,
+        q=chosen.q,
+        position_errors_m=pos,
+        centre_errors_m=cen,
+        inits_used=len(attempts),
+        iterations=iterations,
+        time_s=time.perf_counter() - start,
+        collision_free=collision_free,
+        fingers=hand.fingers,
+        attempts=tuple(a.outcome for a in attempts),
+        history=tuple(chosen.history) if chosen.history is not None else None,
+    )
