@@ -14,7 +14,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-__all__ = ["CollisionPair", "SelfCollision"]
+__all__ = ["CollisionPair", "Penetration", "SelfCollision"]
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,27 @@ class CollisionPair:
 
     link_a: str
     link_b: str
+
+
+@dataclass(frozen=True)
+class Penetration:
+    """Two bodies closer than a margin: witness points and the direction that separates them.
+
+    Attributes:
+        joint_a: Pinocchio joint carrying the first body.
+        joint_b: Pinocchio joint carrying the second body.
+        point_a: Witness point on the first body, world frame [m].
+        point_b: Witness point on the second body, world frame [m].
+        normal: Unit vector from the first body towards the second (moving b along it separates).
+        depth_m: How far b must move along ``normal`` to reach the margin [m].
+    """
+
+    joint_a: int
+    joint_b: int
+    point_a: NDArray[np.float64]
+    point_b: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    depth_m: float
 
 
 class SelfCollision:
@@ -51,6 +72,8 @@ class SelfCollision:
                     geometry_model.addCollisionPair(pin.CollisionPair(a, b))
         self.geometry_data = pin.GeometryData(geometry_model)
         self.data = model.createData()
+        # A second set of requests computes contact witnesses, needed only to resolve collisions.
+        self._witness_data = pin.GeometryData(geometry_model)
 
     def _link(self, obj: pin.GeometryObject) -> str:
         return str(self.model.frames[obj.parentFrame].name)
@@ -96,3 +119,32 @@ class SelfCollision:
         """Smallest signed distance [m] over the checked pairs (negative: penetration)."""
         pin.computeDistances(self.model, self.data, self.geometry_model, self.geometry_data, q)
         return float(min(r.min_distance for r in self.geometry_data.distanceResults))
+
+    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+        """Every checked pair closer than ``margin_m`` [m] at ``q``, with coal's witnesses."""
+        gd = self._witness_data
+        for request in gd.collisionRequests:
+            request.enable_contact = True
+            request.security_margin = margin_m
+        pin.computeCollisions(self.model, self.data, self.geometry_model, gd, q, False)
+        objects = self.geometry_model.geometryObjects
+        out = []
+        for pair, result in zip(
+            self.geometry_model.collisionPairs, gd.collisionResults, strict=True
+        ):
+            if not result.isCollision():
+                continue
+            contact = result.getContact(0)
+            normal = np.asarray(contact.normal, dtype=np.float64)
+            signed = float(contact.penetration_depth)
+            out.append(
+                Penetration(
+                    int(objects[pair.first].parentJoint),
+                    int(objects[pair.second].parentJoint),
+                    np.asarray(contact.getNearestPoint1(), dtype=np.float64),
+                    np.asarray(contact.getNearestPoint2(), dtype=np.float64),
+                    normal / max(float(np.linalg.norm(normal)), 1e-12),
+                    max(-signed, 0.0) + margin_m if signed < 0 else margin_m - signed,
+                )
+            )
+        return out

@@ -50,6 +50,9 @@ class IKSettings:
         stall_iterations: ``n`` of Step 13: consecutive iterations without progress.
         alpha: Step gain of the paper's method (``Delta P' = alpha (P*' - P'_k)``).
         refine_m: The auto method keeps iterating a converged start down to this error [m].
+        repair_iterations: Auto method: steps allowed to push a converged but self-colliding
+            configuration out of collision along the solution set.
+        collision_margin_m: Clearance those steps aim for [m].
         seed: Seed of the random initial configurations.
         record_history: Keep every iterate of the returned attempt (for animation).
     """
@@ -60,9 +63,11 @@ class IKSettings:
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
     s_min_m: float = 1e-3
-    stall_iterations: int = 3
+    stall_iterations: int = 5
     alpha: float = 1.0
     refine_m: float = 1e-5
+    repair_iterations: int = 10
+    collision_margin_m: float = 1e-3
     seed: int = 0
     record_history: bool = False
 
@@ -71,10 +76,10 @@ class IKSettings:
             raise InvalidSettingsError(f"method must be 'auto' or 'paper', got {self.method!r}")
         if self.init not in ("sequence", "random"):
             raise InvalidSettingsError(f"init must be 'sequence' or 'random', got {self.init!r}")
-        for name in ("max_inits", "max_iterations", "stall_iterations"):
+        for name in ("max_inits", "max_iterations", "stall_iterations", "repair_iterations"):
             if int(getattr(self, name)) < 1:
                 raise InvalidSettingsError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("d_min_m", "s_min_m", "alpha", "refine_m"):
+        for name in ("d_min_m", "s_min_m", "alpha", "refine_m", "collision_margin_m"):
             if not float(getattr(self, name)) > 0.0:
                 raise InvalidSettingsError(f"{name} must be > 0, got {getattr(self, name)}")
 
@@ -249,58 +254,162 @@ def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.f
 def _lm_attempt(
     hand: Hand, problem: _Problem, coords: NDArray[np.float64], s: IKSettings
 ) -> _Attempt:
-    """Levenberg-Marquardt on all contacts with a free wrist, bounds as an active set."""
+    """Free-wrist Levenberg-Marquardt from the thumb-hung start, then collision repair."""
     q, _ = hang_from_thumb(hand, coords, problem.target)
     history = [q.copy()] if s.record_history else None
+    attempt = _lm_loop(hand, problem, q, s, s.max_iterations, history)
+    if attempt.outcome != "converged" or not hand.in_collision(attempt.q):
+        return attempt
+    q, used = _separate(hand, problem, attempt.q, s, history)
+    budget = max(s.max_iterations - attempt.iterations - used, 1)
+    refined = _lm_loop(hand, problem, q, s, budget, history)
+    refined.iterations += attempt.iterations + used
+    return refined
+
+
+def _lm_loop(
+    hand: Hand,
+    problem: _Problem,
+    q: NDArray[np.float64],
+    s: IKSettings,
+    max_iterations: int,
+    history: list[NDArray[np.float64]] | None,
+) -> _Attempt:
+    """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set."""
     damping = 1e-3
-    lower, upper = hand.lower, hand.upper
     jac = hand.contact_jacobians(q)
     residual = problem.residual(jac.state)
-    cost = float(residual @ residual)
-    costs = [cost]
-    for k in range(s.max_iterations):
+    costs = [float(residual @ residual)]
+    for k in range(max_iterations):
         pos, cen = problem.errors(jac.state)
         error = max(pos.max(), cen.max())
-        if error < s.refine_m or (error < s.d_min_m and k >= s.max_iterations - 1):
+        if error < s.refine_m:
             return _Attempt(q, "converged", k, error, history)
-        if len(costs) > s.stall_iterations and cost > 0.5 * costs[-1 - s.stall_iterations]:
-            outcome = "converged" if error < s.d_min_m else "no_progress"
-            return _Attempt(q, outcome, k, error, history)
+        stalled = (
+            len(costs) > s.stall_iterations and costs[-1] > 0.5 * costs[-1 - s.stall_iterations]
+        )
+        if stalled or damping > 1e4:
+            return _Attempt(
+                q, "converged" if error < s.d_min_m else "no_progress", k, error, history
+            )
         J = _stack(jac.points, jac.centres)
-        gradient = J.T @ residual
-        free = np.ones(hand.nv, dtype=bool)
-        x = q[7:]
-        # Active set: coordinates at a bound that the descent direction pushes outwards.
-        free[6:] = ~(((x <= lower + 1e-12) & (gradient[6:] < 0))
-                     | ((x >= upper - 1e-12) & (gradient[6:] > 0)))  # fmt: skip
-        JF = J[:, free]
-        A = JF.T @ JF
-        g = gradient[free]
-        while True:
-            step = np.zeros(hand.nv)
-            step[free] = np.linalg.solve(A + damping * (np.diag(np.diag(A)) + 1e-9), g)
-            candidate = hand.integrate(q, step)
-            candidate[7:] = np.clip(candidate[7:], lower, upper)
-            state = hand.contact_state(candidate)
-            r_new = problem.residual(state)
-            c_new = float(r_new @ r_new)
-            if c_new < cost:
-                damping = max(damping / 3.0, 1e-7)
-                break
-            damping *= 4.0
-            if damping > 1e4:
-                outcome = "converged" if error < s.d_min_m else "no_progress"
-                return _Attempt(q, outcome, k, error, history)
-        q = candidate
+        q_new, cost, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
+        if q_new is None:
+            continue
+        q = q_new
         if history is not None:
             history.append(q.copy())
         jac = hand.contact_jacobians(q)
-        residual, cost = problem.residual(jac.state), float(r_new @ r_new)
+        residual = problem.residual(jac.state)
         costs.append(cost)
     pos, cen = problem.errors(jac.state)
     error = max(pos.max(), cen.max())
     outcome = "converged" if error < s.d_min_m else "max_iterations"
-    return _Attempt(q, outcome, s.max_iterations, error, history)
+    return _Attempt(q, outcome, max_iterations, error, history)
+
+
+def _free_coordinates(
+    hand: Hand, q: NDArray[np.float64], gradient: NDArray[np.float64]
+) -> NDArray[np.bool_]:
+    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed."""
+    free = np.ones(hand.nv, dtype=bool)
+    x, g = q[7:], gradient[6:]
+    at_lower = (x <= hand.lower + 1e-12) & (g < 0)
+    at_upper = (x >= hand.upper - 1e-12) & (g > 0)
+    free[6:] = ~(at_lower | at_upper)
+    return free
+
+
+def _clamped_step(
+    hand: Hand, q: NDArray[np.float64], step: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    candidate = hand.integrate(q, step)
+    candidate[7:] = np.clip(candidate[7:], hand.lower, hand.upper)
+    return candidate
+
+
+def _damped_step(
+    hand: Hand,
+    problem: _Problem,
+    q: NDArray[np.float64],
+    J: NDArray[np.float64],
+    residual: NDArray[np.float64],
+    cost: float,
+    damping: float,
+) -> tuple[NDArray[np.float64] | None, float, float]:
+    """One Marquardt step, its damping adapted until the cost decreases.
+
+    Returns the new configuration (None if the damping ran out), its cost and the new damping.
+    """
+    gradient = J.T @ residual
+    free = _free_coordinates(hand, q, gradient)
+    JF = J[:, free]
+    A = JF.T @ JF
+    scaling = np.diag(np.diag(A)) + 1e-9 * np.eye(len(A))
+    while damping <= 1e4:
+        step = np.zeros(hand.nv)
+        step[free] = np.linalg.solve(A + damping * scaling, gradient[free])
+        candidate = _clamped_step(hand, q, step)
+        r_new = problem.residual(hand.contact_state(candidate))
+        c_new = float(r_new @ r_new)
+        if c_new < cost:
+            return candidate, c_new, max(damping / 3.0, 1e-7)
+        damping *= 4.0
+    return None, cost, damping
+
+
+def _separate(
+    hand: Hand,
+    problem: _Problem,
+    q: NDArray[np.float64],
+    s: IKSettings,
+    history: list[NDArray[np.float64]] | None,
+) -> tuple[NDArray[np.float64], int]:
+    """Push colliding bodies apart along coal's normals while holding the contacts.
+
+    The solution set is redundant (27 DoF, 20 contact constraints for the SAH), so a converged but
+    self-colliding configuration can usually slide along it out of collision: each step solves the
+    contact rows together with one row per penetrating pair asking the second body to move along
+    the separating normal by the penetration depth plus a margin.
+    """
+    for k in range(s.repair_iterations):
+        penetrations = hand.collision.penetrations(q, s.collision_margin_m)
+        if not penetrations:
+            return q, k
+        jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
+        rows, depths = _separation_rows(hand, penetrations)
+        J = np.vstack([_stack(jac.points, jac.centres), rows])
+        e = np.concatenate([problem.residual(jac.state), depths])
+        free = _free_coordinates(hand, q, J.T @ e)
+        JF = J[:, free]
+        step = np.zeros(hand.nv)
+        step[free] = np.linalg.solve(JF.T @ JF + 1e-6 * np.eye(int(free.sum())), JF.T @ e)
+        q = _clamped_step(hand, q, step)
+        if history is not None:
+            history.append(q.copy())
+    return q, s.repair_iterations
+
+
+def _separation_rows(
+    hand: Hand, penetrations: list[Any]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
+    rows = np.empty((len(penetrations), hand.nv))
+    depths = np.empty(len(penetrations))
+    for i, pen in enumerate(penetrations):
+        J_b = _point_jacobian(hand, pen.joint_b, pen.point_b)
+        J_a = _point_jacobian(hand, pen.joint_a, pen.point_a)
+        rows[i] = pen.normal @ (J_b - J_a)
+        depths[i] = pen.depth_m
+    return rows, depths
+
+
+def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Jacobian of a point fixed to ``joint``'s body (joint Jacobians must be up to date)."""
+    J = pin.getJointJacobian(hand.model, hand.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+    lever = point - hand.data.oMi[joint].translation
+    # v_p = v_o + omega x (p - o)
+    return np.asarray(J[:3] + np.cross(J[3:].T, lever).T)
 
 
 def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[float, float]]:
