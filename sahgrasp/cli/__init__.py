@@ -14,7 +14,7 @@ from sahgrasp.errors import SahGraspError
 
 __all__ = ["main"]
 
-COMMANDS = ("info", "bench")
+COMMANDS = ("info", "solve", "bench")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -1,5 +1,6 @@
 """Inverse kinematics of the hand from contact points and normals (ik-initial-sequence)."""
 
+from sahgrasp.ik.batch import invalid_result, solve_many
 from sahgrasp.ik.initial import (
     PAPER_TABLE1_LAMBDAS,
     PoseBasis,
@@ -20,8 +21,10 @@ __all__ = [
     "Sequence",
     "default_sequence",
     "hang_from_thumb",
+    "invalid_result",
     "pose_basis",
     "random_problem",
     "random_problems",
     "solve_ik",
+    "solve_many",
 ]

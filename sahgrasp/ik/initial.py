@@ -87,7 +87,10 @@ class PoseBasis:
     sigmas: NDArray[np.float64]
 
     def pose(self, lambdas: tuple[float, float] | NDArray[np.float64]) -> NDArray[np.float64]:
-        """``Q_i = m + 3 sigma_1 (2 lambda^1 - 1) c_1 + 3 sigma_2 (2 lambda^2 - 1) c_2``, Eq. (11)."""
+        """Pose ``Q_i = m + 3 sigma_1 (2 lambda^1 - 1) c_1 + 3 sigma_2 (2 lambda^2 - 1) c_2``.
+
+        Eq. (11).
+        """
         lam = np.asarray(lambdas, dtype=np.float64)
         return np.asarray(self.mean + (3.0 * self.sigmas * (2.0 * lam - 1.0)) @ self.directions)
 

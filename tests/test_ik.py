@@ -1,0 +1,162 @@
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sahgrasp.collision import SelfCollision
+from sahgrasp.contacts import ContactTarget, GraspTarget
+from sahgrasp.errors import InvalidSettingsError, InvalidTargetError, SequenceFileError
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import (
+    IKSettings,
+    Sequence,
+    default_sequence,
+    hang_from_thumb,
+    random_problems,
+    solve_ik,
+    solve_many,
+)
+from sahgrasp.ik.initial import expansion_matrix
+
+
+def _independent_check(hand: Hand, target: GraspTarget, result_dict: dict, d_min: float) -> None:
+    """Set the returned wrist and joints on the plain URDF and check the grasp there."""
+    urdf = str(hand.description.urdf_path)
+    model = pin.buildModelFromUrdf(urdf, mimic=False)
+    data = model.createData()
+    q = pin.neutral(model)
+    for name, value in result_dict["joints"].items():
+        jid = model.getJointId(name)
+        q[model.joints[jid].idx_q] = value
+        assert model.lowerPositionLimit[model.joints[jid].idx_q] - 1e-9 <= value
+        assert value <= model.upperPositionLimit[model.joints[jid].idx_q] + 1e-9
+    for mimic, (leader, scale, offset) in hand.mimic_joints.items():
+        assert result_dict["joints"][mimic] == pytest.approx(
+            scale * result_dict["joints"][leader] + offset
+        )
+    wrist = result_dict["wrist"]
+    T_world_palm = pin.XYZQUATToSE3(np.array(wrist["xyz"] + wrist["quat"]))
+    pin.framesForwardKinematics(model, data, q)
+    for spec in hand.description.fingers:
+        centre = T_world_palm * data.oMf[model.getFrameId(spec.tip_link)].translation
+        contact = target.contact(spec.name)
+        assert np.linalg.norm(centre - contact.centre(hand.radius_m)) < d_min
+        # The contact point is where the sphere touches the object: centre - R * normal.
+        assert np.linalg.norm(centre - hand.radius_m * contact.normal - contact.point) < d_min
+    geometry = pin.buildGeomFromUrdf(model, urdf, pin.GeometryType.COLLISION)
+    plain = SelfCollision(model, geometry, hand.description.excluded_collisions)
+    assert not plain.in_collision(q)
+
+
+@pytest.mark.parametrize("method", ["auto", "paper"])
+def test_known_solution_problems_are_solved_and_verified(sah: Hand, method: str) -> None:
+    problems = random_problems(sah, 8, seed=11)
+    results = [solve_ik(sah, p, method=method) for p in problems]
+    solved = [(p, r) for p, r in zip(problems, results, strict=True) if r.success]
+    assert len(solved) >= (7 if method == "auto" else 5)
+    for problem, result in solved:
+        assert result.reason == "converged"
+        assert result.max_error_m < 1.5e-3
+        _independent_check(sah, problem, result.to_dict(sah), 1.5e-3)
+
+
+def test_allegro_problems_are_solved(allegro: Hand) -> None:
+    results = [solve_ik(allegro, p) for p in random_problems(allegro, 5, seed=2)]
+    assert sum(r.success for r in results) >= 4
+
+
+def test_unreachable_targets_fail_with_reason(sah: Hand) -> None:
+    far = GraspTarget(
+        "far",
+        [ContactTarget(f, [i * 1.0, 0.0, 0.0], [0.0, 0.0, 1.0]) for i, f in enumerate(sah.fingers)],
+    )
+    result = solve_ik(sah, far, max_inits=3)
+    assert not result.success
+    assert result.reason in ("max_inits", "no_progress")
+    assert result.inits_used == 3
+    # A contact behind the palm: the normal points into the hand.
+    problem = random_problems(sah, 1, seed=5)[0]
+    behind = GraspTarget(
+        "behind",
+        [ContactTarget(c.finger, c.point, -c.normal) if c.finger == "index" else c
+         for c in problem.contacts],
+    )  # fmt: skip
+    assert not solve_ik(sah, behind, max_inits=3).success
+
+
+def test_invalid_targets_raise(sah: Hand) -> None:
+    problem = random_problems(sah, 1, seed=5)[0]
+    with pytest.raises(InvalidTargetError, match="missing"):
+        solve_ik(sah, GraspTarget("x", problem.contacts[:3]))
+    pinky = [*problem.contacts[:3], ContactTarget("pinky", [0, 0, 0], [0, 0, 1])]
+    with pytest.raises(InvalidTargetError, match="unknown finger"):
+        solve_ik(sah, GraspTarget("x", pinky))
+    with pytest.raises(InvalidSettingsError, match="method"):
+        solve_ik(sah, problem, method="magic")
+
+
+def test_same_seed_same_result_any_workers(sah: Hand) -> None:
+    problems = random_problems(sah, 4, seed=8)
+    settings = IKSettings(init="random", max_inits=4, seed=3)
+    one = solve_many(sah, problems, settings, workers=1)
+    two = solve_many(sah, problems, settings, workers=2)
+    for a, b in zip(one, two, strict=True):
+        assert (a.success, a.inits_used, a.iterations) == (b.success, b.inits_used, b.iterations)
+        np.testing.assert_array_equal(a.q, b.q)
+
+
+def test_thumb_hanging_satisfies_thumb_contact(sah: Hand) -> None:
+    problem = random_problems(sah, 1, seed=4)[0]
+    coords = default_sequence(sah).basis.coordinates(sah, (0.5, 0.5))
+    q, _ = hang_from_thumb(sah, coords, problem)
+    state = sah.contact_state(q)
+    thumb = problem.contact("thumb")
+    np.testing.assert_allclose(state.points[0], thumb.point, atol=1e-12)
+    np.testing.assert_allclose(state.centres[0], thumb.centre(sah.radius_m), atol=1e-12)
+
+
+def test_pose_basis_in_paper_q_space(sah: Hand) -> None:
+    basis = default_sequence(sah).basis
+    assert basis.mean.shape == (25,)  # Eq. (4): 25 joint values, coupled ones included
+    np.testing.assert_allclose(np.linalg.norm(basis.directions, axis=1), 1.0)
+    E = expansion_matrix(sah)
+    # Principal directions move coupled joints together (they lie in the span of E).
+    residual = basis.directions.T - E @ np.linalg.lstsq(E, basis.directions.T, rcond=None)[0]
+    assert np.abs(residual).max() < 1e-9
+    np.testing.assert_allclose(basis.pose((0.5, 0.5)), basis.mean)
+
+
+def test_sequence_for_another_hand_is_refused(sah: Hand, allegro: Hand) -> None:
+    problem = random_problems(sah, 1, seed=1)[0]
+    with pytest.raises(SequenceFileError, match="cannot be used"):
+        solve_ik(sah, problem, sequence=default_sequence(allegro))
+
+
+def test_sequence_file_roundtrip_and_corruption(sah: Hand, tmp_path) -> None:
+    path = tmp_path / "seq.json"
+    default_sequence(sah).save(path)
+    assert Sequence.load(path).lambdas == default_sequence(sah).lambdas
+    path.write_text('{"format": "sahgrasp-sequence-1", "hand": "sah"}')
+    with pytest.raises(SequenceFileError, match="not a valid"):
+        Sequence.load(path)
+
+
+def test_history_records_iterates(sah: Hand) -> None:
+    problem = random_problems(sah, 1, seed=6)[0]
+    result = solve_ik(sah, problem, record_history=True)
+    assert result.history is not None
+    assert len(result.history) >= 2
+    np.testing.assert_array_equal(result.history[-1], result.q)
+
+
+def test_paper_alpha_and_results_format(sah: Hand) -> None:
+    problem = random_problems(sah, 1, seed=9)[0]
+    entry = solve_ik(sah, problem, method="paper", alpha=0.8).to_dict(sah)
+    assert set(entry["joints"]) == {*sah.joint_names, *sah.mimic_joints}
+    assert len(entry["wrist"]["quat"]) == 4
+    assert math.isfinite(entry["time_ms"])
+
+
+def test_load_hand_fixture_is_the_sah() -> None:
+    assert load_hand("sah").dof()["total"] == 27
