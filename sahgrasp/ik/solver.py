@@ -19,6 +19,7 @@ ones) and the acceptance test (Eq. (9) for every finger, joints within limits, n
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -31,7 +32,17 @@ from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, hang_from_thumb
 
-__all__ = ["REASONS", "IKResult", "IKSettings", "solve_ik"]
+__all__ = [
+    "REASONS",
+    "Attempt",
+    "AttemptFn",
+    "ContactProblem",
+    "IKResult",
+    "IKSettings",
+    "run_algorithm1",
+    "solve_ik",
+    "stack_rows",
+]
 
 REASONS = ("converged", "max_inits", "no_progress", "collision", "invalid_input")
 """Values of :attr:`IKResult.reason`."""
@@ -64,7 +75,7 @@ class IKSettings:
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
     s_min_m: float = 1e-3
-    stall_iterations: int = 5
+    stall_iterations: int = 10
     alpha: float = 1.0
     refine_m: float = 1e-5
     repair_iterations: int = 10
@@ -102,6 +113,7 @@ class IKResult:
         collision_free: No self-collision at ``q``.
         fingers: Finger names, the order of the error arrays.
         attempts: How each initial configuration ended.
+        attempt_seconds: Wall time [s] from the start to the end of each attempt.
         history: Iterates of the returned attempt when recorded, initial configuration first.
     """
 
@@ -117,6 +129,7 @@ class IKResult:
     collision_free: bool
     fingers: tuple[str, ...]
     attempts: tuple[str, ...] = ()
+    attempt_seconds: tuple[float, ...] = ()
     history: tuple[NDArray[np.float64], ...] | None = field(default=None, repr=False)
 
     @property
@@ -148,15 +161,18 @@ class IKResult:
 
 
 @dataclass
-class _Attempt:
+class Attempt:
+    """How one initial configuration ended: its final ``q``, outcome, iterations and error [m]."""
+
     q: NDArray[np.float64]
     outcome: str
     iterations: int
     error_m: float
     history: list[NDArray[np.float64]] | None
+    seconds: float = 0.0
 
 
-class _Problem:
+class ContactProblem:
     """Targets stacked in the hand's finger order, and the residual of a configuration."""
 
     def __init__(self, hand: Hand, target: GraspTarget) -> None:
@@ -182,8 +198,10 @@ class _Problem:
         ).ravel()
 
 
-def _stack(J_points: NDArray[np.float64], J_centres: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Jacobian rows in the order of :meth:`_Problem.residual`: (p_i, r_i) per finger."""
+def stack_rows(
+    J_points: NDArray[np.float64], J_centres: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Jacobian rows in the order of :meth:`ContactProblem.residual`: (p_i, r_i) per finger."""
     return np.concatenate([J_points, J_centres], axis=1).reshape(-1, J_points.shape[-1])
 
 
@@ -196,8 +214,8 @@ def _coupling_weights(hand: Hand) -> NDArray[np.float64]:
 
 
 def _paper_attempt(
-    hand: Hand, problem: _Problem, coords: NDArray[np.float64], s: IKSettings
-) -> _Attempt:
+    hand: Hand, problem: ContactProblem, coords: NDArray[np.float64], s: IKSettings
+) -> Attempt:
     """Inner loop of Algorithm 1 with ``Comp_Nxt_C`` of Eqs. (7)-(8)."""
     q, psi = hang_from_thumb(hand, coords, problem.target)
     others = slice(1, None)  # the thumb holds by construction (Eq. (3))
@@ -211,13 +229,13 @@ def _paper_attempt(
         state = jac.state
         pos, cen = problem.errors(state)
         if max(pos.max(), cen.max()) < s.d_min_m:  # Step 7, Eq. (9)
-            return _Attempt(q, "converged", k, max(pos.max(), cen.max()), history)
+            return Attempt(q, "converged", k, max(pos.max(), cen.max()), history)
         if previous is not None:  # Step 13, Eq. (10)
             moved = np.linalg.norm(state.points - previous.points, axis=1).sum()
             moved += np.linalg.norm(state.centres - previous.centres, axis=1).sum()
             stalled = stalled + 1 if moved < s.s_min_m else 0
             if stalled >= s.stall_iterations:
-                return _Attempt(q, "no_progress", k, max(pos.max(), cen.max()), history)
+                return Attempt(q, "no_progress", k, max(pos.max(), cen.max()), history)
         if k == s.max_iterations:
             break
         previous = state
@@ -229,7 +247,7 @@ def _paper_attempt(
         if history is not None:
             history.append(q.copy())
     pos, cen = problem.errors(hand.contact_state(q))
-    return _Attempt(q, "max_iterations", s.max_iterations, max(pos.max(), cen.max()), history)
+    return Attempt(q, "max_iterations", s.max_iterations, max(pos.max(), cen.max()), history)
 
 
 def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.float64]:
@@ -246,15 +264,15 @@ def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.f
     rhs[3:, 0] = jac.state.normals[0]
     rhs[:, 1:] = -Q
     wrist = np.linalg.solve(B, rhs)  # d(v_b) / d(psi, x)
-    J = _stack(jac.points[others], jac.centres[others])
+    J = stack_rows(jac.points[others], jac.centres[others])
     out = J[:, :6] @ wrist
     out[:, 1:] += J[:, 6:]
     return out
 
 
 def _lm_attempt(
-    hand: Hand, problem: _Problem, coords: NDArray[np.float64], s: IKSettings
-) -> _Attempt:
+    hand: Hand, problem: ContactProblem, coords: NDArray[np.float64], s: IKSettings
+) -> Attempt:
     """Free-wrist Levenberg-Marquardt from the thumb-hung start, then collision repair."""
     q, _ = hang_from_thumb(hand, coords, problem.target)
     history = [q.copy()] if s.record_history else None
@@ -270,12 +288,12 @@ def _lm_attempt(
 
 def _lm_loop(
     hand: Hand,
-    problem: _Problem,
+    problem: ContactProblem,
     q: NDArray[np.float64],
     s: IKSettings,
     max_iterations: int,
     history: list[NDArray[np.float64]] | None,
-) -> _Attempt:
+) -> Attempt:
     """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set."""
     damping = 1e-3
     jac = hand.contact_jacobians(q)
@@ -285,15 +303,15 @@ def _lm_loop(
         pos, cen = problem.errors(jac.state)
         error = max(pos.max(), cen.max())
         if error < s.refine_m:
-            return _Attempt(q, "converged", k, error, history)
+            return Attempt(q, "converged", k, error, history)
         stalled = (
             len(costs) > s.stall_iterations and costs[-1] > 0.5 * costs[-1 - s.stall_iterations]
         )
         if stalled or damping > 1e4:
-            return _Attempt(
+            return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
-        J = _stack(jac.points, jac.centres)
+        J = stack_rows(jac.points, jac.centres)
         q_new, cost, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
         if q_new is None:
             continue
@@ -306,7 +324,7 @@ def _lm_loop(
     pos, cen = problem.errors(jac.state)
     error = max(pos.max(), cen.max())
     outcome = "converged" if error < s.d_min_m else "max_iterations"
-    return _Attempt(q, outcome, max_iterations, error, history)
+    return Attempt(q, outcome, max_iterations, error, history)
 
 
 def _free_coordinates(
@@ -331,7 +349,7 @@ def _clamped_step(
 
 def _damped_step(
     hand: Hand,
-    problem: _Problem,
+    problem: ContactProblem,
     q: NDArray[np.float64],
     J: NDArray[np.float64],
     residual: NDArray[np.float64],
@@ -346,7 +364,7 @@ def _damped_step(
     free = _free_coordinates(hand, q, gradient)
     JF = J[:, free]
     A = JF.T @ JF
-    scaling = np.diag(np.diag(A)) + 1e-9 * np.eye(len(A))
+    scaling = np.eye(len(A))
     while damping <= 1e4:
         step = np.zeros(hand.nv)
         step[free] = np.linalg.solve(A + damping * scaling, gradient[free])
@@ -361,7 +379,7 @@ def _damped_step(
 
 def _separate(
     hand: Hand,
-    problem: _Problem,
+    problem: ContactProblem,
     q: NDArray[np.float64],
     s: IKSettings,
     history: list[NDArray[np.float64]] | None,
@@ -379,7 +397,7 @@ def _separate(
             return q, k
         jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
         rows, depths = _separation_rows(hand, penetrations)
-        J = np.vstack([_stack(jac.points, jac.centres), rows])
+        J = np.vstack([stack_rows(jac.points, jac.centres), rows])
         e = np.concatenate([problem.residual(jac.state), depths])
         free = _free_coordinates(hand, q, J.T @ e)
         JF = J[:, free]
@@ -421,6 +439,10 @@ def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[flo
     return [lambdas[i % len(lambdas)] for i in range(settings.max_inits)]
 
 
+AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
+"""An inner solver: from the initial coordinates of one start to an :class:`Attempt`."""
+
+
 def solve_ik(
     hand: Hand,
     target: GraspTarget,
@@ -446,34 +468,37 @@ def solve_ik(
         SequenceFileError: ``sequence`` was made for another hand.
     """
     s = replace(settings or IKSettings(), **overrides)
-    problem = _Problem(hand, target)
+    attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
+    return run_algorithm1(hand, target, attempt_fn, s, sequence)
+
+
+def run_algorithm1(
+    hand: Hand,
+    target: GraspTarget,
+    attempt_fn: AttemptFn,
+    settings: IKSettings,
+    sequence: Sequence | None = None,
+) -> IKResult:
+    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here)."""
+    problem = ContactProblem(hand, target)
     sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
     start = time.perf_counter()
-    attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    attempts: list[_Attempt] = []
-    iterations = 0
-    for lambdas in _initial_lambdas(s, sequence):
-        attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), s)
-        iterations += attempt.iterations
-        if attempt.outcome == "converged":
-            if not hand.in_collision(attempt.q):  # Step 8
-                attempts.append(attempt)
-                return _result(hand, problem, attempt, attempts, iterations, start, True)
+    attempts: list[Attempt] = []
+    for lambdas in _initial_lambdas(settings, sequence):
+        attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), settings)
+        if attempt.outcome == "converged" and hand.in_collision(attempt.q):  # Step 8
             attempt.outcome = "collision"
+        attempt.seconds = time.perf_counter() - start
         attempts.append(attempt)
+        if attempt.outcome == "converged":
+            return _result(hand, problem, attempt, attempts, True)
     best = min(attempts, key=lambda a: a.error_m)
-    return _result(hand, problem, best, attempts, iterations, start, False)
+    return _result(hand, problem, best, attempts, False)
 
 
 def _result(
-    hand: Hand,
-    problem: _Problem,
-    chosen: _Attempt,
-    attempts: list[_Attempt],
-    iterations: int,
-    start: float,
-    success: bool,
+    hand: Hand, problem: ContactProblem, chosen: Attempt, attempts: list[Attempt], success: bool
 ) -> IKResult:
     pos, cen = problem.errors(hand.contact_state(chosen.q))
     if success:
@@ -491,10 +516,11 @@ def _result(
         position_errors_m=pos,
         centre_errors_m=cen,
         inits_used=len(attempts),
-        iterations=iterations,
-        time_s=time.perf_counter() - start,
+        iterations=sum(a.iterations for a in attempts),
+        time_s=attempts[-1].seconds,
         collision_free=collision_free,
         fingers=hand.fingers,
         attempts=tuple(a.outcome for a in attempts),
+        attempt_seconds=tuple(a.seconds for a in attempts),
         history=tuple(chosen.history) if chosen.history is not None else None,
     )
