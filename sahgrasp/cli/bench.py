@@ -19,6 +19,16 @@ def add_parser(sub: Any) -> None:
     k.add_argument("--calls", type=int, default=20_000)
     k.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
     k.set_defaults(run=run)
+    ik = benches.add_parser("ik", help="Algorithm 1: success/time vs initial poses, with peers")
+    ik.add_argument("--hand", default="sah")
+    ik.add_argument("--problems", type=int, default=1000)
+    ik.add_argument("--seed", type=int, default=0)
+    ik.add_argument("--targets", default=None, help="targets file instead of random problems")
+    ik.add_argument("--peers", nargs="*", default=["scipy", "pink"], choices=["scipy", "pink"])
+    ik.add_argument("--peer-problems", type=int, default=200)
+    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure")
+    ik.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
+    ik.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
