@@ -19,7 +19,7 @@ from scipy.optimize import least_squares
 
 from sahgrasp.hand import Hand
 from sahgrasp.ik.initial import hang_from_thumb
-from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings, stack_rows
+from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings
 
 __all__ = ["PEERS", "pink_attempt", "scipy_attempt"]
 
@@ -50,8 +50,7 @@ def scipy_attempt(
         return -problem.residual(hand.contact_state(configuration(x)))
 
     def jac(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        contact = hand.contact_jacobians(configuration(x))
-        J = stack_rows(contact.points, contact.centres)
+        J = problem.jacobian(hand.contact_jacobians(configuration(x)))
         return J @ pin.dIntegrate(hand.model, q0, x, pin.ArgumentPosition.ARG1)
 
     fit = least_squares(
@@ -71,10 +70,11 @@ def pink_attempt(
     q, _ = hang_from_thumb(hand, coords, problem.target)
     configuration = pink.Configuration(hand.model, hand.model.createData(), q)
     tasks = []
-    for i, finger in enumerate(hand.fingers):
+    for i, finger in enumerate(problem.fingers):
+        tip_link = hand.description.fingers[hand.fingers.index(finger)].tip_link
         for frame, point in (
             (f"{finger}_contact", problem.points[i]),
-            (hand.description.fingers[i].tip_link, problem.centres[i]),
+            (tip_link, problem.centres[i]),
         ):
             task = FrameTask(frame, position_cost=1.0, orientation_cost=0.0)
             task.set_target(pin.SE3(np.eye(3), point))

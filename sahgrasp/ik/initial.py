@@ -272,18 +272,19 @@ def hang_from_thumb(
     The wrist is placed so that the thumb's contact point is ``p_T*`` and its outward normal is
     ``-n_T*`` (so ``r_T = r_T*``). The remaining rotation ``psi`` about the thumb normal is
     ``psi`` if given, else the one that minimises the angle between the projections on the plane
-    ``Pi_T`` of ``p_R* - p_I*`` and ``p_R - p_I`` (first and last non-thumb fingers).
+    ``Pi_T`` of ``p_R* - p_I*`` and ``p_R - p_I`` (first and last non-thumb fingers). The hand hangs
+    from the first of its fingers that the target constrains (the thumb, normally).
 
     Returns:
         The configuration ``q`` and ``psi`` [rad].
     """
-    thumb = hand.fingers[0]
+    thumb = next(f for f in hand.fingers if f in target.fingers)
     q = hand.configuration(None, coordinates)
     T_palm_thumb = hand.contact_placement(q, thumb)
     contact = target.contact(thumb)
     R_align = rotation_aligning_x(-contact.normal)
     if psi is None:
-        psi = _best_psi(hand, q, T_palm_thumb, R_align, contact.point, target)
+        psi = _best_psi(hand, q, T_palm_thumb, R_align, thumb, target)
     T_world_thumb = pin.SE3(R_align @ _rot_x(psi), contact.point)
     q[:7] = pin.SE3ToXYZQUAT(T_world_thumb * T_palm_thumb.inverse())
     return q, psi
@@ -294,10 +295,12 @@ def _best_psi(
     q_palm: NDArray[np.float64],
     T_palm_thumb: pin.SE3,
     R_align: NDArray[np.float64],
-    p_thumb: NDArray[np.float64],
+    thumb: str,
     target: GraspTarget,
 ) -> float:
-    first, last = hand.fingers[1], hand.fingers[-1]
+    others = [f for f in hand.fingers if f in target.fingers and f != thumb]
+    first, last = (others[0], others[-1]) if len(others) > 1 else (thumb, others[0])
+    p_thumb = target.contact(thumb).point
     state = hand.contact_state(q_palm)
     d_palm = state.points[hand.fingers.index(last)] - state.points[hand.fingers.index(first)]
     # Where that direction points in world when psi = 0; rotating by psi turns it about the axis.

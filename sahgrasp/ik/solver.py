@@ -28,7 +28,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, hang_from_thumb
 
@@ -173,29 +173,50 @@ class Attempt:
 
 
 class ContactProblem:
-    """Targets stacked in the hand's finger order, and the residual of a configuration."""
+    """Targets of the constrained fingers (hand order) and the residual of a configuration.
 
-    def __init__(self, hand: Hand, target: GraspTarget) -> None:
-        target.check_fingers(hand.fingers)
+    Args:
+        hand: The hand.
+        target: One contact per finger, except the ``free_fingers``.
+        free_fingers: Fingers deliberately left without a contact (e.g. the ring finger of a
+            three-finger grasp); any other missing finger is an error.
+    """
+
+    def __init__(self, hand: Hand, target: GraspTarget, free_fingers: tuple[str, ...] = ()) -> None:
+        unknown = [f for f in free_fingers if f not in hand.fingers]
+        if unknown:
+            raise InvalidTargetError(
+                f"free finger(s) {unknown} unknown; valid: {list(hand.fingers)}"
+            )
+        constrained = [f for f in hand.fingers if f not in free_fingers]
+        if len(constrained) < 2:
+            raise InvalidTargetError("a grasp needs contacts for at least two fingers")
+        target.check_fingers(constrained)
         self.hand = hand
         self.target = target
-        contacts = [target.contact(f) for f in hand.fingers]
+        self.fingers = tuple(constrained)
+        self.rows = np.array([hand.fingers.index(f) for f in constrained], dtype=np.intp)
+        contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
 
     def errors(self, state: ContactState) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Per-finger position and centre errors [m]."""
+        """Per constrained finger, position and centre errors [m]."""
         return (
-            np.linalg.norm(state.points - self.points, axis=1),
-            np.linalg.norm(state.centres - self.centres, axis=1),
+            np.linalg.norm(state.points[self.rows] - self.points, axis=1),
+            np.linalg.norm(state.centres[self.rows] - self.centres, axis=1),
         )
 
     def residual(self, state: ContactState, rows: slice = slice(None)) -> NDArray[np.float64]:
-        """``P* - P`` stacked as (p, r) per finger, for the fingers in ``rows``."""
+        """``P* - P`` stacked as (p, r) per constrained finger, for the fingers in ``rows``."""
+        points, centres = state.points[self.rows], state.centres[self.rows]
         return np.concatenate(
-            [self.points[rows] - state.points[rows], self.centres[rows] - state.centres[rows]],
-            axis=1,
+            [self.points[rows] - points[rows], self.centres[rows] - centres[rows]], axis=1
         ).ravel()
+
+    def jacobian(self, jac: Any, rows: slice = slice(None)) -> NDArray[np.float64]:
+        """Jacobian of :meth:`residual`'s ``P`` (rows (p_i, r_i) per constrained finger)."""
+        return stack_rows(jac.points[self.rows][rows], jac.centres[self.rows][rows])
 
 
 def stack_rows(
@@ -239,7 +260,7 @@ def _paper_attempt(
         if k == s.max_iterations:
             break
         previous = state
-        J = _thumb_hanging_jacobian(hand, jac, others)
+        J = _thumb_hanging_jacobian(problem, jac, others)
         step = scale * (np.linalg.pinv(J * scale) @ (s.alpha * problem.residual(state, others)))
         psi += step[0]  # Eq. (8)
         coords = np.clip(coords + step[1:], hand.lower, hand.upper)
@@ -250,7 +271,9 @@ def _paper_attempt(
     return Attempt(q, "max_iterations", s.max_iterations, max(pos.max(), cen.max()), history)
 
 
-def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.float64]:
+def _thumb_hanging_jacobian(
+    problem: ContactProblem, jac: Any, others: slice
+) -> NDArray[np.float64]:
     """Jacobian of the other fingers' (p, r) w.r.t. ``C' = (psi, coordinates)``.
 
     The wrist is not free: it moves so that the thumb contact frame stays put except for the
@@ -258,13 +281,14 @@ def _thumb_hanging_jacobian(hand: Hand, jac: Any, others: slice) -> NDArray[np.f
     of the wrist twist and of the coordinates, the wrist twist is
     ``v_b = B^-1 ([0; n_T] psi_dot - Q x_dot)``.
     """
-    thumb = np.vstack([jac.points[0], jac.angular[0]])  # 6 x nv, world-aligned at p_T
+    hung = problem.rows[0]
+    thumb = np.vstack([jac.points[hung], jac.angular[hung]])  # 6 x nv, world-aligned at p_T
     B, Q = thumb[:, :6], thumb[:, 6:]
     rhs = np.zeros((6, 1 + Q.shape[1]))
-    rhs[3:, 0] = jac.state.normals[0]
+    rhs[3:, 0] = jac.state.normals[hung]
     rhs[:, 1:] = -Q
     wrist = np.linalg.solve(B, rhs)  # d(v_b) / d(psi, x)
-    J = stack_rows(jac.points[others], jac.centres[others])
+    J = problem.jacobian(jac, others)
     out = J[:, :6] @ wrist
     out[:, 1:] += J[:, 6:]
     return out
@@ -311,7 +335,7 @@ def _lm_loop(
             return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
-        J = stack_rows(jac.points, jac.centres)
+        J = problem.jacobian(jac)
         q_new, cost, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
         if q_new is None:
             continue
@@ -397,7 +421,7 @@ def _separate(
             return q, k
         jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
         rows, depths = _separation_rows(hand, penetrations)
-        J = np.vstack([stack_rows(jac.points, jac.centres), rows])
+        J = np.vstack([problem.jacobian(jac), rows])
         e = np.concatenate([problem.residual(jac.state), depths])
         free = _free_coordinates(hand, q, J.T @ e)
         JF = J[:, free]
@@ -448,6 +472,7 @@ def solve_ik(
     target: GraspTarget,
     settings: IKSettings | None = None,
     sequence: Sequence | None = None,
+    free_fingers: tuple[str, ...] = (),
     **overrides: Any,
 ) -> IKResult:
     """Find wrist pose and joints that put every fingertip on its contact (Algorithm 1).
@@ -457,6 +482,7 @@ def solve_ik(
         target: One contact per finger of the hand.
         settings: Solver parameters (defaults: :class:`IKSettings`).
         sequence: Initial-pose sequence (default: the hand's shipped or Table-1 sequence).
+        free_fingers: Fingers left without a contact (a three-finger grasp leaves one free).
         **overrides: Fields of :class:`IKSettings` to change, e.g. ``method="paper"``.
 
     Returns:
@@ -469,7 +495,7 @@ def solve_ik(
     """
     s = replace(settings or IKSettings(), **overrides)
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    return run_algorithm1(hand, target, attempt_fn, s, sequence)
+    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers)
 
 
 def run_algorithm1(
@@ -478,9 +504,10 @@ def run_algorithm1(
     attempt_fn: AttemptFn,
     settings: IKSettings,
     sequence: Sequence | None = None,
+    free_fingers: tuple[str, ...] = (),
 ) -> IKResult:
     """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here)."""
-    problem = ContactProblem(hand, target)
+    problem = ContactProblem(hand, target, free_fingers)
     sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
     start = time.perf_counter()
@@ -519,7 +546,7 @@ def _result(
         iterations=sum(a.iterations for a in attempts),
         time_s=attempts[-1].seconds,
         collision_free=collision_free,
-        fingers=hand.fingers,
+        fingers=problem.fingers,
         attempts=tuple(a.outcome for a in attempts),
         attempt_seconds=tuple(a.seconds for a in attempts),
         history=tuple(chosen.history) if chosen.history is not None else None,
