@@ -19,10 +19,10 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from sahgrasp.contacts import GraspTarget, load_targets
+from sahgrasp.contacts import load_targets
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, IKSettings, default_sequence, random_problems
-from sahgrasp.ik.solver import AttemptFn, run_algorithm1, solve_ik
+from sahgrasp.ik.solver import run_algorithm1, solve_ik
 
 __all__ = ["run", "summarize"]
 
@@ -63,17 +63,21 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
     }
 
 
-def _solve_all(
-    hand: Hand,
-    problems: Sequence[GraspTarget],
-    label: str,
-    solve: Any,
-) -> list[IKResult]:
-    return [solve(p) for p in tqdm(problems, desc=label, unit="problem", leave=False)]
+def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
+    """Configuration label -> function solving one target."""
+    solvers: dict[str, Any] = {}
+    for method, init in RUNS:
+        settings = IKSettings(method=method, init=init, seed=seed)
+        solvers[f"{method}/{init}"] = lambda t, s=settings: solve_ik(hand, t, s)
+    if peers:
+        from sahgrasp.bench.peers import PEERS
 
-
-def _peer(hand: Hand, fn: AttemptFn, settings: IKSettings) -> Any:
-    return lambda target: run_algorithm1(hand, target, fn, settings)
+        auto = IKSettings(seed=seed)
+        for name in peers:
+            solvers[f"peer:{name}/sequence"] = lambda t, fn=PEERS[name]: run_algorithm1(
+                hand, t, fn, auto
+            )
+    return solvers
 
 
 def run(
@@ -87,13 +91,17 @@ def run(
 ) -> dict[str, Any]:
     """Run the benchmark; returns the JSON document (and writes the figure to ``plot``).
 
+    Every configuration solves problem ``i`` right after the others, so that a change in machine
+    load affects them alike; peers, slower, see only the first ``peer_problems`` problems, and the
+    ``auto/sequence`` statistics on that subset are reported beside them.
+
     Args:
         hand: Hand name or description path.
         problems: Random feasible problems (ignored with ``targets``).
         seed: Seed of the problems and of the random initial configurations.
         targets: A targets file instead of random problems.
         peers: Peer solvers to run (``scipy``, ``pink``).
-        peer_problems: Peers are slow: run them on the first this-many problems (None = all).
+        peer_problems: Peers run on the first this-many problems (None = all).
         plot: PNG path for the Fig. 9 reproduction.
     """
     model = load_hand(hand)
@@ -101,25 +109,28 @@ def run(
         list(load_targets(targets).problems) if targets else random_problems(model, problems, seed)
     )
     default_sequence(model)  # built before timing
-    out: dict[str, Any] = {"benchmark": "ik", "hand": model.description.name, "seed": seed,
-                           "problems": len(problem_set), "runs": {}}  # fmt: skip
-    for method, init in RUNS:
-        settings = IKSettings(method=method, init=init, seed=seed)
-        results = _solve_all(model, problem_set, f"{method}/{init}",
-                             lambda t, s=settings: solve_ik(model, t, s))  # fmt: skip
-        out["runs"][f"{method}/{init}"] = summarize(results, settings.max_inits)
+    solvers = _solvers(model, seed, peers)
+    subset = len(problem_set) if peer_problems is None else peer_problems
+    results: dict[str, list[IKResult]] = {label: [] for label in solvers}
+    for i, target in enumerate(tqdm(problem_set, desc="bench ik", unit="problem")):
+        for label, solve in solvers.items():
+            if i < subset or not label.startswith("peer:"):
+                results[label].append(solve(target))
+    max_inits = IKSettings().max_inits
+    runs = {label: summarize(rs, max_inits) for label, rs in results.items()}
     if peers:
-        from sahgrasp.bench.peers import PEERS
-
-        subset = problem_set[:peer_problems] if peer_problems else problem_set
-        auto = IKSettings(seed=seed)
-        results = _solve_all(model, subset, "auto/sequence (peer subset)",
-                             lambda t: solve_ik(model, t, auto))  # fmt: skip
-        out["runs"]["auto/sequence (peer subset)"] = summarize(results, auto.max_inits)
-        for name in peers:
-            results = _solve_all(model, subset, name, _peer(model, PEERS[name], auto))
-            out["runs"][f"peer:{name}/sequence"] = summarize(results, auto.max_inits)
-    out["created_unix_s"] = time.time()
+        runs["auto/sequence (peer subset)"] = summarize(
+            results["auto/sequence"][:subset], max_inits
+        )
+    out: dict[str, Any] = {
+        "benchmark": "ik",
+        "hand": model.description.name,
+        "seed": seed,
+        "problems": len(problem_set),
+        "peer_problems": min(subset, len(problem_set)),
+        "runs": runs,
+        "created_unix_s": time.time(),
+    }
     if plot:
         plot_fig9(out, plot)
         out["plot"] = plot
