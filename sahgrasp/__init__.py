@@ -10,6 +10,7 @@ from sahgrasp.errors import (
     SequenceFileError,
 )
 from sahgrasp.hand import Hand, HandDescription, load_hand
+from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
 
 __all__ = [
     "AtlasError",
@@ -18,6 +19,8 @@ __all__ = [
     "Hand",
     "HandDescription",
     "HandModelError",
+    "IKResult",
+    "IKSettings",
     "InvalidConfigurationError",
     "InvalidTargetError",
     "SahGraspError",
@@ -25,4 +28,6 @@ __all__ = [
     "load_hand",
     "load_targets",
     "save_targets",
+    "solve_ik",
+    "solve_many",
 ]

@@ -1,0 +1,72 @@
+"""Objects to grasp: exact surfaces, contact patches, display meshes, coal collision geometry.
+
+The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusable geometry in
+:mod:`~sahgrasp.objects.profiles` (planar profiles), :mod:`~sahgrasp.objects.surfaces`
+(parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
+:mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
+collision shapes. Lengths in metres, angles in radians.
+"""
+
+from sahgrasp.objects.body import GraspObject
+from sahgrasp.objects.catalog import (
+    GRASP_NAMES,
+    OBJECT_NAMES,
+    PAPER_IK_REPORT,
+    IKReport,
+    bottle_patches,
+    can_patches,
+    load_object,
+    paper_grasp,
+)
+from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
+from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
+from sahgrasp.objects.meshing import Mesh, tessellate
+from sahgrasp.objects.patches import ContactRegion, CurvePatch, FixedContact, GraspPatches, Patch
+from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline, sample_profile
+from sahgrasp.objects.solids import BoxSolid, EllipsoidSolid, RevolvedSolid, Solid
+from sahgrasp.objects.surfaces import (
+    EllipsoidSurface,
+    RectangleSurface,
+    RevolvedSurface,
+    Surface,
+    SurfaceJet,
+)
+
+__all__ = [
+    "GRASP_NAMES",
+    "OBJECT_NAMES",
+    "PAPER_IK_REPORT",
+    "Arc",
+    "BoxSolid",
+    "CollisionShape",
+    "ContactRegion",
+    "CurvePatch",
+    "EllipsoidSolid",
+    "EllipsoidSurface",
+    "FixedContact",
+    "GraspObject",
+    "GraspPatches",
+    "IKReport",
+    "Mesh",
+    "Patch",
+    "RectangleSurface",
+    "RevolvedSolid",
+    "RevolvedSurface",
+    "Segment",
+    "Solid",
+    "Surface",
+    "SurfaceJet",
+    "as_placement",
+    "bottle_patches",
+    "can_patches",
+    "convex_hull",
+    "load_object",
+    "paper_grasp",
+    "placement",
+    "rotation_about",
+    "rounded_polyline",
+    "sample_profile",
+    "signed_distances",
+    "tessellate",
+    "transform_points",
+]
