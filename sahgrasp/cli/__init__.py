@@ -14,7 +14,7 @@ from sahgrasp.errors import SahGraspError
 
 __all__ = ["main"]
 
-COMMANDS = ("info", "solve", "bench")
+COMMANDS = ("info", "solve", "bench", "atlas")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -29,6 +29,10 @@ def add_parser(sub: Any) -> None:
     ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure")
     ik.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
     ik.set_defaults(run=run)
+    atlas = benches.add_parser("atlas", help="atlas on spheres and the planar hand vs CuikSuite")
+    atlas.add_argument("--repeats", type=int, default=5)
+    atlas.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
+    atlas.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:

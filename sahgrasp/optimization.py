@@ -1,0 +1,230 @@
+"""Global grasp optimization (atlas-grasp-optimization, Algorithm 1) on a sahgrasp hand.
+
+``GraspOptimization(F, X_h, x_1, Q, t, k, r, epsilon)``: principal hand motions from sampled hand
+configurations, ``R = F + E_s^T (x_h - x_1h)`` with ``s = t - k``, an atlas of ``R`` from the first
+grasp (found with the IK), and a quality index at every chart centre. Chart centres where the hand
+collides with itself are not candidates (Section IV: "collisions could be considered as well");
+the fingertip contact regions are box bounds of the atlas.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.errors import AtlasError
+from sahgrasp.grasp import GraspSystem, PrincipalMotions, principal_motions, reduced_system
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import solve_ik
+from sahgrasp.objects import GraspPatches, bottle_patches, can_patches
+from sahgrasp.quality import (
+    INDICES,
+    SINGULAR_THRESHOLDS,
+    Manipulability,
+    ellipsoid_indices,
+    null_space,
+)
+
+__all__ = ["EXPERIMENTS", "GraspOptimizationResult", "optimize_grasp", "run_experiment"]
+
+
+@dataclass(frozen=True)
+class GraspOptimizationResult:
+    """Outcome of :func:`optimize_grasp`.
+
+    Attributes:
+        system: The feasible-grasp system F.
+        atlas: The atlas of R.
+        index: Name of the quality index.
+        values: Index per chart (NaN where the chart centre is not a valid grasp).
+        valid: Chart centres without self-collision.
+        best: Chart with the largest index among valid ones.
+        worst: Chart with the smallest index among valid ones.
+        retained_variance: Share of the hand-motion variance the kept motions explain.
+        atlas_seconds: Atlas build time [s].
+        quality_seconds: Index evaluation time (with the validity checks) [s].
+    """
+
+    system: GraspSystem
+    atlas: Atlas
+    index: str
+    values: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+    best: int
+    worst: int
+    retained_variance: float
+    atlas_seconds: float
+    quality_seconds: float
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-able summary (charts, dimensions, times, best and worst grasps)."""
+
+        def grasp(i: int) -> dict[str, Any]:
+            q = self.system.configuration(self.atlas.centres[i])
+            return {"chart": i, "value": float(self.values[i]),
+                    "singular": bool(self.values[i] < SINGULAR_THRESHOLDS[self.index]),
+                    "joints": self.system.hand.joint_values(q),
+                    "x": self.atlas.centres[i].tolist()}  # fmt: skip
+
+        return {
+            "problem": self.system.patches.name,
+            "charts": self.atlas.n_charts,
+            "complete": self.atlas.complete,
+            "n": self.system.n,
+            "t": self.system.t,
+            "k": self.atlas.dim,
+            "s": self.system.t - self.atlas.dim,
+            "r": self.atlas.radius,
+            "epsilon": self.atlas.epsilon,
+            "index": self.index,
+            "valid_charts": int(self.valid.sum()),
+            "retained_variance": self.retained_variance,
+            "atlas_seconds": self.atlas_seconds,
+            "quality_seconds": self.quality_seconds,
+            "best": grasp(self.best),
+            "worst": grasp(self.worst),
+        }
+
+
+def hand_motions(hand: Hand, system: GraspSystem, samples: int, seed: int) -> PrincipalMotions:
+    """PCA of collision-free random hand configurations, restricted to ``x_h`` (Section III)."""
+    rng = np.random.default_rng(seed)
+    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
+    return principal_motions(X[:, system.coordinates])
+
+
+def optimize_grasp(
+    hand: Hand,
+    patches: GraspPatches,
+    k: int = 2,
+    radius: float = 0.1,
+    epsilon: float = 0.5,
+    index: str = "volume",
+    free_object: bool = True,
+    max_charts: int = 20_000,
+    motion_samples: int = 2000,
+    seed: int = 0,
+    progress: bool = False,
+    index_fn: Callable[[GraspSystem, NDArray[np.float64]], float] | None = None,
+) -> GraspOptimizationResult:
+    """Algorithm 1 of the atlas paper for ``hand`` and the object's contact ``patches``.
+
+    Args:
+        hand: The hand.
+        patches: Contact regions per finger in the object frame (fingers without one are free).
+        k: Dimension of the relevant-grasp set R.
+        radius: Chart radius ``r`` (x mixes radians and metres; see docs/atlas.md).
+        epsilon: Threshold of Eqs. (17)-(18).
+        index: Manipulability index (``inverse_condition``, ``volume``, ``min_semiaxis``).
+        free_object: Let the object pose vary (else it is fixed in the palm).
+        max_charts: Cap on the atlas size.
+        motion_samples: Hand configurations sampled for the principal motions.
+        seed: Seed of those samples.
+        progress: Show the atlas progress bar.
+        index_fn: A user quality index ``f(system, x) -> float`` instead of ``index``.
+    """
+    free = tuple(f for f in hand.fingers if f not in patches.regions)
+    first = solve_ik(hand, patches.target(), free_fingers=free)
+    if not first.success:
+        raise AtlasError(f"{patches.name}: the IK found no first grasp ({first.reason})")
+    system = GraspSystem(hand, patches, first.q, free_object)
+    motions = hand_motions(hand, system, motion_samples, seed)
+    x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
+    R, JR = reduced_system(system, motions, k, x1)
+    settings = AtlasSettings(radius=radius, epsilon=epsilon, max_charts=max_charts,
+                             start_tol=1e-4, progress=progress)  # fmt: skip
+    start = time.perf_counter()
+    atlas = build_atlas(R, JR, x1, k, settings, system.lower, system.upper)
+    atlas_seconds = time.perf_counter() - start
+    start = time.perf_counter()
+    values, valid = _evaluate(system, atlas, index, index_fn)
+    quality_seconds = time.perf_counter() - start
+    candidates = np.flatnonzero(valid)
+    if not candidates.size:
+        raise AtlasError(f"{patches.name}: no chart centre is a collision-free grasp")
+    best = int(candidates[np.argmax(values[candidates])])
+    worst = int(candidates[np.argmin(values[candidates])])
+    return GraspOptimizationResult(
+        system, atlas, index, values, valid, best, worst,
+        motions.retained_variance(system.t - k), atlas_seconds, quality_seconds,
+    )  # fmt: skip
+
+
+def _start_inside(
+    F: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    J: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    x: NDArray[np.float64],
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    margin: float = 1e-4,
+) -> NDArray[np.float64]:
+    """The first grasp moved ``margin`` inside the box and back onto ``F = 0``.
+
+    The IK leaves joints exactly at their limits, where the atlas's projection could step out of
+    the box; coordinates moved inside stay fixed while Newton corrects the others, until all are
+    inside.
+    """
+    inside = x.copy()
+    free = np.ones(x.size, dtype=bool)
+    for _ in range(10):
+        clipped = np.clip(inside, lower + margin, upper - margin)
+        free &= clipped == inside
+        inside = clipped
+        for _ in range(20):
+            residual = F(inside)
+            if np.linalg.norm(residual) < 1e-12:
+                break
+            inside[free] += np.linalg.lstsq(J(inside)[:, free], -residual, rcond=None)[0]
+        if np.all((inside >= lower + margin) & (inside <= upper - margin)):
+            return inside
+    raise AtlasError("the first grasp cannot be moved inside the joint and region bounds")
+
+
+def _manipulability(system: GraspSystem, x: NDArray[np.float64]) -> Manipulability:
+    """Ellipsoid of object twists reachable with unit actuated joint velocity (hard fingers)."""
+    C = system.hard_finger_constraints(x)
+    a = len(system.actuated_rows)
+    motions = null_space(C, C.shape[1] - C.shape[0])
+    return ellipsoid_indices(motions[:a], motions[a:])
+
+
+def _evaluate(
+    system: GraspSystem,
+    atlas: Atlas,
+    index: str,
+    index_fn: Callable[[GraspSystem, NDArray[np.float64]], float] | None,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    if index_fn is None and index not in INDICES:
+        raise AtlasError(f"unknown index {index!r}; valid: {list(INDICES)} or a callable")
+    hand = system.hand
+    valid = np.array([not hand.in_collision(system.configuration(x)) for x in atlas.centres])
+    if index_fn is not None:
+        values = np.array([index_fn(system, x) for x in atlas.centres], dtype=np.float64)
+    else:
+        values = np.array([_manipulability(system, x).index(index) for x in atlas.centres])
+    return np.where(valid, values, np.nan), valid
+
+
+EXPERIMENTS: dict[str, tuple[Callable[[], GraspPatches], bool]] = {
+    "can": (can_patches, True),
+    "bottle": (bottle_patches, True),
+}
+"""The atlas paper's SAH experiments: contact patches, and whether the object pose is free."""
+
+
+def run_experiment(
+    name: str, hand: str = "sah", k: int = 2, radius: float = 0.1, epsilon: float = 0.5,
+    index: str = "volume", max_charts: int = 20_000, progress: bool = False,
+) -> GraspOptimizationResult:  # fmt: skip
+    """Run the SAH + can or SAH + oil bottle experiment of Section V."""
+    if name not in EXPERIMENTS:
+        raise AtlasError(f"unknown experiment {name!r}; valid: {sorted(EXPERIMENTS)}")
+    patches, free_object = EXPERIMENTS[name]
+    return optimize_grasp(load_hand(hand), patches(), k, radius, epsilon, index,
+                          free_object, max_charts, progress=progress)  # fmt: skip

@@ -1,0 +1,638 @@
+"""The planar three-finger hand of the atlas paper (Fig. 8, Eqs. (19)-(25)) and its optimisation.
+
+Configuration ``x`` (n = 19), in this order:
+
+- ``x[0:12]``: the unit vectors ``v_{i,j}`` of the six phalanges (finger i = 1..3, phalanx
+  j = 1, 2), global orientation in the palm frame (Eq. (19));
+- ``x[12:14]``: the object position ``t_o`` [m]; ``x[14:16]``: its orientation
+  ``v_o = (s_o, c_o)`` (Eq. (20));
+- ``x[16:19]``: the contact parameters ``u_i`` [rad], the angle of the contact on circle i
+  (Eq. (24)).
+
+``F(x) = 0`` (Eq. (9)) has 16 equations: six of Eq. (19), one of Eq. (20), the contact points
+``q_i = o_i`` (Eqs. (7), (21), (23), two each) and the normal alignment ``m_i = -n_i`` (Eqs. (8),
+(22), (25)). As both normals are unit vectors, the alignment is the single equation
+``w(u_i) x v_{i,2} = 0`` (2-D cross product); of its two solution branches the one through the
+initial grasp has ``w(u_i) = -v_{i,2}``. So ``t = 19 - 16 = 3``. Following Eq. (23) literally, the
+angle ``u_i`` is measured in the palm frame and the arcs ``[a_i, b_i]`` are bounds on it.
+
+The actuated joints are the six joint angles ``theta``: ``theta_{i,1}``, of phalanx 1 from the
+palm's x axis, and ``theta_{i,2}``, of phalanx 2 relative to phalanx 1; the rate of the angle of a
+vector ``v`` is ``v x dv / |v|^2``. Principal hand motions come from a PCA of random joint-angle
+vectors (Section III), and Eq. (13) reads ``E_s^T (theta(x_h) - theta(x_1,h)) = 0``: in the
+unit-vector coordinates themselves the least-variance directions are the radial ones (normal to the
+unit circles), which would make Eq. (13) tangent to F at ``x_1``. ``s = t - k`` such equations
+(Eq. (12)) reduce F to the k-manifold R of Eq. (11), which the atlas covers (Section IV). The
+manipulability indices (:mod:`sahgrasp.quality`) are evaluated at every chart centre with the
+tangent space of F, the actuated joint rates and the object twist ``(vx, vy, omega)``.
+
+Geometry (``DEFAULT_HAND``, SI units): fingers based at x = -0.08, 0 and 0.08 m on the palm (the
+x axis), the outer ones with phalanges of 0.07 m and 0.035 m, the middle one of 0.035 m and
+0.03 m; the object is three circles of radius 0.02 m, placed so that the posture of ``x_1`` (outer
+fingers pinching the side lobes, the middle finger pushing the bottom lobe up; the object 0.07 m
+above the palm) is a grasp. Joint limits, as box bounds on the phalanx vectors, keep the
+proximal phalanges pointing up and the distal ones inwards (outer fingers) or up (middle finger).
+Each contact may move by +-0.55 rad along its arc, which gives about the 750 charts of the paper
+with r = 0.125 and epsilon = 0.4.
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.errors import AtlasError
+from sahgrasp.fileio import write_json_atomic
+from sahgrasp.quality import INDICES, Manipulability, manipulability, null_space
+
+__all__ = [
+    "DEFAULT_HAND",
+    "Extremum",
+    "PlanarGraspProblem",
+    "PlanarHand",
+    "PlanarResult",
+    "build_planar_atlas",
+    "make_planar_problem",
+    "optimize_planar",
+    "plot_atlas",
+    "principal_motions",
+    "random_hand_configurations",
+    "run_planar",
+]
+
+FloatArray = NDArray[np.float64]
+
+N_VARS = 19  # 12 phalanx vectors + t_o (2) + v_o (2) + u (3)
+T_DIM = 3  # dimension of F (Section V)
+_INF = np.inf
+_V = slice(0, 12)
+_TO = slice(12, 14)
+_VO = slice(14, 16)
+_U = slice(16, 19)
+
+
+def _unit(angle: ArrayLike) -> FloatArray:
+    """``w(angle) = (cos, sin)`` (Eq. (24)), stacked on a last axis."""
+    a = np.asarray(angle, dtype=np.float64)
+    return np.stack((np.cos(a), np.sin(a)), axis=-1)
+
+
+def _perp(a: FloatArray) -> FloatArray:
+    """``a`` turned by +90 degrees over the last axis."""
+    return np.stack((-a[..., 1], a[..., 0]), axis=-1)
+
+
+_JOINTS_FROM_PHALANGES = np.kron(np.eye(3), [[1.0, 0.0], [-1.0, 1.0]])
+"""``theta = D phi``: joint angles from absolute phalanx angles (distal relative to proximal)."""
+
+
+def _angle_gradients(x: FloatArray) -> FloatArray:
+    """Gradient of each phalanx's absolute angle by its vector (``v x dv / |v|^2``), (..., 12)."""
+    vx, vy = x[..., 0:12:2], x[..., 1:12:2]
+    norm2 = vx * vx + vy * vy
+    grad = np.empty((*x.shape[:-1], 12))
+    grad[..., 0::2] = -vy / norm2
+    grad[..., 1::2] = vx / norm2
+    return grad
+
+
+@functools.cache
+def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
+    """Constant entries of the Jacobian of F (flattened 16 x 19) and where the others go.
+
+    The variable entries are, in order: Eq. (19) (12), Eq. (20) (2), d/du_i of Eq. (7) (x for
+    i = 1..3, then y), d/dv_{i,2} of Eq. (8) (x, then y) and d/du_i of Eq. (8).
+    """
+    jac = np.zeros((16, N_VARS))
+    for i in range(3):
+        contact = slice(7 + 2 * i, 9 + 2 * i)
+        cx, cy = hand.centres[i]
+        jac[contact, 4 * i : 4 * i + 2] = hand.phalanges[i, 0] * np.eye(2)  # Eq. (21)
+        jac[contact, 4 * i + 2 : 4 * i + 4] = hand.phalanges[i, 1] * np.eye(2)
+        jac[contact, _TO] = -np.eye(2)  # Eq. (23)
+        jac[contact, 14] = (cy, -cx)  # -d(R c_i)/ds_o
+        jac[contact, 15] = (-cx, -cy)  # -d(R c_i)/dc_o
+    fingers = np.arange(3)
+    rows = np.concatenate(
+        (np.repeat(np.arange(6), 2), [6, 6], 7 + 2 * fingers, 8 + 2 * fingers, 13 + fingers,
+         13 + fingers, 13 + fingers)
+    )  # fmt: skip
+    cols = np.concatenate(
+        (np.arange(12), [14, 15], 16 + fingers, 16 + fingers, 4 * fingers + 2, 4 * fingers + 3,
+         16 + fingers)
+    )  # fmt: skip
+    return jac.reshape(-1), rows * N_VARS + cols
+
+
+@dataclass(frozen=True, eq=False)
+class PlanarHand:
+    """Geometry of the hand and the object of Fig. 8 (SI units).
+
+    Attributes:
+        anchors: Palm anchor points ``a_i`` of the fingers, (3, 2) [m].
+        phalanges: Lengths ``l_{i,1}, l_{i,2}``, (3, 2) [m].
+        centres: Circle centres ``c_i`` in the object frame, (3, 2) [m].
+        radii: Circle radii ``l_{i,3}``, (3,) [m].
+        arcs: Contact parameter ranges ``[a_i, b_i]`` in the palm frame, (3, 2) [rad].
+        posture: Absolute phalanx angles of the initial grasp ``x_1``, (3, 2) [rad].
+        object_position: Object position ``t_o`` at ``x_1`` (unrotated object), (2,) [m].
+        limits: Joint limits as box bounds on the phalanx vectors ``x[0:12]``: lower and upper,
+            (2, 12); ``v_y >= sin(a)`` keeps a phalanx's angle within ``[a, pi - a]``.
+    """
+
+    anchors: FloatArray
+    phalanges: FloatArray
+    centres: FloatArray
+    radii: FloatArray
+    arcs: FloatArray
+    posture: FloatArray
+    object_position: FloatArray
+    limits: FloatArray
+
+    def initial_grasp(self) -> FloatArray:
+        """The feasible grasp ``x_1`` (19,) the circles were placed for."""
+        v = _unit(self.posture)
+        u = np.arctan2(-v[:, 1, 1], -v[:, 1, 0])  # w(u_i) = -v_{i,2}
+        return np.concatenate((v.reshape(-1), self.object_position, [0.0, 1.0], u))
+
+    @classmethod
+    def from_posture(
+        cls,
+        anchors: ArrayLike,
+        phalanges: ArrayLike,
+        radii: ArrayLike,
+        angles: ArrayLike,
+        object_position: ArrayLike,
+        half_arc: float,
+        limits: ArrayLike | None = None,
+    ) -> PlanarHand:
+        """Place the circles so that the hand at ``angles`` grasps the object (unrotated).
+
+        Args:
+            anchors: ``a_i``, (3, 2) [m].
+            phalanges: ``l_{i,1}, l_{i,2}``, (3, 2) [m].
+            radii: ``l_{i,3}``, (3,) [m].
+            angles: Absolute angles of the phalanges, (3, 2) [rad].
+            object_position: ``t_o`` at that grasp, (2,) [m].
+            half_arc: Half-width of each arc around the nominal contact [rad].
+            limits: Lower and upper bounds on the phalanx vectors, (2, 12); none if None.
+        """
+        a = np.asarray(anchors, dtype=np.float64)
+        lengths = np.asarray(phalanges, dtype=np.float64)
+        l3 = np.asarray(radii, dtype=np.float64)
+        posture = np.asarray(angles, dtype=np.float64)
+        t_o = np.asarray(object_position, dtype=np.float64)
+        v = _unit(posture)  # (3, 2, 2)
+        tips = a + lengths[:, :1] * v[:, 0] + lengths[:, 1:] * v[:, 1]  # Eq. (21)
+        centres = tips + l3[:, None] * v[:, 1] - t_o  # Eq. (23) with w(u_i) = -v_{i,2}
+        nominal = np.arctan2(-v[:, 1, 1], -v[:, 1, 0])
+        arcs = nominal[:, None] + half_arc * np.array([-1.0, 1.0])
+        box = np.array([[-np.inf] * 12, [np.inf] * 12]) if limits is None else np.asarray(limits)
+        return cls(a, lengths, centres, l3, arcs, posture, t_o, box.astype(np.float64))
+
+
+DEFAULT_HAND = PlanarHand.from_posture(
+    anchors=[[-0.08, 0.0], [0.0, 0.0], [0.08, 0.0]],
+    phalanges=[[0.07, 0.035], [0.035, 0.03], [0.07, 0.035]],
+    radii=[0.02, 0.02, 0.02],
+    angles=np.deg2rad([[95.0, 10.0], [60.0, 110.0], [85.0, 170.0]]),
+    object_position=[0.0, 0.07],
+    half_arc=0.55,
+    limits=[
+        # proximal phalanges point up (v_y >= 0.3), the outer distal ones inwards (v_x >= -0.3
+        # on the left, <= 0.3 on the right), the middle distal one up (v_y >= 0)
+        [-_INF, 0.3, -0.3, -_INF, -_INF, 0.3, -_INF, 0.0, -_INF, 0.3, -_INF, -_INF],
+        [_INF, _INF, _INF, _INF, _INF, _INF, _INF, _INF, _INF, _INF, 0.3, _INF],
+    ],
+)
+"""The hand used for the experiment of Section V (see the module docstring)."""
+
+
+def random_hand_configurations(
+    hand: PlanarHand, rng: np.random.Generator, count: int, spread: float
+) -> FloatArray:
+    """Random joint-angle vectors (count, 6) around the hand's initial posture.
+
+    Gaussian with a random covariance (a random mixing matrix), so that the joints move in a
+    correlated way and the principal motions are well defined; ``spread`` scales it [rad].
+    """
+    mixing = rng.normal(size=(6, 6)) / np.sqrt(6.0)
+    joints = _JOINTS_FROM_PHALANGES @ hand.posture.reshape(6)
+    return joints + spread * rng.normal(size=(count, 6)) @ mixing
+
+
+def principal_motions(samples: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """PCA of hand configurations (Section III): ``T T^T = E S^2 E^T``.
+
+    Args:
+        samples: Hand configurations ``X_h``, one per row, (z, h).
+
+    Returns:
+        ``E`` (h, h), columns sorted by decreasing variance, and the variances ``S^2`` (h,).
+    """
+    X = np.asarray(samples, dtype=np.float64)
+    T = (X - X.mean(axis=0)).T
+    variances, E = np.linalg.eigh(T @ T.T / max(len(X) - 1, 1))
+    order = np.argsort(variances)[::-1]
+    return E[:, order], variances[order]
+
+
+@dataclass(frozen=True, eq=False)
+class PlanarGraspProblem:
+    """The feasible-grasp system of the planar hand plus the principal-motion constraints.
+
+    Every method accepts one configuration (19,) or a batch (..., 19).
+
+    Attributes:
+        hand: Geometry.
+        x1: The initial feasible grasp that Eq. (13) passes through, (19,).
+        synergy: ``E_s``, the ``s`` least-variance hand motions in joint space, (6, s).
+    """
+
+    hand: PlanarHand
+    x1: FloatArray
+    synergy: FloatArray
+
+    @property
+    def k(self) -> int:
+        """Dimension of R: ``k = t - s`` (Eq. (12))."""
+        return T_DIM - self.synergy.shape[1]
+
+    def grasp_residual(self, x: ArrayLike) -> FloatArray:
+        """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8).
+
+        Written on strided views of ``x`` (finger-wise x and y components) to keep the number of
+        numpy calls, which dominates the cost of one evaluation, small.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        h = self.hand
+        out = np.empty((*x.shape[:-1], 16))
+        squares = x[..., :12] ** 2
+        out[..., :6] = squares[..., 0::2] + squares[..., 1::2] - 1.0  # Eq. (19)
+        s, c = x[..., 14:15], x[..., 15:16]
+        out[..., 6] = (s * s + c * c - 1.0)[..., 0]  # Eq. (20)
+        cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])  # w(u_i), Eq. (24)
+        (l1, l2), (cx, cy) = h.phalanges.T, h.centres.T
+        v1x, v1y, v2x, v2y = x[..., 0:12:4], x[..., 1:12:4], x[..., 2:12:4], x[..., 3:12:4]
+        # q_i - o_i with q_i of Eq. (21) and o_i of Eq. (23): Eq. (7)
+        out[..., 7:13:2] = h.anchors[:, 0] + l1 * v1x + l2 * v2x
+        out[..., 7:13:2] -= x[..., 12:13] + c * cx - s * cy + h.radii * cu
+        out[..., 8:13:2] = h.anchors[:, 1] + l1 * v1y + l2 * v2y
+        out[..., 8:13:2] -= x[..., 13:14] + s * cx + c * cy + h.radii * su
+        out[..., 13:16] = cu * v2y - su * v2x  # Eq. (8) as w(u_i) x v_{i,2} = 0
+        return out
+
+    def grasp_jacobian(self, x: ArrayLike) -> FloatArray:
+        """Jacobian of :meth:`grasp_residual`, (..., 16, 19): a constant part plus 29 entries."""
+        x = np.asarray(x, dtype=np.float64)
+        cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])
+        v2x, v2y = x[..., 2:12:4], x[..., 3:12:4]  # distal phalanges
+        values = np.empty((*x.shape[:-1], 29))
+        values[..., :12] = 2.0 * x[..., :12]  # Eq. (19)
+        values[..., 12:14] = 2.0 * x[..., _VO]  # Eq. (20)
+        values[..., 14:17] = self.hand.radii * su  # Eq. (7), d/du_i, x then y
+        values[..., 17:20] = -self.hand.radii * cu
+        values[..., 20:23] = -su  # Eq. (8), d/dv_{i,2} x, y and d/du_i
+        values[..., 23:26] = cu
+        values[..., 26:29] = -su * v2y - cu * v2x
+        constant, where = _jacobian_layout(self.hand)
+        jac = np.broadcast_to(constant, (*x.shape[:-1], 16 * N_VARS)).copy()
+        jac[..., where] = values
+        return jac.reshape(*x.shape[:-1], 16, N_VARS)
+
+    def residual(self, x: ArrayLike) -> FloatArray:
+        """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s)."""
+        x = np.asarray(x, dtype=np.float64)
+        motion = self.joint_motion(x) @ self.synergy  # Eq. (13): E_s^T (theta - theta_1) = 0
+        return np.concatenate((self.grasp_residual(x), motion), axis=-1)
+
+    def jacobian(self, x: ArrayLike) -> FloatArray:
+        """Jacobian of :meth:`residual`, (..., 16 + s, 19)."""
+        x = np.asarray(x, dtype=np.float64)
+        motion = np.zeros((*x.shape[:-1], self.synergy.shape[1], N_VARS))
+        motion[..., :12] = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
+        motion[..., :12] *= _angle_gradients(x)[..., None, :]  # E_s^T J_a
+        return np.concatenate((self.grasp_jacobian(x), motion), axis=-2)
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Box bounds on ``x``: the joint limits and the arcs ``[a_i, b_i]`` of the contacts."""
+        lower, upper = np.full(N_VARS, -np.inf), np.full(N_VARS, np.inf)
+        lower[_V], upper[_V] = self.hand.limits
+        lower[_U], upper[_U] = self.hand.arcs[:, 0], self.hand.arcs[:, 1]
+        return lower, upper
+
+    def joint_angles(self, x: ArrayLike) -> FloatArray:
+        """The six actuated joint angles (..., 6) in (-pi, pi] [rad], finger by finger."""
+        v = np.asarray(x, dtype=np.float64)[..., _V].reshape(*np.shape(x)[:-1], 6, 2)
+        theta = np.arctan2(v[..., 1], v[..., 0]) @ _JOINTS_FROM_PHALANGES.T
+        return np.angle(np.exp(1j * theta))
+
+    def joint_motion(self, x: ArrayLike) -> FloatArray:
+        """Joint angles minus those of ``x_1`` (..., 6) [rad], smooth while under pi in size."""
+        x = np.asarray(x, dtype=np.float64)
+        vx, vy = x[..., 0:12:2], x[..., 1:12:2]
+        rx, ry = self.x1[0:12:2], self.x1[1:12:2]
+        turn = np.arctan2(rx * vy - ry * vx, rx * vx + ry * vy)  # per phalanx, from x_1
+        return turn @ _JOINTS_FROM_PHALANGES.T
+
+    def joint_jacobian(self, x: ArrayLike) -> FloatArray:
+        """``J_a``: joint angle rates from ``dx``, (..., 6, 19)."""
+        x = np.asarray(x, dtype=np.float64)
+        rate = np.zeros((*x.shape[:-1], 6, N_VARS))
+        rate[..., :12] = np.repeat(_JOINTS_FROM_PHALANGES, 2, axis=1)
+        rate[..., :12] *= _angle_gradients(x)[..., None, :]
+        return rate
+
+    def object_jacobian(self, x: ArrayLike) -> FloatArray:
+        """``J_o``: object velocity ``(vx, vy, omega)`` from ``dx``, (..., 3, 19).
+
+        ``omega = c_o ds_o - s_o dc_o`` for ``v_o = (s_o, c_o) = (sin, cos)`` of the angle.
+        """
+        x = np.asarray(x, dtype=np.float64)
+        jac = np.zeros((*x.shape[:-1], 3, N_VARS))
+        jac[..., 0, 12] = 1.0
+        jac[..., 1, 13] = 1.0
+        jac[..., 2, 14] = x[..., 15]
+        jac[..., 2, 15] = -x[..., 14]
+        return jac
+
+    def manipulability(self, x: ArrayLike) -> Manipulability:
+        """Manipulability ellipsoids at configurations ``x`` (..., 19) with the tangent of F."""
+        x = np.asarray(x, dtype=np.float64)
+        tangent = null_space(self.grasp_jacobian(x), T_DIM)
+        return manipulability(tangent, self.joint_jacobian(x), self.object_jacobian(x))
+
+
+def make_planar_problem(
+    k: int = 2,
+    hand: PlanarHand = DEFAULT_HAND,
+    samples: int = 500,
+    spread: float = 0.5,
+    seed: int = 0,
+) -> PlanarGraspProblem:
+    """The planar grasp problem with ``s = 3 - k`` principal-motion constraints (Eq. (12)).
+
+    Args:
+        k: Dimension of the explored set R, 1 <= k <= 3.
+        hand: Geometry; its nominal posture is the initial grasp ``x_1``.
+        samples: Number ``z`` of random hand configurations for the PCA.
+        spread: Half-range of the random joint angles around the nominal ones [rad].
+        seed: Seed of the random configurations.
+
+    Raises:
+        AtlasError: ``k`` is not 1, 2 or 3.
+    """
+    if k not in (1, 2, 3):
+        raise AtlasError(f"k must be 1, 2 or 3 (t = {T_DIM}), got {k}")
+    rng = np.random.default_rng(seed)
+    E, _ = principal_motions(random_hand_configurations(hand, rng, samples, spread))
+    s = T_DIM - k  # Eq. (12)
+    return PlanarGraspProblem(hand=hand, x1=hand.initial_grasp(), synergy=E[:, 6 - s :])
+
+
+@dataclass(frozen=True)
+class Extremum:
+    """The best or worst chart for one index.
+
+    Attributes:
+        chart: Index of the chart in the atlas.
+        value: Index value at its centre.
+        configuration: The chart centre ``x`` (19,).
+    """
+
+    chart: int
+    value: float
+    configuration: FloatArray
+
+
+@dataclass(frozen=True)
+class PlanarResult:
+    """Outcome of :func:`optimize_planar` (Algorithm 1 on the planar hand).
+
+    Attributes:
+        problem: The grasp problem.
+        atlas: Atlas of R.
+        quality: Manipulability ellipsoid at every chart centre.
+        atlas_seconds: Time to build the atlas [s].
+        quality_seconds: Time to evaluate the three indices at every chart [s].
+        best: Per index name (:data:`~sahgrasp.quality.INDICES`), the chart with the largest value.
+        worst: Per index name, the chart with the smallest value.
+    """
+
+    problem: PlanarGraspProblem
+    atlas: Atlas
+    quality: Manipulability
+    atlas_seconds: float
+    quality_seconds: float
+    best: Mapping[str, Extremum]
+    worst: Mapping[str, Extremum]
+
+    @property
+    def charts(self) -> int:
+        """Number of charts."""
+        return self.atlas.n_charts
+
+    @property
+    def t(self) -> int:
+        """Dimension of F."""
+        return T_DIM
+
+    @property
+    def k(self) -> int:
+        """Dimension of R."""
+        return self.problem.k
+
+
+def build_planar_atlas(
+    problem: PlanarGraspProblem,
+    radius: float = 0.125,
+    epsilon: float = 0.4,
+    start: ArrayLike | None = None,
+    progress: bool = False,
+) -> Atlas:
+    """Atlas of R (Eq. (11)) from ``start`` (default ``x_1``), bounded by the contact arcs.
+
+    Args:
+        problem: The grasp problem.
+        radius: Chart radius ``r``.
+        epsilon: Threshold of Eqs. (17)-(18).
+        start: A point of R to start from, (19,); another one than ``x_1`` covers the same
+            connected component.
+        progress: Show a progress bar.
+    """
+    lower, upper = problem.bounds()
+    x0 = problem.x1 if start is None else np.asarray(start, dtype=np.float64)
+    settings = AtlasSettings(radius=radius, epsilon=epsilon, progress=progress)
+    return build_atlas(problem.residual, problem.jacobian, x0, problem.k, settings, lower, upper)
+
+
+def _extremum(atlas: Atlas, values: FloatArray, best: bool) -> Extremum:
+    chart = int(np.nanargmax(values) if best else np.nanargmin(values))
+    return Extremum(chart, float(values[chart]), atlas.centres[chart].copy())
+
+
+def optimize_planar(
+    problem: PlanarGraspProblem | None = None,
+    radius: float = 0.125,
+    epsilon: float = 0.4,
+    start: ArrayLike | None = None,
+    progress: bool = False,
+) -> PlanarResult:
+    """Algorithm 1: atlas of R, then the three manipulability indices at every chart centre.
+
+    Args:
+        problem: The grasp problem; :func:`make_planar_problem` () if None.
+        radius: Chart radius ``r`` (the paper: 0.125).
+        epsilon: Threshold of Eqs. (17)-(18) (the paper: 0.4).
+        start: Start point on R, default ``x_1``.
+        progress: Show a progress bar.
+    """
+    problem = problem or make_planar_problem()
+    atlas = build_planar_atlas(problem, radius, epsilon, start, progress)
+    begin = time.perf_counter()
+    quality = problem.manipulability(atlas.centres)
+    best = {name: _extremum(atlas, quality.index(name), best=True) for name in INDICES}
+    worst = {name: _extremum(atlas, quality.index(name), best=False) for name in INDICES}
+    seconds = time.perf_counter() - begin
+    return PlanarResult(problem, atlas, quality, atlas.build_seconds, seconds, best, worst)
+
+
+def _describe(problem: PlanarGraspProblem, extremum: Extremum) -> dict[str, Any]:
+    """JSON-able description of a grasp (SI units, angles in radians)."""
+    x = extremum.configuration
+    return {
+        "chart": extremum.chart,
+        "value": extremum.value,
+        "configuration": {
+            "joint_angles_rad": problem.joint_angles(x).tolist(),
+            "object_position_m": x[_TO].tolist(),
+            "object_angle_rad": float(np.arctan2(x[14], x[15])),
+            "contact_params_rad": x[_U].tolist(),
+            "x": x.tolist(),
+        },
+    }
+
+
+def _projection(points: FloatArray) -> FloatArray:
+    """The first two principal components of ``points`` (N, n) -> (N, 2)."""
+    centred = points - points.mean(axis=0)
+    vt = np.linalg.svd(centred, full_matrices=False)[2]
+    return centred @ vt[:2].T
+
+
+def _draw_grasp(ax: Any, hand: PlanarHand, x: FloatArray, title: str) -> None:
+    """The hand (blue), the object's circles (black) and contact arcs (red) at ``x``."""
+    v = x[_V].reshape(3, 2, 2)
+    joints = hand.anchors[:, None, :] + np.cumsum(hand.phalanges[:, :, None] * v, axis=1)
+    for anchor, (knuckle, tip) in zip(hand.anchors, joints, strict=True):
+        ax.plot(*np.array([anchor, knuckle, tip]).T, "-o", color="tab:blue", markersize=3)
+    s, c = x[14], x[15]
+    centres = x[_TO] + c * hand.centres + s * _perp(hand.centres)
+    for centre, radius, arc in zip(centres, hand.radii, hand.arcs, strict=True):
+        full = np.linspace(0.0, 2.0 * np.pi, 90)
+        ax.plot(*(centre + radius * _unit(full)).T, color="black", linewidth=0.8)
+        contact_arc = _unit(np.linspace(arc[0], arc[1], 30))
+        ax.plot(*(centre + radius * contact_arc).T, color="tab:red", linewidth=2)
+    ax.plot(*np.array([hand.anchors[0], hand.anchors[-1]]).T, color="black", linewidth=4)
+    ax.set_title(title)
+    ax.set_aspect("equal")
+
+
+def plot_atlas(result: PlanarResult, path: str | Path, index: str = "volume") -> None:
+    """Fig. 9: chart centres coloured by each index (green large, red small, black singular).
+
+    Top row: the centres on their first two principal components, one panel per index; the best
+    chart of each index is a star, the worst a cross. Bottom row: the best and worst grasps of
+    ``index``. Written as a PNG with the Agg renderer (no display needed).
+    """
+    from matplotlib import colormaps
+    from matplotlib.figure import Figure
+
+    xy = _projection(result.atlas.centres)
+    fig = Figure(figsize=(15, 9), layout="constrained")
+    grid = fig.add_gridspec(2, 6)
+    titles = ("(a) inverse condition number", "(b) volume", "(c) smallest semi-axis")
+    top = [fig.add_subplot(grid[0, 2 * i : 2 * i + 2]) for i in range(3)]
+    for ax, name, title in zip(top, INDICES, titles, strict=True):
+        values, singular = result.quality.index(name), result.quality.singular(name)
+        fine = xy[~singular]
+        ax.scatter(fine[:, 0], fine[:, 1], c=values[~singular], cmap=colormaps["RdYlGn"], s=12)
+        ax.scatter(xy[singular, 0], xy[singular, 1], c="black", s=12)
+        ax.plot(*xy[result.best[name].chart], marker="*", color="blue", markersize=16)
+        ax.plot(*xy[result.worst[name].chart], marker="X", color="blue", markersize=12)
+        ax.set_title(f"{title}: {int(singular.sum())} singular of {result.charts}")
+        ax.set_xlabel("principal component 1")
+        ax.set_ylabel("principal component 2")
+    for column, (which, extremum) in enumerate(
+        (("best", result.best[index]), ("worst", result.worst[index]))
+    ):
+        ax = fig.add_subplot(grid[1, 3 * column : 3 * column + 3])
+        title = f"{which} {index}: chart {extremum.chart}, {extremum.value:.3g}"
+        _draw_grasp(ax, result.problem.hand, extremum.configuration, title)
+    fig.savefig(Path(path), dpi=90)
+
+
+def run_planar(
+    k: int = 2,
+    r: float = 0.125,
+    eps: float = 0.4,
+    index: str = "volume",
+    json_out: str | None = None,
+    plot_out: str | None = None,
+) -> dict[str, Any]:
+    """The planar experiment of Section V, summarised for the ``sahgrasp atlas planar`` command.
+
+    Args:
+        k: Dimension of R (``s = 3 - k`` principal-motion constraints).
+        r: Chart radius.
+        eps: Threshold of Eqs. (17)-(18).
+        index: The index whose best and worst grasps head the summary (see ``INDICES``).
+        json_out: Write the summary there as JSON.
+        plot_out: Write the Fig. 9 plot there as PNG.
+
+    Returns:
+        JSON-able summary: ``charts``, ``t``, ``k``, ``atlas_seconds``, ``quality_seconds``,
+        ``best`` and ``worst`` (chart, value, configuration) of ``index``, and per index the same
+        plus the number of singular charts.
+
+    Raises:
+        AtlasError: ``index`` is not one of ``INDICES`` or ``k`` is not 1, 2 or 3.
+    """
+    if index not in INDICES:
+        raise AtlasError(f"unknown index {index!r}; valid: {', '.join(INDICES)}")
+    result = optimize_planar(make_planar_problem(k), r, eps)
+    problem = result.problem
+    summary: dict[str, Any] = {
+        "charts": result.charts,
+        "t": result.t,
+        "k": result.k,
+        "radius": r,
+        "epsilon": eps,
+        "complete": result.atlas.complete,
+        "atlas_seconds": result.atlas_seconds,
+        "quality_seconds": result.quality_seconds,
+        "index": index,
+        "best": _describe(problem, result.best[index]),
+        "worst": _describe(problem, result.worst[index]),
+        "indices": {
+            name: {
+                "best": _describe(problem, result.best[name]),
+                "worst": _describe(problem, result.worst[name]),
+                "singular_charts": int(result.quality.singular(name).sum()),
+            }
+            for name in INDICES
+        },
+    }
+    if json_out is not None:
+        write_json_atomic(json_out, summary)
+    if plot_out is not None:
+        plot_atlas(result, plot_out, index)
+    return summary

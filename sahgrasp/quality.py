@@ -1,0 +1,216 @@
+"""Grasp quality from the manipulability ellipsoid (Bicchi & Prattichizzo 2000, ref. [1]).
+
+At a feasible grasp ``x`` let ``T`` (n x t) be a basis of the tangent space of the feasible-grasp
+manifold F, so that every feasible motion is ``dx = T tau``. The actuated joint velocities are
+``qdot = A tau`` with ``A = J_a T`` and the object velocity is ``nu = B tau`` with ``B = J_o T``.
+The manipulability ellipsoid is the set of object velocities reachable with a unit-norm actuated
+velocity compatible with the constraints, ``{B tau : |A tau| <= 1}``. With the thin SVD
+``A = U S V^T`` it is the image of the unit ball by ``M = B V S^-1``, whose singular values are
+the ellipsoid's semi-axes. The atlas paper (Section V, Fig. 9) optimises three indices of it: the
+inverse condition number, the volume and the smallest semi-axis, and calls a grasp singular when
+the index falls below 1e-3, 1e-4 and 1e-3 respectively.
+
+Everything here is vectorised over leading axes (one entry per chart). ``evaluate_index``
+evaluates any index, built-in or user-supplied, at the centres of an atlas and picks the best and
+worst charts.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sahgrasp.errors import AtlasError
+
+__all__ = [
+    "INDICES",
+    "SINGULAR_THRESHOLDS",
+    "ChartCentres",
+    "IndexEvaluation",
+    "Manipulability",
+    "ellipsoid_indices",
+    "evaluate_index",
+    "manipulability",
+    "null_space",
+    "semi_axes",
+]
+
+FloatArray = NDArray[np.float64]
+
+INDICES = ("inverse_condition", "volume", "min_semiaxis")
+"""Names of the built-in manipulability indices, in the order of Fig. 9 (a)-(c)."""
+
+SINGULAR_THRESHOLDS = {"inverse_condition": 1e-3, "volume": 1e-4, "min_semiaxis": 1e-3}
+"""A grasp whose index is below its threshold is singular (Section V)."""
+
+_RANK_TOL = 1e-12  # relative singular value below which a matrix counts as rank deficient
+
+
+@dataclass(frozen=True)
+class Manipulability:
+    """Manipulability ellipsoids of one grasp or of a batch (leading axes ``...``).
+
+    Attributes:
+        semi_axes: Semi-axis lengths, decreasing, shape (..., o); zeros where the hand cannot move
+            the object at all in some direction. All zero when the actuated joints do not determine
+            the grasp motion (``A`` rank deficient): the object then moves with the joints locked.
+        inverse_condition: Smallest over largest semi-axis, shape (...).
+        volume: Product of the semi-axes (the ellipsoid volume over that of the unit ball), (...).
+        min_semiaxis: Smallest semi-axis, shape (...).
+    """
+
+    semi_axes: FloatArray
+    inverse_condition: FloatArray
+    volume: FloatArray
+    min_semiaxis: FloatArray
+
+    def index(self, name: str) -> FloatArray:
+        """The index called ``name`` (one of :data:`INDICES`)."""
+        if name not in INDICES:
+            raise AtlasError(f"unknown manipulability index {name!r}; valid: {', '.join(INDICES)}")
+        values: FloatArray = getattr(self, name)
+        return values
+
+    def singular(self, name: str) -> NDArray[np.bool_]:
+        """True where index ``name`` is below its singularity threshold."""
+        return self.index(name) < SINGULAR_THRESHOLDS[name]
+
+
+def null_space(jac: ArrayLike, dim: int) -> FloatArray:
+    """Orthonormal bases (..., n, dim) of the null spaces of a batch of Jacobians (..., m, n).
+
+    The last ``dim`` right singular vectors: the tangent space of ``F = 0`` when ``J`` has rank
+    ``n - dim``.
+    """
+    vt = np.linalg.svd(np.asarray(jac, dtype=np.float64), full_matrices=True)[2]
+    return np.swapaxes(vt[..., vt.shape[-1] - dim :, :], -1, -2)
+
+
+def semi_axes(actuated: ArrayLike, obj: ArrayLike) -> FloatArray:
+    """Semi-axes of the manipulability ellipsoids ``{B tau : |A tau| <= 1}``.
+
+    Args:
+        actuated: ``A = J_a T``, actuated joint velocity per tangent coordinate, (..., a, t).
+        obj: ``B = J_o T``, object velocity per tangent coordinate, (..., o, t).
+
+    Returns:
+        Semi-axis lengths, decreasing, (..., o); all zero where ``A`` is rank deficient.
+    """
+    A, B = np.asarray(actuated, dtype=np.float64), np.asarray(obj, dtype=np.float64)
+    _, s, vt = np.linalg.svd(A, full_matrices=False)  # A = U S V^T
+    deficient = s[..., -1] <= _RANK_TOL * s[..., 0]
+    s_safe = np.where(deficient[..., None], 1.0, s)
+    M = (B @ np.swapaxes(vt, -1, -2)) / s_safe[..., None, :]  # M = B V S^-1
+    sigma = np.linalg.svd(M, compute_uv=False)
+    o = B.shape[-2]
+    axes = np.zeros((*sigma.shape[:-1], o))
+    axes[..., : min(o, sigma.shape[-1])] = sigma[..., :o]
+    axes[deficient] = 0.0
+    return axes
+
+
+def ellipsoid_indices(actuated: ArrayLike, obj: ArrayLike) -> Manipulability:
+    """The three indices of the manipulability ellipsoids; arguments as :func:`semi_axes`."""
+    axes = semi_axes(actuated, obj)
+    largest, smallest = axes[..., 0], axes[..., -1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inverse_condition = np.where(largest > 0, smallest / largest, 0.0)
+    return Manipulability(
+        semi_axes=axes,
+        inverse_condition=inverse_condition,
+        volume=np.prod(axes, axis=-1),
+        min_semiaxis=smallest,
+    )
+
+
+def _velocity_map(rows_or_matrix: ArrayLike, tangent: FloatArray) -> FloatArray:
+    """``tangent`` rows (integer indices) or ``matrix @ tangent`` (a float (..., p, n) matrix)."""
+    m = np.asarray(rows_or_matrix)
+    if np.issubdtype(m.dtype, np.integer):
+        if m.ndim != 1:
+            raise AtlasError(f"coordinate rows must be a 1-D integer array, got shape {m.shape}")
+        return tangent[..., m, :]
+    return np.asarray(m, dtype=np.float64) @ tangent
+
+
+def manipulability(tangent: ArrayLike, actuated: ArrayLike, obj: ArrayLike) -> Manipulability:
+    """Manipulability ellipsoid of grasps from their tangent spaces.
+
+    Args:
+        tangent: Basis ``T`` of the tangent space of the feasible-grasp manifold, (..., n, t).
+        actuated: Rows of ``x`` that are actuated joint coordinates (integer array), or the
+            Jacobian ``J_a`` (..., a, n) mapping ``dx`` to actuated joint velocities.
+        obj: Rows of ``x`` that are object coordinates (integer array), or the Jacobian ``J_o``
+            (..., o, n) mapping ``dx`` to the object velocity.
+
+    Returns:
+        Semi-axes and the three indices, with the batch shape of ``tangent``.
+    """
+    T = np.asarray(tangent, dtype=np.float64)
+    return ellipsoid_indices(_velocity_map(actuated, T), _velocity_map(obj, T))
+
+
+class ChartCentres(Protocol):
+    """What :func:`evaluate_index` needs of an atlas (:class:`sahgrasp.atlas.Atlas` has it)."""
+
+    @property
+    def centres(self) -> FloatArray:
+        """Chart centres, (N, n)."""
+        ...
+
+
+@dataclass(frozen=True)
+class IndexEvaluation:
+    """A quality index evaluated at every chart centre of an atlas.
+
+    Attributes:
+        values: Index value per chart, shape (N,); NaN where the index is undefined.
+        best: Chart with the largest value.
+        worst: Chart with the smallest value.
+        seconds: Wall time of the evaluation [s].
+    """
+
+    values: FloatArray
+    best: int
+    worst: int
+    seconds: float
+
+
+def evaluate_index(
+    atlas: ChartCentres, index_fn: Callable[[FloatArray], ArrayLike], vectorised: bool = True
+) -> IndexEvaluation:
+    """Evaluate a quality index at the centre of every chart (Algorithm 1, lines 14-21).
+
+    Args:
+        atlas: The atlas whose chart centres are the candidate grasps.
+        index_fn: With ``vectorised``, maps the centres (N, n) to N values; otherwise maps one
+            centre (n,) to one value. Larger is better.
+        vectorised: Whether ``index_fn`` takes all centres at once.
+
+    Returns:
+        The values with the best (largest) and worst (smallest) chart.
+
+    Raises:
+        AtlasError: ``index_fn`` returned the wrong number of values, or only NaN.
+    """
+    start = time.perf_counter()
+    if vectorised:
+        values = np.asarray(index_fn(atlas.centres), dtype=np.float64).reshape(-1)
+    else:
+        values = np.array([float(np.asarray(index_fn(x))) for x in atlas.centres])
+    charts = len(atlas.centres)
+    if values.shape != (charts,):
+        raise AtlasError(f"index_fn gave {values.size} values for {charts} charts")
+    if np.isnan(values).all():
+        raise AtlasError("index_fn gave NaN at every chart")
+    return IndexEvaluation(
+        values=values,
+        best=int(np.nanargmax(values)),
+        worst=int(np.nanargmin(values)),
+        seconds=time.perf_counter() - start,
+    )

@@ -1,0 +1,192 @@
+"""Tests of the generic continuation engine on spheres, a torus, a cap and singular curves."""
+
+from __future__ import annotations
+
+from math import gamma, pi
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas, project
+from sahgrasp.errors import AtlasError
+
+
+def sphere_f(x: np.ndarray) -> np.ndarray:
+    return np.array([x @ x - 1.0])
+
+
+def sphere_j(x: np.ndarray) -> np.ndarray:
+    return 2.0 * x[None, :]
+
+
+TORUS_R, TORUS_RHO = 1.0, 0.4
+
+
+def torus_f(x: np.ndarray) -> np.ndarray:
+    q = np.hypot(x[0], x[1])
+    return np.array([(q - TORUS_R) ** 2 + x[2] ** 2 - TORUS_RHO**2])
+
+
+def torus_j(x: np.ndarray) -> np.ndarray:
+    q = np.hypot(x[0], x[1])
+    g = 2.0 * (q - TORUS_R) / q
+    return np.array([[g * x[0], g * x[1], 2.0 * x[2]]])
+
+
+def lemniscate_f(p: np.ndarray) -> np.ndarray:
+    return np.array([(p @ p) ** 2 - 2.0 * (p[0] ** 2 - p[1] ** 2)])
+
+
+def lemniscate_j(p: np.ndarray) -> np.ndarray:
+    s = p @ p
+    return np.array([[4.0 * s * p[0] - 4.0 * p[0], 4.0 * s * p[1] + 4.0 * p[1]]])
+
+
+def sphere_volume(n: int) -> float:
+    """Volume of the unit sphere S^(n-1) in R^n."""
+    return 2.0 * pi ** (n / 2) / gamma(n / 2)
+
+
+def check_on_manifold(atlas: Atlas, F, J) -> None:  # type: ignore[no-untyped-def]
+    assert max(np.linalg.norm(F(x)) for x in atlas.centres) <= 1e-8
+    for x, phi in zip(atlas.centres[::7], atlas.tangents[::7], strict=True):
+        assert np.allclose(phi.T @ phi, np.eye(atlas.dim), atol=1e-10)
+        assert np.allclose(J(x) @ phi, 0.0, atol=1e-8)
+
+
+@pytest.mark.parametrize(("n", "r"), [(2, 0.1), (3, 0.15), (4, 0.3)])
+def test_spheres_are_covered_with_vol_over_r_to_the_k_charts(n: int, r: float) -> None:
+    atlas = build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, AtlasSettings(radius=r))
+    assert atlas.complete
+    expected = sphere_volume(n) / r ** (n - 1)
+    assert abs(atlas.n_charts / expected - 1.0) <= 0.10
+    check_on_manifold(atlas, sphere_f, sphere_j)
+    assert atlas.singular_points.shape == (0, n)
+    assert not atlas.boundary.any()
+
+
+@pytest.mark.parametrize(("n", "r"), [(3, 0.15), (4, 0.3)])
+def test_sphere_has_no_hole(n: int, r: float) -> None:
+    atlas = build_atlas(sphere_f, sphere_j, np.eye(n)[-1], n - 1, AtlasSettings(radius=r))
+    points = np.random.default_rng(0).normal(size=(50_000, n))
+    points /= np.linalg.norm(points, axis=1)[:, None]
+    distance, _ = cKDTree(atlas.centres).query(points)
+    assert distance.max() <= r
+
+
+def test_torus_is_covered() -> None:
+    r = 0.15
+    atlas = build_atlas(torus_f, torus_j, [TORUS_R + TORUS_RHO, 0, 0], 2, AtlasSettings(radius=r))
+    assert atlas.complete
+    area = 4.0 * pi**2 * TORUS_R * TORUS_RHO
+    assert abs(atlas.n_charts / (area / r**2) - 1.0) <= 0.10
+    check_on_manifold(atlas, torus_f, torus_j)
+
+
+def test_edges_join_close_charts_and_parents_are_neighbours() -> None:
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.2))
+    i, j = atlas.edges.T
+    assert (i < j).all()
+    assert (np.linalg.norm(atlas.centres[i] - atlas.centres[j], axis=1) < 2 * atlas.radius).all()
+    assert atlas.parents[0] == -1
+    for child in (1, 10, atlas.n_charts - 1):
+        assert atlas.parents[child] in atlas.neighbours(child)
+
+
+def test_box_bound_stops_the_atlas_at_the_bound() -> None:
+    r, z_min = 0.1, 0.5
+    lower = [-np.inf, -np.inf, z_min]
+    atlas = build_atlas(sphere_f, sphere_j, [0, 0, 1], 2, AtlasSettings(radius=r), lower=lower)
+    assert atlas.complete
+    assert (atlas.centres[:, 2] >= z_min).all()
+    assert atlas.boundary.any()
+    assert atlas.centres[atlas.boundary, 2].min() < z_min + r
+    cap = np.random.default_rng(1).normal(size=(50_000, 3))
+    cap /= np.linalg.norm(cap, axis=1)[:, None]
+    cap = cap[cap[:, 2] >= z_min]
+    distance, _ = cKDTree(atlas.centres).query(cap)
+    assert distance.max() <= r
+    area = 2.0 * pi * (1.0 - z_min)
+    assert abs(atlas.n_charts / (area / r**2) - 1.0) <= 0.15
+
+
+def test_crossing_of_a_lemniscate_is_reported_and_passed() -> None:
+    start = [np.sqrt(2.0), 0.0]
+    atlas = build_atlas(lemniscate_f, lemniscate_j, start, 1, AtlasSettings(radius=0.1))
+    assert atlas.complete
+    assert len(atlas.singular_points) == 1
+    assert np.linalg.norm(atlas.singular_points[0]) < 0.01
+    assert atlas.centres[:, 0].min() < -1.3  # the far lobe was reached through the crossing
+
+
+def test_rank_drop_at_a_centre_is_reported() -> None:
+    def f(p: np.ndarray) -> np.ndarray:
+        return np.array([p[0] * p[1]])
+
+    def j(p: np.ndarray) -> np.ndarray:
+        return np.array([[p[1], p[0]]])
+
+    settings = AtlasSettings(radius=0.1)
+    atlas = build_atlas(f, j, [0.5, 0.0], 1, settings, lower=[-1, -1], upper=[1, 1])
+    assert atlas.complete
+    assert len(atlas.singular_points) == 1
+    assert np.linalg.norm(atlas.singular_points[0]) < 1e-6
+
+
+def test_max_charts_leaves_an_open_frontier() -> None:
+    settings = AtlasSettings(radius=0.1, max_charts=50)
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
+    assert atlas.n_charts == 50
+    assert not atlas.complete
+    assert atlas.open.any()
+
+
+def test_start_point_is_projected_onto_the_manifold() -> None:
+    atlas = build_atlas(sphere_f, sphere_j, [1.0 + 1e-8, 0.0, 0.0], 2, AtlasSettings(max_charts=1))
+    assert abs(np.linalg.norm(atlas.centres[0]) - 1.0) <= 1e-12
+
+
+def test_project_solves_eq_15() -> None:
+    phi = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    x_tilde = np.array([1.0, 0.3, -0.2])
+    x = project(sphere_f, sphere_j, x_tilde, phi)
+    assert x is not None
+    assert abs(x @ x - 1.0) <= 1e-10
+    assert np.allclose(phi.T @ (x - x_tilde), 0.0)
+    assert project(sphere_f, sphere_j, np.array([0.0, 2.0, 0.0]), phi) is None
+
+
+@pytest.mark.parametrize(
+    ("x0", "k", "f", "j", "match"),
+    [
+        ([1.0, 0.0, 0.0], 1, sphere_f, sphere_j, "shape"),
+        ([1.0, 0.0, 0.0], 3, sphere_f, sphere_j, "1 <= k < n"),
+        ([1.0, 0.0, 0.0], 0, sphere_f, sphere_j, "1 <= k < n"),
+        ([1.0, 0.0, 0.0], 2, sphere_f, lambda x: 2.0 * x, "shape"),
+        ([1.1, 0.0, 0.0], 2, sphere_f, sphere_j, "off the manifold"),
+        ([np.nan, 0.0, 0.0], 2, sphere_f, sphere_j, "finite"),
+        ([[1.0, 0.0, 0.0]], 2, sphere_f, sphere_j, "1-D"),
+        (
+            [0.0, 0.0],
+            1,
+            lambda p: np.array([p[0] * p[1]]),
+            lambda p: np.array([[p[1], p[0]]]),
+            "rank",
+        ),
+    ],
+)
+def test_bad_input_raises_atlas_error(x0, k, f, j, match) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(AtlasError, match=match):
+        build_atlas(f, j, x0, k)
+
+
+def test_bad_bounds_and_settings_raise_atlas_error() -> None:
+    with pytest.raises(AtlasError, match="outside the box"):
+        build_atlas(sphere_f, sphere_j, [1.0, 0, 0], 2, lower=[-1, -1, 0.5])
+    with pytest.raises(AtlasError, match="3 numbers"):
+        build_atlas(sphere_f, sphere_j, [1.0, 0, 0], 2, upper=[1, 1])
+    with pytest.raises(AtlasError, match="epsilon"):
+        AtlasSettings(epsilon=1.5)
+    with pytest.raises(AtlasError, match="radius"):
+        AtlasSettings(radius=-0.1)

@@ -1,0 +1,110 @@
+"""Tests of the manipulability indices on ellipsoids computed by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sahgrasp.atlas import AtlasSettings, build_atlas
+from sahgrasp.errors import AtlasError
+from sahgrasp.quality import (
+    INDICES,
+    SINGULAR_THRESHOLDS,
+    ellipsoid_indices,
+    evaluate_index,
+    manipulability,
+    null_space,
+    semi_axes,
+)
+
+
+def test_identity_actuation_gives_the_object_map_singular_values() -> None:
+    m = ellipsoid_indices(np.eye(3), np.diag([0.5, 2.0, 1.0]))
+    assert np.allclose(m.semi_axes, [2.0, 1.0, 0.5])
+    assert m.inverse_condition == pytest.approx(0.25)
+    assert m.volume == pytest.approx(1.0)
+    assert m.min_semiaxis == pytest.approx(0.5)
+
+
+def test_fast_joints_shrink_the_ellipsoid() -> None:
+    # qdot = diag(2, 1) tau and nu = tau: a unit joint speed moves the object 0.5 along x, 1 along y
+    assert np.allclose(semi_axes(np.diag([2.0, 1.0]), np.eye(2)), [1.0, 0.5])
+
+
+def test_redundant_actuation_matches_the_quadratic_form() -> None:
+    rng = np.random.default_rng(3)
+    A, B = rng.normal(size=(6, 3)), rng.normal(size=(3, 3))
+    # {B tau : tau^T A^T A tau <= 1}: squared semi-axes = eigenvalues of B (A^T A)^-1 B^T
+    expected = np.sqrt(np.sort(np.linalg.eigvalsh(B @ np.linalg.inv(A.T @ A) @ B.T))[::-1])
+    assert np.allclose(semi_axes(A, B), expected)
+
+
+def test_object_direction_out_of_reach_is_a_zero_semi_axis() -> None:
+    m = ellipsoid_indices(np.eye(2), np.array([[1.0, 0.0], [0.0, 1.0], [0.0, 0.0]]))
+    assert np.allclose(m.semi_axes, [1.0, 1.0, 0.0])
+    assert m.volume == 0.0 and m.inverse_condition == 0.0
+    assert all(m.singular(name) for name in INDICES)
+
+
+def test_motion_with_locked_joints_is_singular() -> None:
+    A = np.array([[1.0, 0.0], [0.0, 0.0]])  # tau = (0, 1) moves the object without any joint
+    m = ellipsoid_indices(A, np.eye(2))
+    assert np.allclose(m.semi_axes, 0.0)
+    assert all(m.singular(name) for name in INDICES)
+
+
+def test_thresholds_of_the_paper() -> None:
+    assert SINGULAR_THRESHOLDS == {"inverse_condition": 1e-3, "volume": 1e-4, "min_semiaxis": 1e-3}
+    m = ellipsoid_indices(np.eye(2), np.diag([1.0, 2e-3]))  # volume 2e-3, inverse cond 2e-3
+    assert not m.singular("volume") and not m.singular("inverse_condition")
+    m = ellipsoid_indices(np.eye(2), np.diag([1.0, 5e-4]))
+    assert m.singular("inverse_condition") and m.singular("min_semiaxis")
+    with pytest.raises(AtlasError, match="valid"):
+        m.index("dexterity")
+
+
+def test_rows_or_matrices_of_a_tangent_basis_and_batches() -> None:
+    rng = np.random.default_rng(0)
+    T = rng.normal(size=(5, 7, 3))  # five grasps, n = 7, t = 3
+    actuated, obj = np.array([0, 1, 2, 3]), np.array([4, 5, 6])
+    by_rows = manipulability(T, actuated, obj)
+    selector = np.eye(7)
+    by_matrix = manipulability(T, selector[actuated], selector[obj])
+    assert by_rows.semi_axes.shape == (5, 3)
+    assert np.allclose(by_rows.semi_axes, by_matrix.semi_axes)
+    single = manipulability(T[2], actuated, obj)
+    assert np.allclose(single.volume, by_rows.volume[2])
+    with pytest.raises(AtlasError, match="1-D"):
+        manipulability(T, actuated[None, :], obj)
+
+
+def test_null_space_is_an_orthonormal_tangent_basis() -> None:
+    jac = np.random.default_rng(1).normal(size=(4, 2, 5))
+    N = null_space(jac, 3)
+    assert N.shape == (4, 5, 3)
+    assert np.allclose(jac @ N, 0.0, atol=1e-12)
+    assert np.allclose(np.swapaxes(N, 1, 2) @ N, np.eye(3), atol=1e-12)
+
+
+def sphere_atlas():  # type: ignore[no-untyped-def]
+    def f(x: np.ndarray) -> np.ndarray:
+        return np.array([x @ x - 1.0])
+
+    def j(x: np.ndarray) -> np.ndarray:
+        return 2.0 * x[None, :]
+
+    return build_atlas(f, j, [0.0, 0.0, 1.0], 2, AtlasSettings(radius=0.3))
+
+
+def test_evaluate_index_accepts_user_callables() -> None:
+    atlas = sphere_atlas()
+    height = evaluate_index(atlas, lambda X: X[:, 2])
+    assert height.values.shape == (atlas.n_charts,)
+    assert height.best == 0  # the start point is the north pole
+    assert atlas.centres[height.worst, 2] == height.values.min()
+    scalar = evaluate_index(atlas, lambda x: -x[0], vectorised=False)
+    assert atlas.centres[scalar.best, 0] == atlas.centres[:, 0].min()
+    with pytest.raises(AtlasError, match="values for"):
+        evaluate_index(atlas, lambda X: X[:3, 0])
+    with pytest.raises(AtlasError, match="NaN"):
+        evaluate_index(atlas, lambda X: np.full(len(X), np.nan))
