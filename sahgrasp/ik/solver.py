@@ -458,7 +458,8 @@ def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArr
 def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[float, float]]:
     if settings.init == "random":
         rng = np.random.default_rng(settings.seed)
-        return [tuple(rng.uniform(0.0, 1.0, 2)) for _ in range(settings.max_inits)]  # type: ignore[misc]
+        pairs = rng.uniform(0.0, 1.0, (settings.max_inits, 2))
+        return [(float(a), float(b)) for a, b in pairs]
     lambdas = list(sequence.lambdas)
     return [lambdas[i % len(lambdas)] for i in range(settings.max_inits)]
 
