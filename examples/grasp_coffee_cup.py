@@ -1,0 +1,22 @@
+"""IK of the paper's coffee cup grasp with the SAH (ik-initial-sequence Section 4.1, Fig. 7c).
+
+Paper: 7 initial configurations, 38 Jacobian iterations.
+
+Run `python examples/grasp_coffee_cup.py` to open the viewer, or add `--html OUT` to write
+the scene to a standalone HTML file.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+
+from sahgrasp.viz import run_grasp_example
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_grasp_example("coffee_cup", argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

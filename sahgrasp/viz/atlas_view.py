@@ -1,0 +1,224 @@
+"""An atlas in a scene: chart centres coloured by a quality index, with the best and worst grasps.
+
+As the atlas paper's Figs. 9-10: green for a large index, red for a small one, black for a singular
+grasp (index below its threshold); chart centres that are no candidate grasp (NaN index, e.g. the
+hand collides with itself) are grey. The centres are plain arrays: 2-D or 3-D points are drawn as
+they are, higher-dimensional ones (configurations ``x``) on their three principal axes; either way
+scaled to ``size_m``. The best and the worst grasps are drawn beside the atlas, right and left,
+each linked to its chart by a line.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import meshcat.geometry as mg
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sahgrasp.hand import Hand
+from sahgrasp.objects import GraspObject, transform_points
+from sahgrasp.viz.colors import hex_color, quality_colors
+from sahgrasp.viz.grasp_view import show_grasp
+from sahgrasp.viz.viewer import Viewer, translation
+
+__all__ = [
+    "ATLAS_SIZE_M",
+    "AtlasPlot",
+    "ChartGrasp",
+    "DrawExtreme",
+    "display_points",
+    "show_atlas",
+    "show_atlas_grasps",
+    "show_atlas_scene",
+]
+
+ATLAS_SIZE_M = 0.25
+"""Largest extent of a drawn atlas [m] (hand-sized, to sit beside the grasps)."""
+
+_INVALID_RGB = (0.6, 0.6, 0.6)
+_LINK_RGB = (0.3, 0.3, 0.3)
+_VIEW = (0.0, -1.0, 0.35)
+_ASPECT = 2.0  # the scene is a row: atlas between two grasps
+_POINT_SIZE_M = 0.035 * ATLAS_SIZE_M
+
+DrawExtreme = Callable[[str, int, NDArray[np.float64]], NDArray[np.float64]]
+"""``draw(path, chart, T_scene) -> extent``: draws chart ``chart``'s grasp under ``path`` placed
+at ``T_scene`` (4x4), returns points spanning it in the scene (N, 3) [m]."""
+
+
+@dataclass(frozen=True)
+class AtlasPlot:
+    """What :func:`show_atlas` drew.
+
+    Attributes:
+        positions_m: Display position of each chart centre in the atlas's frame, (N, 3) [m].
+        best: Chart of the best grasp.
+        worst: Chart of the worst grasp.
+    """
+
+    positions_m: NDArray[np.float64]
+    best: int
+    worst: int
+
+
+def display_points(points: ArrayLike, size_m: float = ATLAS_SIZE_M) -> NDArray[np.float64]:
+    """3-D display positions (N, 3) of chart centres (N, d), centred, largest extent ``size_m``.
+
+    Points with d <= 3 are drawn as given (zero-padded to 3-D), higher-dimensional ones on their
+    three principal axes.
+
+    Raises:
+        ValueError: ``points`` is not a finite (N, d) array with N >= 1.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[0] == 0 or not np.all(np.isfinite(p)):
+        raise ValueError(f"chart centres must be a finite (N, d) array, got shape {p.shape}")
+    p = p - p.mean(axis=0)
+    if p.shape[1] > 3:
+        _, _, vt = np.linalg.svd(p, full_matrices=False)
+        p = p @ vt[:3].T
+    p = np.pad(p, ((0, 0), (0, 3 - p.shape[1])))
+    extent = float(np.ptp(p, axis=0).max())
+    return p * (size_m / extent) if extent > 0 else p
+
+
+def _extremes(values: NDArray[np.float64]) -> tuple[int, int]:
+    candidates = np.flatnonzero(np.isfinite(values))
+    if not candidates.size:
+        raise ValueError("no chart has a finite quality value")
+    return (
+        int(candidates[np.argmax(values[candidates])]),
+        int(candidates[np.argmin(values[candidates])]),
+    )
+
+
+def show_atlas(
+    viewer: Viewer,
+    path: str,
+    points: ArrayLike,
+    values: ArrayLike,
+    singular_below: float,
+    best: int | None = None,
+    worst: int | None = None,
+) -> AtlasPlot:
+    """Draw chart centres coloured by quality; mark the best and worst charts with spheres.
+
+    Args:
+        viewer: The scene.
+        path: Scene path of the atlas (``path/charts``, ``path/best``, ``path/worst``).
+        points: Chart centres, (N, d) (see :func:`display_points`).
+        values: Quality index per chart, (N,); NaN marks a chart that is no candidate.
+        singular_below: Index value below which a grasp is singular (drawn black).
+        best: Chart of the best grasp (default: the largest finite value).
+        worst: Chart of the worst grasp (default: the smallest finite value).
+
+    Raises:
+        ValueError: Shapes disagree, or no value is finite.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    positions = display_points(points)
+    if v.shape != (len(positions),):
+        raise ValueError(f"{len(positions)} chart centres but values of shape {v.shape}")
+    default_best, default_worst = _extremes(v)
+    best = default_best if best is None else best
+    worst = default_worst if worst is None else worst
+    finite = np.isfinite(v)
+    colors = np.tile(_INVALID_RGB, (len(v), 1))
+    colors[finite] = quality_colors(v[finite], singular_below)
+    cloud = mg.PointCloud(
+        positions.T.astype(np.float32), colors.T.astype(np.float32), size=_POINT_SIZE_M
+    )
+    viewer.meshcat[f"{path}/charts"].set_object(cloud)
+    for name, chart in (("best", best), ("worst", worst)):
+        node = viewer.meshcat[f"{path}/{name}"]
+        node.set_object(
+            mg.Sphere(1.5 * _POINT_SIZE_M), mg.MeshPhongMaterial(color=hex_color(colors[chart]))
+        )
+        node.set_transform(translation(positions[chart]))
+    return AtlasPlot(positions, best, worst)
+
+
+def show_atlas_scene(
+    viewer: Viewer,
+    points: ArrayLike,
+    values: ArrayLike,
+    singular_below: float,
+    draw_extreme: DrawExtreme,
+    best: int | None = None,
+    worst: int | None = None,
+) -> AtlasPlot:
+    """The atlas at the origin (``atlas``), its best grasp right (``best``), worst left (``worst``).
+
+    Args:
+        viewer: The scene.
+        points: Chart centres, (N, d).
+        values: Quality index per chart, (N,) (NaN: no candidate).
+        singular_below: Singularity threshold of the index.
+        draw_extreme: Draws a chart's grasp (see :data:`DrawExtreme`).
+        best: Chart of the best grasp (default: largest finite value).
+        worst: Chart of the worst grasp (default: smallest finite value).
+    """
+    plot = show_atlas(viewer, "atlas", points, values, singular_below, best, worst)
+    extents = [plot.positions_m]
+    for name, chart, side in (("best", plot.best, 1.0), ("worst", plot.worst, -1.0)):
+        T = translation((side * 1.6 * ATLAS_SIZE_M, 0.0, 0.0))
+        extent = draw_extreme(name, chart, T)
+        extents.append(extent)
+        anchor = extent.mean(axis=0)
+        line = np.array([plot.positions_m[chart], anchor], dtype=np.float32).T
+        viewer.meshcat[f"links/{name}"].set_object(
+            mg.Line(mg.PointsGeometry(line), mg.LineBasicMaterial(color=hex_color(_LINK_RGB)))
+        )
+    viewer.frame(np.concatenate(extents), _VIEW, aspect=_ASPECT)
+    return plot
+
+
+@dataclass(frozen=True)
+class ChartGrasp:
+    """A hand grasp at one chart of an atlas.
+
+    Attributes:
+        chart: The chart's index.
+        q: Hand configuration.
+        obj: The object placed as held (world frame), or None.
+    """
+
+    chart: int
+    q: NDArray[np.float64]
+    obj: GraspObject | None = None
+
+
+def show_atlas_grasps(
+    viewer: Viewer,
+    hand: Hand,
+    points: ArrayLike,
+    values: ArrayLike,
+    singular_below: float,
+    best: ChartGrasp,
+    worst: ChartGrasp,
+) -> AtlasPlot:
+    """An atlas of a hand's grasps with its best and worst grasps (atlas paper Fig. 10).
+
+    Each grasp is centred on its fingertip contacts beside the atlas.
+
+    Args:
+        viewer: The scene.
+        hand: The hand.
+        points: Chart centres, (N, d).
+        values: Quality index per chart, (N,) (NaN: no candidate).
+        singular_below: Singularity threshold of the index.
+        best: The best grasp.
+        worst: The worst grasp.
+    """
+    grasps = {"best": best, "worst": worst}
+
+    def draw(path: str, chart: int, T_scene: NDArray[np.float64]) -> NDArray[np.float64]:
+        grasp = grasps[path]
+        T = T_scene @ translation(-hand.contact_state(grasp.q).points.mean(axis=0))
+        show_grasp(viewer, path, hand, grasp.q, grasp.obj, T_scene=T)
+        links = [M.translation for M in hand.frame_placements(grasp.q).values()]
+        return transform_points(T, links)
+
+    return show_atlas_scene(viewer, points, values, singular_below, draw, best.chart, worst.chart)

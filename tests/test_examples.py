@@ -1,0 +1,101 @@
+"""Every example script runs to completion in --html mode (small settings), leaving no process."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import psutil
+import pytest
+
+from sahgrasp.cli import demo
+from sahgrasp.viz import scene_commands
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+GRASPS = ("fork", "cup", "buddha", "coffee_cup", "can")
+SMALL_ATLAS = {
+    "optimize_can": ["--max-charts", "40"],
+    "optimize_bottle": ["--max-charts", "40"],
+    "optimize_planar": ["--r", "0.3"],
+}
+
+
+def load(name: str) -> ModuleType:
+    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def children() -> set[int]:
+    return {p.pid for p in psutil.Process().children(recursive=True)}
+
+
+def run_main(name: str, args: list[str], tmp_path: Path) -> str:
+    out = tmp_path / f"{name}.html"
+    before = children()
+    code = load(name).main([*args, "--html", str(out)])
+    assert code == 0
+    assert children() == before, "a process outlived the example"
+    html = out.read_text(encoding="utf-8")
+    assert "MeshCat.Viewer" in html
+    return html
+
+
+def test_every_script_is_tested_and_listed_in_the_readme() -> None:
+    scripts = {p.stem for p in EXAMPLES.glob("*.py")}
+    assert scripts == {f"grasp_{g}" for g in GRASPS} | set(SMALL_ATLAS)
+    readme = (EXAMPLES / "README.md").read_text(encoding="utf-8")
+    for name in scripts:
+        assert f"{name}.py" in readme
+        assert (EXAMPLES / "img" / f"{name}.png").is_file(), f"no screenshot of {name}"
+
+
+@pytest.mark.parametrize("grasp", GRASPS)
+def test_grasp_example(grasp: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run_main(f"grasp_{grasp}", [], tmp_path)
+    printed = capsys.readouterr().out
+    assert printed.splitlines()[1].split()[:2] == [grasp, "yes"]
+    assert "inits (paper)" in printed and "initial configurations:" in printed
+
+
+@pytest.mark.parametrize("name", sorted(SMALL_ATLAS))
+def test_optimize_example(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run_main(name, SMALL_ATLAS[name], tmp_path)
+    printed = capsys.readouterr().out
+    assert "charts" in printed and "best grasp: chart" in printed and "paper" in printed
+
+
+def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
+    out = tmp_path / "fork.html"
+    done = subprocess.run(
+        [sys.executable, str(EXAMPLES / "grasp_fork.py"), "--inits", "2", "--html", str(out)],
+        capture_output=True, text=True, timeout=120, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "fork" in done.stdout and out.stat().st_size > 100_000
+
+
+def test_demo_writes_every_grasp_into_one_scene(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    parser = argparse.ArgumentParser()
+    demo.add_parser(parser.add_subparsers())
+    args = parser.parse_args(["demo"])
+    monkeypatch.chdir(tmp_path)
+    before = children()
+    assert args.run(args) == 0
+    assert children() == before
+    printed = capsys.readouterr().out
+    assert [line.split()[0] for line in printed.splitlines()[1:6]] == list(GRASPS)
+    html = (tmp_path / demo.DEFAULT_HTML).read_text(encoding="utf-8")
+    drawn = {command["path"] for command in scene_commands(html) if command["type"] == "set_object"}
+    for grasp in GRASPS:
+        assert {f"/meshcat/grasps/{grasp}/object",
+                f"/meshcat/grasps/{grasp}/contacts/thumb/disk"} <= drawn  # fmt: skip
+        assert any(p.startswith(f"/meshcat/grasps/{grasp}/hand/visuals/") for p in drawn)

@@ -1,0 +1,283 @@
+"""Scenes of sahgrasp.viz: what they hold, their HTML export, and no server left behind."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import psutil
+import pytest
+
+from sahgrasp.contacts import ContactTarget, GraspTarget
+from sahgrasp.hand import Hand
+from sahgrasp.ik import random_problem, solve_ik
+from sahgrasp.objects import load_object, paper_grasp
+from sahgrasp.viz import (
+    CAMERA_FOV_DEG,
+    ChartGrasp,
+    HandView,
+    RecordingWindow,
+    Viewer,
+    display_points,
+    format_report,
+    hex_color,
+    present,
+    quality_colors,
+    scene_commands,
+    show_atlas,
+    show_atlas_grasps,
+    show_contacts,
+    show_grasp,
+    solve_example,
+    visual_model,
+)
+
+
+def by_path(html: str, kind: str) -> dict[str, dict[str, Any]]:
+    return {c["path"]: c for c in scene_commands(html) if c["type"] == kind}
+
+
+def transform(command: dict[str, Any]) -> np.ndarray:
+    return np.array(command["matrix"]).reshape(4, 4).T
+
+
+# ----- recording window and viewer ------------------------------------------------------------
+def test_recording_window_keeps_the_latest_state_like_meshcats_server() -> None:
+    with Viewer() as viewer:
+        assert viewer.server_pid is None and viewer.url is None
+        node = viewer.meshcat["a/b"]
+        node.set_transform(np.eye(4))
+        node.set_transform(np.diag([1.0, 1.0, 1.0, 1.0]) + np.eye(4, k=3) * 0.5)
+        viewer.meshcat["a/c"].set_property("visible", False)
+        viewer.meshcat["gone"].set_transform(np.eye(4))
+        viewer.meshcat["gone"].delete()
+        html = viewer.html()
+    transforms = by_path(html, "set_transform")
+    assert transform(transforms["/meshcat/a/b"])[0, 3] == pytest.approx(0.5)
+    assert "/meshcat/gone" not in transforms
+    assert by_path(html, "set_property")["/meshcat/a/c"]["value"] is False
+    assert "MeshCat.Viewer" in html and "<title>sahgrasp</title>" in html
+
+
+def test_recording_window_refuses_unknown_commands() -> None:
+    class Odd:
+        def lower(self) -> dict[str, str]:
+            return {"type": "capture_image", "path": ""}
+
+    with pytest.raises(ValueError, match="capture_image"):
+        RecordingWindow().send(Odd())
+
+
+def test_live_viewer_server_is_gone_after_close() -> None:
+    with Viewer(live=True) as viewer:
+        pid = viewer.server_pid
+        assert pid is not None and psutil.pid_exists(pid)
+        assert viewer.url is not None and viewer.url.startswith("http")
+        viewer.meshcat["box"].set_transform(np.eye(4))
+        assert "MeshCat.Viewer" in viewer.html()  # static_html() from the live server
+    assert not psutil.pid_exists(pid)
+    viewer.close()  # idempotent
+
+
+def test_live_viewer_server_is_gone_after_an_error() -> None:
+    with pytest.raises(RuntimeError, match="boom"), Viewer(live=True) as viewer:
+        pid = viewer.server_pid
+        raise RuntimeError("boom")
+    assert pid is not None and not psutil.pid_exists(pid)
+
+
+def test_offline_viewer_cannot_open_a_browser() -> None:
+    with Viewer() as viewer, pytest.raises(RuntimeError, match="save_html"):
+        viewer.open()
+
+
+def test_save_html_writes_a_standalone_page(tmp_path: Path) -> None:
+    with Viewer(title="my scene") as viewer:
+        out = viewer.save_html(tmp_path / "sub" / "scene.html")
+    text = out.read_text(encoding="utf-8")
+    assert "<title>my scene</title>" in text and "http://" not in text.split("<script>")[0]
+
+
+def test_look_at_shifts_the_scene_and_places_the_camera() -> None:
+    with Viewer() as viewer:
+        viewer.look_at([0.1, 0.2, 0.3], [0.1, -0.3, 0.5])
+        html = viewer.html()
+    assert np.allclose(transform(by_path(html, "set_transform")["/meshcat"])[:3, 3],
+                       [-0.1, -0.2, -0.3])  # fmt: skip
+    camera = [
+        c
+        for c in scene_commands(html)
+        if c["type"] == "set_property" and c["property"] == "position"
+    ]
+    assert np.allclose(camera[-1]["value"], [0.0, 0.2, 0.5])  # world (x, y, z) -> (x, z, -y)
+
+
+def test_frame_holds_every_point_in_the_field_of_view() -> None:
+    points = np.random.default_rng(0).uniform(-0.2, 0.2, (50, 3)) + np.array([1.0, 2.0, 0.0])
+    with Viewer() as viewer:
+        viewer.frame(points, (0.0, -1.0, 0.0))
+        html = viewer.html()
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    (position,) = [c for c in scene_commands(html) if c.get("property") == "position"]
+    x, z, minus_y = position["value"]
+    eye = centre + np.array([x, -minus_y, z])
+    rel = points - eye
+    depth = rel[:, 1]  # looking along +y
+    half = np.tan(np.radians(0.5 * CAMERA_FOV_DEG))
+    assert np.all(np.abs(rel[:, 0]) <= depth * half) and np.all(np.abs(rel[:, 2]) <= depth * half)
+
+
+# ----- colours --------------------------------------------------------------------------------
+def test_hex_color() -> None:
+    assert hex_color((1.0, 0.0, 0.0, 1.0)) == 0xFF0000
+    assert hex_color((0.0, 0.5, 1.0)) == 0x0080FF
+    assert hex_color((2.0, -1.0, 0.0)) == 0xFF0000
+
+
+def test_quality_colors_red_to_green_black_if_singular() -> None:
+    colors = quality_colors([1e-6, 0.1, 0.5, 1.0], singular_below=1e-3)
+    assert np.allclose(colors[0], 0.0)
+    assert colors[1, 0] > colors[1, 1] and colors[3, 1] > colors[3, 0]  # red low, green high
+    with pytest.raises(ValueError, match="finite"):
+        quality_colors([np.nan], 1e-3)
+
+
+# ----- hands, contacts, grasps ----------------------------------------------------------------
+def test_hand_view_draws_every_visual_geometry(any_hand: Hand) -> None:
+    with Viewer() as viewer:
+        view = HandView(viewer, any_hand, "h")
+        html = viewer.html()
+    objects = by_path(html, "set_object")
+    assert len(view.node_names) == visual_model(any_hand).ngeoms > 0
+    for name in view.node_names:
+        assert f"/meshcat/{name}" in objects
+    if any_hand.description.name == "allegro":  # STL meshes are embedded, not linked
+        assert any(o["object"]["geometries"][0].get("format") == "stl" for o in objects.values()
+                   if o["object"].get("geometries"))  # fmt: skip
+
+
+def test_hand_view_shows_the_configuration(sah: Hand) -> None:
+    q = sah.configuration()
+    q[:3] = [0.1, 0.2, 0.3]
+    with Viewer() as viewer:
+        view = HandView(viewer, sah, "h", q)
+        html = viewer.html()
+    palm = next(n for n in view.node_names if n.endswith("palm_0"))
+    placed = transform(by_path(html, "set_transform")[f"/meshcat/{palm}"])
+    assert np.allclose(placed, view.placements(q)[view.node_names.index(palm)])
+    assert np.allclose(placed[:3, 3], q[:3] + sah.wrist_pose(q).rotation
+                       @ visual_model(sah).geometryObjects[0].placement.translation)  # fmt: skip
+
+
+def test_animation_has_one_keyframe_per_iterate(sah: Hand) -> None:
+    result = solve_ik(sah, random_problem(sah, 0, 1), record_history=True)
+    assert result.history is not None and len(result.history) >= 2
+    with Viewer() as viewer:
+        view = HandView(viewer, sah, "h", result.q)
+        view.animate(result.history)
+        html = viewer.html()
+    (animation,) = [c for c in scene_commands(html) if c["type"] == "set_animation"]
+    clips = {a["path"]: a["clip"] for a in animation["animations"]}
+    assert set(clips) == {f"/meshcat/{n}" for n in view.node_names}
+    track = clips[f"/meshcat/{view.node_names[0]}"]["tracks"][0]
+    assert [k["time"] for k in track["keys"]] == list(range(len(result.history)))
+    first = view.placements(result.history[0])[0][:3, 3]
+    assert np.allclose(track["keys"][0]["value"], first)
+    with pytest.raises(ValueError, match="nothing to animate"):
+        view.animate([])
+
+
+def test_contacts_are_disks_at_the_points_with_cylinders_along_the_normals() -> None:
+    n = np.array([0.0, 0.6, 0.8])
+    thumb = ContactTarget("thumb", [0.1, 0.0, 0.0], n)
+    target = GraspTarget("t", [thumb, ContactTarget("index", [0.0, 0.1, 0.0], [0.0, -1.0, 0.0])])
+    with Viewer() as viewer:
+        show_contacts(viewer, "c", target, disk_radius_m=0.005, normal_length_m=0.02)
+        html = viewer.html()
+    transforms = by_path(html, "set_transform")
+    disk = transform(transforms["/meshcat/c/thumb/disk"])
+    stick = transform(transforms["/meshcat/c/thumb/normal"])
+    assert np.allclose(disk[:3, 3], [0.1, 0.0, 0.0]) and np.allclose(disk[:3, 1], n)
+    assert np.allclose(stick[:3, 3], [0.1, 0.0, 0.0] + 0.01 * n)
+    assert np.allclose(transform(transforms["/meshcat/c/index/disk"])[:3, 1], [0, -1, 0])
+    geometry = by_path(html, "set_object")["/meshcat/c/thumb/disk"]["object"]["geometries"][0]
+    assert geometry["type"] == "CylinderGeometry" and geometry["radiusTop"] == 0.005
+
+
+def test_grasp_scene_holds_object_contacts_and_hand(sah: Hand) -> None:
+    obj = load_object("can")
+    target = paper_grasp("can")
+    T = np.eye(4)
+    T[:3, 3] = [0.5, 0.0, 0.0]
+    with Viewer() as viewer:
+        show_grasp(viewer, "g", sah, sah.configuration(), obj, target, T_scene=T)
+        html = viewer.html()
+    objects = by_path(html, "set_object")
+    mesh = objects["/meshcat/g/object"]["object"]
+    assert mesh["materials"][0]["color"] == hex_color(obj.rgba)
+    assert {f"/meshcat/g/contacts/{f}/disk" for f in target.fingers} <= set(objects)
+    assert any(p.startswith("/meshcat/g/hand/visuals/") for p in objects)
+    assert np.allclose(transform(by_path(html, "set_transform")["/meshcat/g"]), T)
+
+
+# ----- atlas ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("dim", [2, 3, 12])
+def test_display_points_fit_the_atlas_size(dim: int) -> None:
+    points = np.random.default_rng(dim).normal(size=(40, dim))
+    shown = display_points(points, size_m=0.3)
+    assert shown.shape == (40, 3)
+    assert np.ptp(shown, axis=0).max() == pytest.approx(0.3)
+    assert np.allclose(shown.mean(axis=0), 0.0, atol=1e-12)
+    if dim == 2:
+        assert np.allclose(shown[:, 2], 0.0)
+    with pytest.raises(ValueError, match="finite"):
+        display_points(np.zeros((0, 3)))
+
+
+def test_atlas_points_coloured_by_quality_best_and_worst_marked() -> None:
+    points = np.random.default_rng(1).normal(size=(30, 5))
+    values = np.linspace(0.0, 1.0, 30)
+    values[7] = np.nan  # no candidate: grey
+    with Viewer() as viewer:
+        plot = show_atlas(viewer, "atlas", points, values, singular_below=0.05)
+        html = viewer.html()
+    assert (plot.best, plot.worst) == (29, 0)
+    cloud = by_path(html, "set_object")["/meshcat/atlas/charts"]["object"]
+    assert cloud["object"]["type"] == "Points"
+    best = transform(by_path(html, "set_transform")["/meshcat/atlas/best"])
+    assert np.allclose(best[:3, 3], plot.positions_m[29])
+    with Viewer() as viewer, pytest.raises(ValueError, match="values of shape"):
+        show_atlas(viewer, "atlas", points, values[:5], 0.05)
+
+
+def test_atlas_with_the_best_and_worst_hand_grasps(sah: Hand) -> None:
+    rng = np.random.default_rng(2)
+    best = ChartGrasp(3, sah.random_configuration(rng), load_object("can"))
+    worst = ChartGrasp(5, sah.random_configuration(rng))
+    with Viewer() as viewer:
+        plot = show_atlas_grasps(viewer, sah, rng.normal(size=(10, 20)), rng.uniform(size=10),
+                                 1e-4, best, worst)  # fmt: skip
+        html = viewer.html()
+    assert (plot.best, plot.worst) == (3, 5)
+    objects = by_path(html, "set_object")
+    assert "/meshcat/best/object" in objects and "/meshcat/worst/object" not in objects
+    assert {"/meshcat/links/best", "/meshcat/links/worst"} <= set(objects)
+    assert any(p.startswith("/meshcat/worst/hand/") for p in objects)
+
+
+# ----- paper examples -------------------------------------------------------------------------
+def test_example_report_beside_the_paper(sah: Hand) -> None:
+    example = solve_example(sah, "fork")
+    report = format_report([example])
+    assert report.splitlines()[0].split()[:2] == ["object", "solved"]
+    row = report.splitlines()[1]
+    assert row.split()[0] == "fork" and "(1)" in row and "(6)" in row
+    assert example.result.history is not None
+
+
+def test_present_writes_html_without_a_server(tmp_path: Path) -> None:
+    before = {p.pid for p in psutil.Process().children(recursive=True)}
+    present(lambda v: v.meshcat["x"].set_transform(np.eye(4)), str(tmp_path / "x.html"))
+    assert (tmp_path / "x.html").stat().st_size > 100_000  # meshcat's viewer is inlined
+    assert {p.pid for p in psutil.Process().children(recursive=True)} == before
