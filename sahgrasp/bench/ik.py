@@ -2,19 +2,20 @@
 
 On the same problems, from the same initial configurations and with the same acceptance test, it
 runs ``method=paper`` and ``method=auto`` each with ``init=sequence`` and ``init=random``, the
-peers of :mod:`sahgrasp.bench.peers` with ``init=sequence``, and, when the hand's sequence comes from
-the offline search, ``method=auto`` with the paper's Table 1 lambdas on the same PCA basis. Because Algorithm 1 tries its initial
-configurations in order, one run with ``i_max = 12`` gives every smaller ``i_max`` too: a
-problem counts as solved within ``i`` configurations when it succeeded with ``inits_used <= i``,
-and its time under that cap is the time at the end of its ``min(i, inits_used)``-th attempt
-(Fig. 9a). Fig. 9b is the share of problems solved within a time budget.
+peers of :mod:`sahgrasp.bench.peers` with ``init=sequence``, and, when the hand's sequence comes
+from the offline search, ``method=auto`` with the paper's Table 1 lambdas on the same PCA basis.
+Because Algorithm 1 tries its initial configurations in order, one run with ``i_max = 12``
+gives every smaller ``i_max`` too: a problem counts as solved within ``i`` configurations when it
+succeeded with ``inits_used <= i``, and its time under that cap is the time at the end of its
+``min(i, inits_used)``-th attempt (Fig. 9a). Fig. 9b is the share of problems solved within a time
+budget.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import replace
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
