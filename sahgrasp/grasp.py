@@ -10,7 +10,11 @@ Variables ``x = [x_h, x_c, x_o]``:
   ``u`` on a curve, none at a fixed point of the object;
 * ``x_o`` -- the object pose when it is free: a translation and a rotation vector, world-aligned,
   about the pose of the first grasp (Eq. (2) holds by construction); or none, object fixed in the
-  palm.
+  palm. When every contact region is a surface of revolution about one object axis, spinning the
+  object about it while every contact slides back by the same angle leaves the grasp unchanged:
+  a direction of F along which nothing physical moves. Given that ``symmetry_axis``, the rotation
+  vector is kept normal to it at the first grasp (two coordinates): every object orientation is
+  still reached once, as a swing of the first one (times a spin, which the contacts absorb).
 
 Contacts, Eqs. (7)-(8): the fingertip point equals the object point (3 equations), and the object
 normal is anti-parallel to the fingertip normal, written as two equations ``m_i . b_1 = 0``,
@@ -29,19 +33,26 @@ from typing import Any
 
 import numpy as np
 import pinocchio as pin
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.errors import AtlasError
 from sahgrasp.hand import Hand
+from sahgrasp.motions import PrincipalMotions
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
 
-__all__ = ["GraspSystem", "PrincipalMotions", "principal_motions", "reduced_system"]
+__all__ = ["GraspSystem", "reduced_system"]
+
+FloatArray = NDArray[np.float64]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
-def _skew(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+def _skew(v: FloatArray) -> FloatArray:
+    """Cross-product matrices ``[v]x`` of vectors (..., 3), shape (..., 3, 3)."""
+    S = np.zeros((*v.shape[:-1], 3, 3))
+    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return S
 
 
 @dataclass(frozen=True)
@@ -52,8 +63,30 @@ class _Contact:
     frame: int  # the fingertip's contact frame
 
 
+@dataclass(eq=False)
+class _Point:
+    """Kinematics, region jets and F at one ``x`` (palm frame, stacked over the c contacts)."""
+
+    key: bytes  # the bytes of x
+    rotation_vector: FloatArray  # of the object, from its first orientation, (3,)
+    rotation: FloatArray  # object orientation, (3, 3)
+    origin: FloatArray  # object origin, (3,)
+    axes: FloatArray  # tangent axes b_1, b_2 of the fingertip contact frames, (c, 3, 2)
+    frame_jacobians: FloatArray  # of the contact frames, columns of x_h, (c, 6, h)
+    points: FloatArray  # object contact points o_i, (c, 3)
+    normals: FloatArray  # object normals m_i, (c, 3)
+    point_jacobians: FloatArray  # dO/d(region params) in the object frame, (3, p)
+    normal_jacobians: FloatArray  # dM/d(region params) in the object frame, (3, p)
+    residual: FloatArray  # F, read-only
+    jacobian: FloatArray | None = None  # J once asked for, read-only
+
+
 class GraspSystem:
     """F(x) = 0 for a hand, an object's contact regions, and a first feasible grasp.
+
+    F and J share one evaluation of the kinematics and of the region jets per point: the last
+    point's are kept, so ``J(x)`` after ``F(x)`` (a Newton step, a tangent space) only assembles
+    the Jacobian. Both return read-only arrays.
 
     Args:
         hand: The hand.
@@ -61,10 +94,17 @@ class GraspSystem:
         q_first: A hand configuration solving the grasp at the regions' nominal parameters (from
             the IK), with the object frame as world.
         free_object: Let the object pose vary (6 variables); else it is fixed in the palm.
+        symmetry_axis: An axis (object frame) of rotational symmetry of every contact region: the
+            free object's spin about it is left out of ``x_o`` (5 variables).
     """
 
     def __init__(
-        self, hand: Hand, patches: GraspPatches, q_first: NDArray[np.float64], free_object: bool
+        self,
+        hand: Hand,
+        patches: GraspPatches,
+        q_first: NDArray[np.float64],
+        free_object: bool,
+        symmetry_axis: ArrayLike | None = None,
     ) -> None:
         self.hand = hand
         self.patches = patches
@@ -73,6 +113,7 @@ class GraspSystem:
         self.coordinates = np.array(
             sorted({int(i) for f in fingers for i in hand.finger_coordinates[f]}), dtype=np.intp
         )
+        self.hand_rows = np.arange(len(self.coordinates))  # of x_h in x: its first entries
         virtual = set(hand.virtual_joint_names)
         self.actuated_rows = np.array(
             [r for r, i in enumerate(self.coordinates) if hand.coordinate_names[i] not in virtual],
@@ -87,23 +128,37 @@ class GraspSystem:
             )
             offset += dim
         self.contacts = tuple(contacts)
-        self.pose_slice = slice(offset, offset + (6 if free_object else 0))
-        self.n = self.pose_slice.stop
-        self.m = 5 * len(contacts)
         self.q_first = np.array(q_first, dtype=np.float64)
         self.T_palm_object0 = hand.wrist_pose(q_first).inverse()
+        self._rotation_basis = self._rotations(symmetry_axis)  # rotation vector = basis @ x_o[3:]
+        pose = 3 + self._rotation_basis.shape[1] if free_object else 0
+        self.pose_slice = slice(offset, offset + pose)
+        self.n = self.pose_slice.stop
+        self.m = 5 * len(contacts)
+        self._q_palm = self.q_first.copy()  # the first grasp with the palm at the origin
+        self._q_palm[:7] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+        self._columns = 6 + self.coordinates  # v columns of x_h
+        sizes = [c.params.stop - c.params.start for c in self.contacts]
+        self._param_contact = np.repeat(np.arange(len(self.contacts)), sizes)  # owner of each
+        self._param_columns = np.arange(len(self.coordinates), self.pose_slice.start)
+        self._last: _Point | None = None
         self.x_first = self._first_point()
+
+    def _rotations(self, symmetry_axis: ArrayLike | None) -> FloatArray:
+        """Basis (3, 3 or 2) of the object's rotation vectors: all, or those normal to the axis."""
+        if symmetry_axis is None:
+            return np.eye(3)
+        axis = np.asarray(symmetry_axis, dtype=np.float64)
+        if axis.shape != (3,) or not np.linalg.norm(axis) > 0:
+            raise AtlasError(f"symmetry_axis must be a non-zero 3-vector, got {symmetry_axis!r}")
+        axis = self.T_palm_object0.rotation @ axis
+        return np.linalg.svd(axis[None, :])[2][1:].T  # the plane normal to the axis
 
     # ----- layout ---------------------------------------------------------------------------
     @property
     def t(self) -> int:
         """Dimension of the feasible-grasp manifold F: ``n - m``."""
         return self.n - self.m
-
-    @property
-    def hand_rows(self) -> NDArray[np.intp]:
-        """Indices of ``x_h`` in ``x``."""
-        return np.arange(len(self.coordinates))
 
     @property
     def lower(self) -> NDArray[np.float64]:
@@ -131,138 +186,129 @@ class GraspSystem:
 
     def configuration(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Hand configuration at ``x`` with the palm at the origin (other fingers as at first)."""
-        q = self.q_first.copy()
-        q[:7] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+        q = self._q_palm.copy()
         q[7:][self.coordinates] = x[self.hand_rows]
         return q
+
+    def _rotation_vector(self, x: NDArray[np.float64]) -> FloatArray:
+        """The object's rotation (world-aligned) from its first orientation; zero when fixed."""
+        if not self.free_object:
+            return np.zeros(3)
+        return self._rotation_basis @ x[self.pose_slice.start + 3 : self.n]
 
     def object_pose(self, x: NDArray[np.float64]) -> pin.SE3:
         """Object pose in the palm frame at ``x``."""
         T0 = self.T_palm_object0
         if not self.free_object:
             return T0
-        xo = x[self.pose_slice]
-        return pin.SE3(pin.exp3(xo[3:]) @ T0.rotation, T0.translation + xo[:3])
+        shift = x[self.pose_slice.start : self.pose_slice.start + 3]
+        return pin.SE3(pin.exp3(self._rotation_vector(x)) @ T0.rotation, T0.translation + shift)
 
     # ----- F and its Jacobian ----------------------------------------------------------------
-    def _kinematics(self, x: NDArray[np.float64], jacobians: bool) -> list[Any]:
+    def _frames(self, x: NDArray[np.float64]) -> tuple[FloatArray, FloatArray]:
+        """Contact frame placements (c, 4, 4) and Jacobians (c, 6, h) (palm-aligned) at ``x``."""
         model, data = self.hand.model, self.hand.data
-        q = self.configuration(x)
-        if jacobians:
-            pin.computeJointJacobians(model, data, q)
-        else:
-            pin.forwardKinematics(model, data, q)
-        return [pin.updateFramePlacement(model, data, c.frame) for c in self.contacts]
+        pin.computeJointJacobians(model, data, self.configuration(x))
+        placements = [pin.updateFramePlacement(model, data, c.frame) for c in self.contacts]
+        jacobians = [pin.getFrameJacobian(model, data, c.frame, _LWA) for c in self.contacts]
+        columns = np.array(jacobians)[:, :, self._columns]
+        return np.array([M.homogeneous for M in placements]), columns
+
+    def _point(self, x: NDArray[np.float64]) -> _Point:
+        """Everything F and J need at ``x``; the last point's when ``x`` is the same."""
+        x = np.asarray(x, dtype=np.float64)
+        key = x.tobytes()
+        if self._last is not None and self._last.key == key:
+            return self._last
+        placements, frame_jacobians = self._frames(x)
+        jets = [c.region.evaluate(x[c.params]) for c in self.contacts]
+        T = self.object_pose(x)
+        rotation, origin = T.rotation, T.translation
+        points = np.array([j.point for j in jets]) @ rotation.T + origin
+        normals = np.array([j.normal for j in jets]) @ rotation.T
+        axes = placements[:, :3, 1:3]
+        per_contact = np.empty((len(self.contacts), 5))
+        per_contact[:, :3] = placements[:, :3, 3] - points  # p_i = o_i, Eq. (7)
+        per_contact[:, 3:] = np.einsum("cij,ci->cj", axes, normals)  # m_i . b_j = 0, Eq. (8)
+        residual = per_contact.reshape(self.m)
+        residual.flags.writeable = False
+        self._last = _Point(
+            key=key,
+            rotation_vector=self._rotation_vector(x),
+            rotation=rotation,
+            origin=origin,
+            axes=axes,
+            frame_jacobians=frame_jacobians,
+            points=points,
+            normals=normals,
+            point_jacobians=np.concatenate([j.point_jacobian for j in jets], axis=1),
+            normal_jacobians=np.concatenate([j.normal_jacobian for j in jets], axis=1),
+            residual=residual,
+        )
+        return self._last
 
     def F(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Residual of Eqs. (7)-(8) per contact: point (3) [m], normal alignment (2) [1]."""
-        frames = self._kinematics(x, jacobians=False)
-        T = self.object_pose(x)
-        out = np.empty(self.m)
-        for i, (c, frame) in enumerate(zip(self.contacts, frames, strict=True)):
-            jet = c.region.evaluate(x[c.params])
-            R = frame.rotation
-            out[5 * i : 5 * i + 3] = frame.translation - T.act(jet.point)
-            out[5 * i + 3 : 5 * i + 5] = R[:, 1:].T @ (T.rotation @ jet.normal)
-        return out
+        return self._point(x).residual
 
     def J(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Jacobian of :meth:`F` w.r.t. ``x``, shape (m, n)."""
-        frames = self._kinematics(x, jacobians=True)
-        model, data = self.hand.model, self.hand.data
-        cols = 6 + self.coordinates  # v columns of x_h
-        T = self.object_pose(x)
-        out = np.zeros((self.m, self.n))
-        for i, (c, frame) in enumerate(zip(self.contacts, frames, strict=True)):
-            point_rows, normal_rows = slice(5 * i, 5 * i + 3), slice(5 * i + 3, 5 * i + 5)
-            J = pin.getFrameJacobian(model, data, c.frame, _LWA)[:, cols]
-            jet = c.region.evaluate(x[c.params])
-            normal = T.rotation @ jet.normal
-            axes = frame.rotation[:, 1:]  # b_1, b_2
-            out[point_rows, self.hand_rows] = J[:3]
-            # d(b_j) = omega x b_j, so d(m . b_j) = m . (omega x b_j) = (b_j x m) . omega
-            out[normal_rows, self.hand_rows] = np.cross(axes.T, normal) @ J[3:]
-            out[point_rows, c.params] = -T.rotation @ jet.point_jacobian
-            out[normal_rows, c.params] = axes.T @ (T.rotation @ jet.normal_jacobian)
-            if self.free_object:
-                xo = x[self.pose_slice]
-                Jl = pin.Jexp3(xo[3:]).T  # d(exp3(w) R0 a)/dw = -[exp3(w) R0 a]x Jl(w)
-                lever = T.act(jet.point) - T.translation
-                position, rotation = self.pose_slice.start, self.pose_slice.start + 3
-                out[point_rows, position:rotation] = -np.eye(3)
-                out[point_rows, rotation : self.pose_slice.stop] = _skew(lever) @ Jl
-                out[normal_rows, rotation : self.pose_slice.stop] = -axes.T @ _skew(normal) @ Jl
-        return out
+        point = self._point(x)
+        if point.jacobian is None:
+            point.jacobian = self._jacobian(point)
+        return point.jacobian
+
+    def _jacobian(self, p: _Point) -> FloatArray:
+        """J from the kinematics and jets kept at ``p``, stacked over the contacts."""
+        c, h = len(self.contacts), len(self.coordinates)
+        out = np.zeros((c, 5, self.n))
+        skews = _skew(np.concatenate((p.normals, p.points - p.origin)))
+        # d(b_j) = omega x b_j, so d(m . b_j) = m . (omega x b_j) = b_j^T [m]x omega
+        turn = np.swapaxes(p.axes, 1, 2) @ skews[:c]  # (c, 2, 3)
+        out[:, :3, :h] = p.frame_jacobians[:, :3]
+        out[:, 3:, :h] = turn @ p.frame_jacobians[:, 3:]
+        owner, columns = self._param_contact, self._param_columns
+        out[owner, :3, columns] = -(p.rotation @ p.point_jacobians).T
+        normal_rates = p.rotation @ p.normal_jacobians  # (3, p)
+        out[owner, 3:, columns] = np.einsum("qij,iq->qj", p.axes[owner], normal_rates)
+        if self.free_object:
+            start = self.pose_slice.start
+            # d(exp3(w) R0 a)/dw = -[exp3(w) R0 a]x Jl(w), w = basis @ x_o[3:]
+            rates = pin.Jexp3(p.rotation_vector).T @ self._rotation_basis
+            out[:, :3, start : start + 3] = -np.eye(3)
+            out[:, :3, start + 3 : self.n] = skews[c:] @ rates
+            out[:, 3:, start + 3 : self.n] = -turn @ rates
+        jacobian = out.reshape(self.m, self.n)
+        jacobian.flags.writeable = False
+        return jacobian
 
     def hard_finger_constraints(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Velocity constraints ``J_h qdot - G^T nu = 0`` of hard-finger contacts at ``x``.
 
         Bicchi & Prattichizzo's manipulability (the paper's [1]) assumes contacts that do not
         slip: the velocity of the fingertip's material point at each contact equals the velocity
-        of the object's point there. Unknowns: the actuated joint velocities ``qdot`` (the rows
-        :attr:`actuated_rows` of ``x_h``) then the object twist ``nu`` (world-aligned at its
-        origin). Shape (3 contacts, a + 6).
+        of the object's point there. With the virtual contact joints held, the contact frame is
+        that material point, so ``J_h`` is its Jacobian at the actuated columns. Unknowns: the
+        actuated joint velocities ``qdot`` (the rows :attr:`actuated_rows` of ``x_h``) then the
+        object twist ``nu`` (world-aligned at its origin). Shape (3 contacts, a + 6).
         """
-        frames = self._kinematics(x, jacobians=True)
-        model, data = self.hand.model, self.hand.data
-        cols = 6 + self.coordinates[self.actuated_rows]
-        origin = self.object_pose(x).translation
-        out = np.zeros((3 * len(self.contacts), len(cols) + 6))
-        for i, (c, frame) in enumerate(zip(self.contacts, frames, strict=True)):
-            tip = model.getFrameId(
-                self.hand.description.fingers[self.hand.fingers.index(c.finger)].tip_link
-            )
-            J = pin.getFrameJacobian(model, data, tip, _LWA)[:, cols]
-            centre = pin.updateFramePlacement(model, data, tip).translation
-            rows = slice(3 * i, 3 * i + 3)
-            out[rows, : len(cols)] = J[:3] - _skew(frame.translation - centre) @ J[3:]
-            out[rows, len(cols) : len(cols) + 3] = -np.eye(3)
-            out[rows, len(cols) + 3 :] = _skew(frame.translation - origin)
-        return out
+        placements, jacobians = self._frames(x)
+        a = len(self.actuated_rows)
+        out = np.zeros((len(self.contacts), 3, a + 6))
+        out[:, :, :a] = jacobians[:, :3, self.actuated_rows]
+        out[:, :, a : a + 3] = -np.eye(3)  # object point velocity: v + w x (p - origin)
+        out[:, :, a + 3 :] = _skew(placements[:, :3, 3] - self.object_pose(x).translation)
+        return out.reshape(3 * len(self.contacts), a + 6)
 
     def object_velocity(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Matrix (6, n) giving the object's twist (world-aligned at its origin) from ``dx``."""
         out = np.zeros((6, self.n))
         if self.free_object:
-            xo = x[self.pose_slice]
-            out[:3, self.pose_slice.start : self.pose_slice.start + 3] = np.eye(3)
-            out[3:, self.pose_slice.start + 3 : self.pose_slice.stop] = pin.Jexp3(xo[3:]).T
+            start = self.pose_slice.start
+            out[:3, start : start + 3] = np.eye(3)
+            rates = pin.Jexp3(self._rotation_vector(x)).T
+            out[3:, start + 3 : self.n] = rates @ self._rotation_basis
         return out
-
-
-@dataclass(frozen=True)
-class PrincipalMotions:
-    """PCA of hand configurations (Section III): directions ``E`` (columns) and variances ``S^2``.
-
-    Attributes:
-        mean: Average configuration, shape (h,).
-        directions: ``E``, orthonormal columns sorted by decreasing variance, shape (h, h).
-        variances: ``S^2`` in the same order, shape (h,).
-    """
-
-    mean: NDArray[np.float64]
-    directions: NDArray[np.float64]
-    variances: NDArray[np.float64]
-
-    def constraints(self, s: int) -> NDArray[np.float64]:
-        """``E_s^T``: the ``s`` directions of least variance, as rows (Eq. (10))."""
-        h = len(self.variances)
-        if not 0 <= s < h:
-            raise AtlasError(f"s = t - k must satisfy 0 <= s < h = {h}, got s = {s}")
-        return self.directions[:, h - s :].T
-
-    def retained_variance(self, s: int) -> float:
-        """Share of the variance kept by the first ``h - s`` motions."""
-        return float(self.variances[: len(self.variances) - s].sum() / self.variances.sum())
-
-
-def principal_motions(samples: NDArray[np.float64]) -> PrincipalMotions:
-    """PCA of a set of hand configurations (rows): ``T T^T = E S^2 E^T`` (Section III)."""
-    mean = samples.mean(axis=0)
-    centred = samples - mean
-    variances, E = np.linalg.eigh(centred.T @ centred / max(len(samples) - 1, 1))
-    order = np.argsort(variances)[::-1]
-    return PrincipalMotions(mean, E[:, order], variances[order])
 
 
 def reduced_system(
@@ -277,13 +323,13 @@ def reduced_system(
     Es = motions.constraints(system.t - k)
     rows = system.hand_rows
     x1h = (system.x_first if x1 is None else x1)[rows]
+    linear = np.zeros((len(Es), system.n))
+    linear[:, rows] = Es
 
     def R(x: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.concatenate([system.F(x), Es @ (x[rows] - x1h)])
 
     def JR(x: NDArray[np.float64]) -> NDArray[np.float64]:
-        linear = np.zeros((len(Es), system.n))
-        linear[:, rows] = Es
-        return np.vstack([system.J(x), linear])
+        return np.concatenate([system.J(x), linear])
 
     return R, JR

@@ -15,13 +15,14 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.errors import AtlasError
-from sahgrasp.grasp import GraspSystem, PrincipalMotions, principal_motions, reduced_system
+from sahgrasp.grasp import GraspSystem, reduced_system
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import solve_ik
+from sahgrasp.motions import PrincipalMotions, principal_motions
 from sahgrasp.objects import GraspPatches, bottle_patches, can_patches
 from sahgrasp.quality import (
     INDICES,
@@ -31,7 +32,15 @@ from sahgrasp.quality import (
     null_space,
 )
 
-__all__ = ["EXPERIMENTS", "GraspOptimizationResult", "optimize_grasp", "run_experiment"]
+__all__ = [
+    "EXPERIMENTS",
+    "Experiment",
+    "GraspOptimizationResult",
+    "first_grasp_system",
+    "hand_motions",
+    "optimize_grasp",
+    "run_experiment",
+]
 
 
 @dataclass(frozen=True)
@@ -41,7 +50,7 @@ class GraspOptimizationResult:
     Attributes:
         system: The feasible-grasp system F.
         atlas: The atlas of R.
-        index: Name of the quality index.
+        index: Name of the quality index (``"user"`` for a user ``index_fn``).
         values: Index per chart (NaN where the chart centre is not a valid grasp).
         valid: Chart centres without self-collision.
         best: Chart with the largest index among valid ones.
@@ -49,6 +58,9 @@ class GraspOptimizationResult:
         retained_variance: Share of the hand-motion variance the kept motions explain.
         atlas_seconds: Atlas build time [s].
         quality_seconds: Index evaluation time (with the validity checks) [s].
+        motions: The principal hand motions (Section III).
+        start: The first grasp ``x_1`` the atlas starts from and Eq. (13) passes through.
+        settings: The atlas settings.
     """
 
     system: GraspSystem
@@ -61,14 +73,22 @@ class GraspOptimizationResult:
     retained_variance: float
     atlas_seconds: float
     quality_seconds: float
+    motions: PrincipalMotions
+    start: NDArray[np.float64]
+    settings: AtlasSettings
+
+    def reduced_system(self) -> tuple[Any, Any]:
+        """``R`` and its Jacobian (Eq. (11)) whose solution set the atlas covers."""
+        return reduced_system(self.system, self.motions, self.atlas.dim, self.start)
 
     def summary(self) -> dict[str, Any]:
         """JSON-able summary (charts, dimensions, times, best and worst grasps)."""
 
         def grasp(i: int) -> dict[str, Any]:
             q = self.system.configuration(self.atlas.centres[i])
+            threshold = SINGULAR_THRESHOLDS.get(self.index)
             return {"chart": i, "value": float(self.values[i]),
-                    "singular": bool(self.values[i] < SINGULAR_THRESHOLDS[self.index]),
+                    "singular": None if threshold is None else bool(self.values[i] < threshold),
                     "joints": self.system.hand.joint_values(q),
                     "x": self.atlas.centres[i].tolist()}  # fmt: skip
 
@@ -99,6 +119,27 @@ def hand_motions(hand: Hand, system: GraspSystem, samples: int, seed: int) -> Pr
     return principal_motions(X[:, system.coordinates])
 
 
+def first_grasp_system(
+    hand: Hand,
+    patches: GraspPatches,
+    free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
+) -> GraspSystem:
+    """F for ``hand`` and ``patches`` around the IK's grasp at the regions' nominal parameters.
+
+    Fingers without a contact region are left free (they do not enter ``x``); ``free_object`` and
+    ``symmetry_axis`` are those of :class:`~sahgrasp.grasp.GraspSystem`.
+
+    Raises:
+        AtlasError: The IK finds no such grasp.
+    """
+    free = tuple(f for f in hand.fingers if f not in patches.regions)
+    first = solve_ik(hand, patches.target(), free_fingers=free)
+    if not first.success:
+        raise AtlasError(f"{patches.name}: the IK found no first grasp ({first.reason})")
+    return GraspSystem(hand, patches, first.q, free_object, symmetry_axis)
+
+
 def optimize_grasp(
     hand: Hand,
     patches: GraspPatches,
@@ -107,6 +148,7 @@ def optimize_grasp(
     epsilon: float = 0.5,
     index: str = "volume",
     free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
     max_charts: int = 20_000,
     motion_samples: int = 2000,
     seed: int = 0,
@@ -123,17 +165,22 @@ def optimize_grasp(
         epsilon: Threshold of Eqs. (17)-(18).
         index: Manipulability index (``inverse_condition``, ``volume``, ``min_semiaxis``).
         free_object: Let the object pose vary (else it is fixed in the palm).
+        symmetry_axis: Axis (object frame) about which every contact region is revolved: the
+            object's spin about it, which changes nothing but the parametrisation, is left out.
         max_charts: Cap on the atlas size.
         motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
         progress: Show the atlas progress bar.
-        index_fn: A user quality index ``f(system, x) -> float`` instead of ``index``.
+        index_fn: A user quality index ``f(system, x) -> float`` instead of ``index``; larger
+            is better.
+
+    Raises:
+        AtlasError: ``index`` is unknown (and no ``index_fn`` given), the IK finds no first grasp,
+            ``k`` is not in ``[1, t]``, or no chart centre is free of self-collision.
     """
-    free = tuple(f for f in hand.fingers if f not in patches.regions)
-    first = solve_ik(hand, patches.target(), free_fingers=free)
-    if not first.success:
-        raise AtlasError(f"{patches.name}: the IK found no first grasp ({first.reason})")
-    system = GraspSystem(hand, patches, first.q, free_object)
+    if index_fn is None and index not in INDICES:
+        raise AtlasError(f"unknown index {index!r}; valid: {list(INDICES)} or a callable")
+    system = first_grasp_system(hand, patches, free_object, symmetry_axis)
     motions = hand_motions(hand, system, motion_samples, seed)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
     R, JR = reduced_system(system, motions, k, x1)
@@ -151,8 +198,9 @@ def optimize_grasp(
     best = int(candidates[np.argmax(values[candidates])])
     worst = int(candidates[np.argmin(values[candidates])])
     return GraspOptimizationResult(
-        system, atlas, index, values, valid, best, worst,
-        motions.retained_variance(system.t - k), atlas_seconds, quality_seconds,
+        system, atlas, "user" if index_fn else index, values, valid, best, worst,
+        motions.retained_variance(system.t - k), atlas_seconds, quality_seconds, motions, x1,
+        settings,
     )  # fmt: skip
 
 
@@ -200,8 +248,6 @@ def _evaluate(
     index: str,
     index_fn: Callable[[GraspSystem, NDArray[np.float64]], float] | None,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
-    if index_fn is None and index not in INDICES:
-        raise AtlasError(f"unknown index {index!r}; valid: {list(INDICES)} or a callable")
     hand = system.hand
     valid = np.array([not hand.in_collision(system.configuration(x)) for x in atlas.centres])
     if index_fn is not None:
@@ -211,11 +257,26 @@ def _evaluate(
     return np.where(valid, values, np.nan), valid
 
 
-EXPERIMENTS: dict[str, tuple[Callable[[], GraspPatches], bool]] = {
-    "can": (can_patches, True),
-    "bottle": (bottle_patches, True),
+@dataclass(frozen=True)
+class Experiment:
+    """One of the atlas paper's SAH experiments (Section V).
+
+    Attributes:
+        patches: Builds the object's contact regions.
+        free_object: Whether the object pose varies.
+        symmetry_axis: Axis of revolution shared by every contact region (object frame), if any.
+    """
+
+    patches: Callable[[], GraspPatches]
+    free_object: bool = True
+    symmetry_axis: tuple[float, float, float] | None = None
+
+
+EXPERIMENTS = {
+    "can": Experiment(can_patches),  # the thumb's fixed point breaks the can's symmetry
+    "bottle": Experiment(bottle_patches, symmetry_axis=(0.0, 0.0, 1.0)),
 }
-"""The atlas paper's SAH experiments: contact patches, and whether the object pose is free."""
+"""The SAH + can (Fig. 10a) and SAH + oil bottle (Fig. 10b) experiments, by name."""
 
 
 def run_experiment(
@@ -225,6 +286,9 @@ def run_experiment(
     """Run the SAH + can or SAH + oil bottle experiment of Section V."""
     if name not in EXPERIMENTS:
         raise AtlasError(f"unknown experiment {name!r}; valid: {sorted(EXPERIMENTS)}")
-    patches, free_object = EXPERIMENTS[name]
-    return optimize_grasp(load_hand(hand), patches(), k, radius, epsilon, index,
-                          free_object, max_charts, progress=progress)  # fmt: skip
+    experiment = EXPERIMENTS[name]
+    return optimize_grasp(
+        load_hand(hand), experiment.patches(), k=k, radius=radius, epsilon=epsilon, index=index,
+        free_object=experiment.free_object, symmetry_axis=experiment.symmetry_axis,
+        max_charts=max_charts, progress=progress,
+    )  # fmt: skip

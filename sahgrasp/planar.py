@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.errors import AtlasError
 from sahgrasp.fileio import write_json_atomic
+from sahgrasp.motions import principal_motions
 from sahgrasp.quality import INDICES, Manipulability, manipulability, null_space
 
 __all__ = [
@@ -63,7 +64,6 @@ __all__ = [
     "make_planar_problem",
     "optimize_planar",
     "plot_atlas",
-    "principal_motions",
     "random_hand_configurations",
     "run_planar",
 ]
@@ -229,22 +229,6 @@ def random_hand_configurations(
     return joints + spread * rng.normal(size=(count, 6)) @ mixing
 
 
-def principal_motions(samples: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """PCA of hand configurations (Section III): ``T T^T = E S^2 E^T``.
-
-    Args:
-        samples: Hand configurations ``X_h``, one per row, (z, h).
-
-    Returns:
-        ``E`` (h, h), columns sorted by decreasing variance, and the variances ``S^2`` (h,).
-    """
-    X = np.asarray(samples, dtype=np.float64)
-    T = (X - X.mean(axis=0)).T
-    variances, E = np.linalg.eigh(T @ T.T / max(len(X) - 1, 1))
-    order = np.argsort(variances)[::-1]
-    return E[:, order], variances[order]
-
-
 @dataclass(frozen=True, eq=False)
 class PlanarGraspProblem:
     """The feasible-grasp system of the planar hand plus the principal-motion constraints.
@@ -393,9 +377,9 @@ def make_planar_problem(
     if k not in (1, 2, 3):
         raise AtlasError(f"k must be 1, 2 or 3 (t = {T_DIM}), got {k}")
     rng = np.random.default_rng(seed)
-    E, _ = principal_motions(random_hand_configurations(hand, rng, samples, spread))
-    s = T_DIM - k  # Eq. (12)
-    return PlanarGraspProblem(hand=hand, x1=hand.initial_grasp(), synergy=E[:, 6 - s :])
+    motions = principal_motions(random_hand_configurations(hand, rng, samples, spread))
+    synergy = motions.constraints(T_DIM - k).T  # s = t - k least-variance motions, Eq. (12)
+    return PlanarGraspProblem(hand=hand, x1=hand.initial_grasp(), synergy=synergy)
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,6 @@ from sahgrasp.planar import (
     PlanarResult,
     make_planar_problem,
     optimize_planar,
-    principal_motions,
     run_planar,
 )
 from sahgrasp.quality import INDICES
@@ -73,14 +72,6 @@ def test_joint_angles_of_the_initial_posture() -> None:
     posture = DEFAULT_HAND.posture
     expected = np.column_stack((posture[:, 0], posture[:, 1] - posture[:, 0])).reshape(6)
     assert np.allclose(problem.joint_angles(problem.x1), expected)
-
-
-def test_principal_motions_sort_variances() -> None:
-    rng = np.random.default_rng(2)
-    samples = rng.normal(size=(2000, 3)) * [3.0, 1.0, 0.1]
-    E, variances = principal_motions(samples)
-    assert np.all(np.diff(variances) <= 0)
-    assert abs(E[0, 0]) > 0.99 and abs(E[2, 2]) > 0.99
 
 
 def test_atlas_covers_r_like_the_paper(result: PlanarResult) -> None:
