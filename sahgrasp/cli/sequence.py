@@ -43,7 +43,12 @@ class _Bar:
         if self.bar is None:
             self.bar = tqdm(total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05)
         self.bar.set_description(f"round {p.round}/{p.rounds} {p.stage}", refresh=False)
-        self.bar.set_postfix_str(f"cells {p.cells_done}/{p.cells}", refresh=False)
+        screening = p.stage == "screening"
+        if screening:
+            postfix = f"found {p.found}/{p.problems} problems in {p.scanned}"
+        else:
+            postfix = f"cells {p.cells_done}/{p.cells}"
+        self.bar.set_postfix_str(postfix, refresh=screening)
         self.bar.update(p.runs_done - self.bar.n)
 
     def close(self) -> None:
