@@ -129,18 +129,43 @@ def finger(name: str) -> list[str]:
         joint(f"{name}_j1", parent, base, xyz, axis_angle_rpy(axis, angle), LIMITS_DEG["j1"]),
         link(f"{name}_proximal", "proximal"),
         # Modified DH: alpha = -90 deg about x, then the flexion joint about z.
-        joint(f"{name}_j2", base, f"{name}_proximal", (0, 0, 0), (-math.pi / 2, 0, 0),
-              LIMITS_DEG["j2"]),
+        joint(
+            f"{name}_j2",
+            base,
+            f"{name}_proximal",
+            (0, 0, 0),
+            (-math.pi / 2, 0, 0),
+            LIMITS_DEG["j2"],
+        ),
         link(f"{name}_middle", "middle"),
-        joint(j3, f"{name}_proximal", f"{name}_middle", (PROXIMAL_LENGTH_MM, 0, 0), (0, 0, 0),
-              LIMITS_DEG["j3"]),
+        joint(
+            j3,
+            f"{name}_proximal",
+            f"{name}_middle",
+            (PROXIMAL_LENGTH_MM, 0, 0),
+            (0, 0, 0),
+            LIMITS_DEG["j3"],
+        ),
         link(f"{name}_distal", "distal"),
         # theta offset -90 deg turns the distal frame so that the phalanx runs along +y.
-        joint(f"{name}_j4", f"{name}_middle", f"{name}_distal", (MIDDLE_LENGTH_MM, 0, 0),
-              (0, 0, -math.pi / 2), LIMITS_DEG["j3"], mimic=j3),
+        joint(
+            f"{name}_j4",
+            f"{name}_middle",
+            f"{name}_distal",
+            (MIDDLE_LENGTH_MM, 0, 0),
+            (0, 0, -math.pi / 2),
+            LIMITS_DEG["j3"],
+            mimic=j3,
+        ),
         link(f"{name}_tip", "tip"),
-        joint(f"{name}_tip_joint", f"{name}_distal", f"{name}_tip", (0, TIP_CENTRE_MM, 0),
-              (0, 0, 0), None),
+        joint(
+            f"{name}_tip_joint",
+            f"{name}_distal",
+            f"{name}_tip",
+            (0, TIP_CENTRE_MM, 0),
+            (0, 0, 0),
+            None,
+        ),
     ]
 
 
