@@ -33,6 +33,17 @@ def add_parser(sub: Any) -> None:
     atlas.add_argument("--repeats", type=int, default=5)
     atlas.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
     atlas.set_defaults(run=run)
+    seq = benches.add_parser("sequence", help="offline search: 1 vs 2 workers, cluster estimate")
+    seq.add_argument("--hand", default="sah")
+    seq.add_argument("--grid", type=int, default=5)
+    seq.add_argument("--problems", type=int, default=60)
+    seq.add_argument("--rounds", type=int, default=2)
+    seq.add_argument("--seed", type=int, default=0)
+    seq.add_argument("--method", choices=("auto", "paper"), default="auto")
+    seq.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    seq.add_argument("--cluster-workers", type=int, default=16)
+    seq.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
+    seq.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
