@@ -19,9 +19,8 @@ from concurrent.futures import Executor, wait
 from typing import Any
 
 from sahgrasp.hand import HandDescription, load_hand
-from sahgrasp.ik import IKSettings
+from sahgrasp.ik import IKSettings, worker_hand
 from sahgrasp.sequence import SearchSettings, open_executor, search_sequence
-from sahgrasp.sequence.tasks import worker_hand
 
 __all__ = ["extrapolate", "run"]
 

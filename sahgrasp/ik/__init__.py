@@ -1,6 +1,6 @@
 """Inverse kinematics of the hand from contact points and normals (ik-initial-sequence)."""
 
-from sahgrasp.ik.batch import invalid_result, solve_many
+from sahgrasp.ik.batch import invalid_result, solve_many, worker_hand
 from sahgrasp.ik.initial import (
     PAPER_TABLE1_LAMBDAS,
     PoseBasis,
@@ -27,4 +27,5 @@ __all__ = [
     "random_problems",
     "solve_ik",
     "solve_many",
+    "worker_hand",
 ]

@@ -1,12 +1,14 @@
 """Solve many IK problems over a process pool, with the same results for any worker count.
 
-Workers receive the picklable :class:`HandDescription` and rebuild the hand once per process
-(Pinocchio's GeometryModel does not pickle). Each problem's random initial configurations are
+Workers receive the picklable :class:`HandDescription` and its digest and rebuild the hand once
+per worker thread (Pinocchio's GeometryModel does not pickle); :func:`worker_hand` also serves the
+offline sequence search. Each problem's random initial configurations are
 seeded from ``(seed, problem index)``, so a result never depends on which worker solved it.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import replace
@@ -15,21 +17,45 @@ from typing import Any
 import numpy as np
 
 from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import Hand, HandDescription
+from sahgrasp.errors import InvalidTargetError, SequenceFileError
+from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
 
-__all__ = ["invalid_result", "solve_many"]
-
-_HANDS: dict[str, Hand] = {}
+__all__ = ["invalid_result", "solve_many", "worker_hand"]
 
 
-def _worker_hand(description: HandDescription) -> Hand:
-    key = description.digest()
-    if key not in _HANDS:
-        _HANDS[key] = Hand(description)
-    return _HANDS[key]
+class _WorkerHands(threading.local):
+    def __init__(self) -> None:
+        self.hands: dict[str, Hand] = {}
+
+
+_HANDS = _WorkerHands()
+
+
+def worker_hand(description: HandDescription, digest: str) -> Hand:
+    """The hand of ``description``, built once per worker thread and kept by its ``digest``.
+
+    A built-in hand whose URDF path does not exist on this machine (a cluster node with another
+    install prefix) is rebuilt from this machine's copy. Either way the hand must have ``digest``.
+
+    Raises:
+        SequenceFileError: This worker's hand is not the one the work was started with.
+    """
+    hand = _HANDS.hands.get(digest)
+    if hand is None:
+        local = description
+        if not description.urdf_path.is_file() and description.name in BUILTIN_HANDS:
+            local = load_hand(description.name).description
+        hand = load_hand(local)
+        found = hand.description.digest()
+        if found != digest:
+            raise SequenceFileError(
+                f"worker's hand {description.name!r} has digest {found[:12]}, the caller's has "
+                f"{digest[:12]}: install the same sahgrasp and URDF on every worker"
+            )
+        _HANDS.hands[digest] = hand
+    return hand
 
 
 def invalid_result(hand: Hand, name: str) -> IKResult:
@@ -44,12 +70,13 @@ def invalid_result(hand: Hand, name: str) -> IKResult:
 
 def _solve_one(
     description: HandDescription,
+    digest: str,
     target: GraspTarget,
     settings: IKSettings,
     sequence: PoseSequence | None,
     index: int,
 ) -> IKResult:
-    hand = _worker_hand(description)
+    hand = worker_hand(description, digest)
     problem_seed = np.random.SeedSequence([settings.seed, index]).generate_state(1)[0]
     seeded = replace(settings, seed=int(problem_seed))
     try:
@@ -71,9 +98,10 @@ def solve_many(
     Targets whose fingers do not match the hand get a ``reason="invalid_input"`` result.
     """
     settings = settings or IKSettings()
-    jobs = [(hand.description, t, settings, sequence, i) for i, t in enumerate(targets)]
+    digest = hand.description.digest()
+    jobs = [(hand.description, digest, t, settings, sequence, i) for i, t in enumerate(targets)]
     if executor is None and workers <= 1:
-        _HANDS.setdefault(hand.description.digest(), hand)
+        _HANDS.hands.setdefault(digest, hand)
         return [_solve_one(*job) for job in jobs]
     if executor is not None:
         return list(_map(executor, jobs))

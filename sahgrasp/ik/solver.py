@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
-from sahgrasp.ik.initial import Sequence, default_sequence, hang_from_thumb
+from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 
 __all__ = [
     "REASONS",
@@ -227,11 +227,8 @@ def stack_rows(
 
 
 def _coupling_weights(hand: Hand) -> NDArray[np.float64]:
-    """Per coordinate, how many URDF joints it drives (weighted by multiplier^2)."""
-    weights = np.ones(len(hand.coordinate_names))
-    for leader, scale, _ in hand.mimic_joints.values():
-        weights[hand.coordinate_index(leader)] += scale**2
-    return weights
+    """Per coordinate, how many URDF joints it drives (weighted by multiplier^2): diag(E^T E)."""
+    return np.asarray(np.square(expansion_matrix(hand)).sum(axis=0))
 
 
 def _paper_attempt(

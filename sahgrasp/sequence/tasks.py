@@ -24,11 +24,10 @@ import time
 from dataclasses import dataclass, replace
 
 from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
-from sahgrasp.ik import IKSettings, PoseBasis, Sequence, random_problem, solve_ik
+from sahgrasp.hand import Hand, HandDescription
+from sahgrasp.ik import IKSettings, PoseBasis, Sequence, random_problem, solve_ik, worker_hand
 
-__all__ = ["Chunk", "ChunkResult", "solve_chunk", "worker_hand"]
+__all__ = ["Chunk", "ChunkResult", "solve_chunk"]
 
 _PROBLEM_CACHE_SIZE = 20_000
 """Problems kept per worker thread: a round's problems are reused by every grid cell."""
@@ -74,36 +73,10 @@ class ChunkResult:
 
 class _WorkerState(threading.local):
     def __init__(self) -> None:
-        self.hands: dict[str, Hand] = {}
         self.problems: dict[tuple[str, int, int], GraspTarget] = {}
 
 
 _STATE = _WorkerState()
-
-
-def worker_hand(description: HandDescription, digest: str) -> Hand:
-    """The hand of ``description``, built once per worker thread.
-
-    A built-in hand whose URDF path does not exist on this machine (a cluster node with another
-    install prefix) is rebuilt from this machine's copy. Either way the hand must have ``digest``.
-
-    Raises:
-        SequenceFileError: This worker's hand is not the one the search was started with.
-    """
-    hand = _STATE.hands.get(digest)
-    if hand is None:
-        local = description
-        if not description.urdf_path.is_file() and description.name in BUILTIN_HANDS:
-            local = load_hand(description.name).description
-        hand = load_hand(local)
-        found = hand.description.digest()
-        if found != digest:
-            raise SequenceFileError(
-                f"worker's hand {description.name!r} has digest {found[:12]}, the search's has "
-                f"{digest[:12]}: install the same sahgrasp and URDF on every worker"
-            )
-        _STATE.hands[digest] = hand
-    return hand
 
 
 def _problem(hand: Hand, digest: str, seed: int, index: int) -> GraspTarget:
