@@ -9,7 +9,10 @@
   each time a screening wave or a cell finishes.
 
 Every file carries the digest of the hand and settings, so a file from another search is refused,
-as is anything malformed, with :class:`SequenceFileError`.
+as is anything malformed (the message names the file and the field), with
+:class:`SequenceFileError`: bad JSON, NaN or infinite numbers, fields of the wrong type, a basis of
+the wrong shape or not orthonormal, counts out of range, problems out of order, a missing round
+file. Nothing is trusted because it parses.
 """
 
 from __future__ import annotations
@@ -23,11 +26,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import write_json_atomic
-from sahgrasp.ik import PoseBasis
+import numpy as np
+from numpy.typing import NDArray
 
-__all__ = ["CellOutcome", "Checkpoint", "RoundState", "remove_stale_temporaries"]
+from sahgrasp.errors import SequenceFileError
+from sahgrasp.ik import PoseBasis
+from sahgrasp.sequence.folder import CHECKPOINT, HEADER, RESULTS, write_json
+
+__all__ = ["CellOutcome", "Checkpoint", "RoundState", "refuse_leftovers"]
 
 FORMAT = "sahgrasp-search-checkpoint-1"
 
@@ -89,59 +95,121 @@ class RoundState:
         """Parse and check the JSON form for a grid of ``cells`` cells and ``problems`` M.
 
         Raises:
-            ValueError: The data is not a consistent round.
+            ValueError: The data is not a consistent round (the message names the field).
         """
+        chosen = _field(data, "problems", list)
+        finished = _field(data, "cells", dict)
         state = cls(
-            index=_int(data["round"], 1),
-            start=_int(data["start"], 0),
-            scanned=_int(data["scanned"], 0),
-            problems=tuple(_int(p, 0) for p in data["problems"]),
-            cells={
-                _int(int(c), 0, cells - 1): CellOutcome(_int(s, 0, problems), _seconds(t))
-                for c, (s, t) in data["cells"].items()
-            },
-            screen_runs=_int(data["screen_runs"], 0),
-            screen_seconds=_seconds(data["screen_seconds"]),
+            index=_int(_field(data, "round"), "round", 1),
+            start=_int(_field(data, "start"), "start", 0),
+            scanned=_int(_field(data, "scanned"), "scanned", 0),
+            problems=tuple(_int(p, "problems[]", 0) for p in chosen),
+            cells=dict(_cell(key, value, cells, problems) for key, value in finished.items()),
+            screen_runs=_int(_field(data, "screen_runs"), "screen_runs", 0),
+            screen_seconds=_seconds(_field(data, "screen_seconds"), "screen_seconds"),
         )
-        chosen = state.problems
-        if chosen and (
-            chosen[0] < state.start
-            or chosen[-1] >= state.scanned
-            or any(a >= b for a, b in itertools.pairwise(chosen))
-        ):
-            raise ValueError("problems must increase strictly, within start .. scanned - 1")
-        if state.scanned < state.start or len(chosen) > problems:
-            raise ValueError(f"at most {problems} problems between start and scanned")
-        if state.cells and len(state.problems) != problems:
-            raise ValueError("cells are finished before the round's problems are complete")
+        state._check(problems)
         return state
 
+    def _check(self, problems: int) -> None:
+        chosen = self.problems
+        if chosen and (
+            chosen[0] < self.start
+            or chosen[-1] >= self.scanned
+            or any(a >= b for a, b in itertools.pairwise(chosen))
+        ):
+            raise ValueError("field 'problems' must increase strictly, within start .. scanned - 1")
+        if self.scanned < self.start or len(chosen) > problems:
+            raise ValueError(
+                f"field 'problems' holds more than {problems} problems, or scanned < start"
+            )
+        if self.cells and len(chosen) != problems:
+            raise ValueError(
+                "field 'cells' has cells finished before the round's problems are complete"
+            )
 
-def _int(value: Any, lower: int, upper: int | None = None) -> int:
-    if not isinstance(value, int) or isinstance(value, bool):
-        raise ValueError(f"expected an integer, got {value!r}")
-    if value < lower or (upper is not None and value > upper):
-        raise ValueError(f"{value} is outside {lower} .. {upper}")
+
+def _field(data: dict[str, Any], name: str, kind: type | None = None) -> Any:
+    """``data[name]``, which must exist (and be a ``kind``)."""
+    if name not in data:
+        raise ValueError(f"field {name!r} is missing")
+    value = data[name]
+    if kind is not None and not isinstance(value, kind):
+        raise ValueError(f"field {name!r} must be a JSON {_JSON_NAMES[kind]}, got {_show(value)}")
     return value
 
 
-def _seconds(value: Any) -> float:
-    seconds = float(value)
-    if not math.isfinite(seconds) or seconds < 0.0:
-        raise ValueError(f"expected a time >= 0 s, got {value!r}")
-    return seconds
+_JSON_NAMES: dict[type, str] = {list: "array", dict: "object", str: "string"}
 
 
-def remove_stale_temporaries(folder: Path) -> None:
-    """Delete temporary files left in ``folder`` by an atomic write that was killed."""
-    for tmp in folder.glob(".*.tmp"):
-        tmp.unlink(missing_ok=True)
+def _show(value: Any, limit: int = 60) -> str:
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
+def _int(value: Any, name: str, lower: int, upper: int | None = None) -> int:
+    if (
+        not isinstance(value, int)
+        or isinstance(value, bool)
+        or value < lower
+        or (upper is not None and value > upper)
+    ):
+        valid = f">= {lower}" if upper is None else f"in {lower} .. {upper}"
+        raise ValueError(f"field {name!r} must be an integer {valid}, got {_show(value)}")
+    return value
+
+
+def _seconds(value: Any, name: str) -> float:
+    if (
+        not isinstance(value, (int, float))
+        or isinstance(value, bool)
+        or not math.isfinite(value)
+        or value < 0
+    ):
+        raise ValueError(f"field {name!r} must be a time >= 0 s, got {_show(value)}")
+    return float(value)
+
+
+def _cell(key: str, value: Any, cells: int, problems: int) -> tuple[int, CellOutcome]:
+    """One entry ``"flat index": [solved, seconds]`` of a round's ``cells``."""
+    name = f"cells.{key}"
+    if not (key.isdigit() and str(int(key)) == key and int(key) < cells):
+        raise ValueError(f"field {name!r}: cell indices are 0 .. {cells - 1}, written plainly")
+    if not isinstance(value, list) or len(value) != 2:
+        raise ValueError(f"field {name!r} must be [solved, seconds], got {_show(value)}")
+    return int(key), CellOutcome(_int(value[0], name, 0, problems), _seconds(value[1], name))
+
+
+def _basis(data: Any, size: int) -> PoseBasis:
+    """The PCA basis of a header: ``size`` values per pose, orthonormal directions, sigmas > 0."""
+    if not isinstance(data, dict):
+        raise ValueError(f"field 'basis' must be a JSON object, got {_show(data)}")
+    mean = _array(data, "mean", (size,))
+    directions = _array(data, "directions", (2, size))
+    sigmas = _array(data, "sigmas", (2,))
+    if not np.allclose(directions @ directions.T, np.eye(2), rtol=0.0, atol=1e-9):
+        raise ValueError("field 'basis.directions' must hold 2 orthonormal directions")
+    if not np.all(sigmas > 0.0):
+        raise ValueError("field 'basis.sigmas' must be > 0")
+    return PoseBasis(mean, directions, sigmas)
+
+
+def _array(data: dict[str, Any], name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
+    try:
+        values = np.asarray(data.get(name))
+    except ValueError:  # ragged nested lists
+        values = np.asarray(None)
+    if values.dtype.kind not in "if" or values.shape != shape or not np.all(np.isfinite(values)):
+        wanted = " x ".join(map(str, shape))
+        raise ValueError(f"field 'basis.{name}' must be {wanted} finite numbers")
+    return values.astype(np.float64)
 
 
 class Checkpoint:
     """The checkpoint folder of one search (module docstring).
 
-    Build it with :meth:`create` or :meth:`open`.
+    Build it with :meth:`create` or :meth:`open`, while holding the output folder's lock
+    (:func:`sahgrasp.sequence.folder.locked_folder`).
 
     Attributes:
         folder: ``DIR/checkpoint``.
@@ -160,8 +228,7 @@ class Checkpoint:
         self.folder = folder
         self.basis = basis
         self.rounds = rounds
-        self._identity = identity
-        self._key = hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
+        self._key = _key(identity)
         self._shape = shape
 
     @classmethod
@@ -177,43 +244,47 @@ class Checkpoint:
             shape: ``(N^2 cells, M problems)``, to check the rounds against.
 
         Raises:
-            SequenceFileError: ``out_dir`` already holds a search.
+            SequenceFileError: ``out_dir`` already holds a search, or what is left of one.
         """
-        folder = out_dir / "checkpoint"
-        if (folder / "header.json").exists():
-            raise SequenceFileError(
-                f"{out_dir} already holds a search; resume it (--resume) or choose another --out"
-            )
-        checkpoint = cls(folder, identity, basis, shape, [])
+        refuse_leftovers(out_dir)
+        checkpoint = cls(out_dir / CHECKPOINT, identity, basis, shape, [])
         header = {"format": FORMAT, **identity, "key": checkpoint._key, "basis": basis.to_dict()}
-        write_json_atomic(folder / "header.json", header)
+        checkpoint.folder.mkdir(exist_ok=True)
+        write_json(checkpoint.folder / HEADER, header)
         return checkpoint
 
     @classmethod
-    def open(cls, out_dir: Path, identity: dict[str, Any], shape: tuple[int, int]) -> Checkpoint:
+    def open(
+        cls, out_dir: Path, identity: dict[str, Any], shape: tuple[int, int], basis_size: int
+    ) -> Checkpoint:
         """Read the checkpoint in ``out_dir`` of a search with this ``identity``.
+
+        Args:
+            out_dir: The search's output folder.
+            identity: As for :meth:`create`.
+            shape: As for :meth:`create`.
+            basis_size: Values per pose of the hand's PCA basis (the length of ``Q``).
 
         Raises:
             SequenceFileError: Missing, corrupted, or made by a search with another identity.
         """
-        folder = out_dir / "checkpoint"
-        header = _read(folder / "header.json")
-        try:
-            if header["format"] != FORMAT:
-                raise ValueError(f"format is not {FORMAT}")
-            stored = {k: header[k] for k in identity}
-            basis = PoseBasis.from_dict(header["basis"])
-            if basis.directions.shape != (2, basis.mean.size) or basis.sigmas.shape != (2,):
-                raise ValueError("the basis needs a mean, 2 directions and 2 sigmas")
-        except (KeyError, TypeError, ValueError) as exc:
-            raise _corrupted(folder / "header.json", exc) from exc
-        if stored != identity:
+        path = out_dir / CHECKPOINT / HEADER
+        header = _read(path)
+        stored = {k: header.get(k) for k in identity}
+        if header.get("format") == FORMAT and stored != identity:
             raise SequenceFileError(
-                f"{out_dir} holds a search of another hand or settings: it has "
+                f"{out_dir} holds a search of another hand or settings: {path} has "
                 f"{_differences(stored, identity)}; use the same settings or another --out"
             )
-        remove_stale_temporaries(folder)
-        checkpoint = cls(folder, identity, basis, shape, [])
+        try:
+            if _field(header, "format") != FORMAT:
+                raise ValueError(f"field 'format' must be {FORMAT!r}")
+            if _field(header, "key") != _key(identity):
+                raise ValueError("field 'key' is not the digest of the hand and settings")
+            basis = _basis(_field(header, "basis"), basis_size)
+        except ValueError as exc:
+            raise _corrupted(path, exc) from exc
+        checkpoint = cls(path.parent, identity, basis, shape, [])
         checkpoint.rounds = checkpoint._read_rounds()
         return checkpoint
 
@@ -224,59 +295,105 @@ class Checkpoint:
         else:
             self.rounds.append(state)
         data = {"format": FORMAT, "key": self._key, **state.to_dict()}
-        write_json_atomic(self.folder / f"round-{state.index:03d}.json", data)
+        write_json(self.folder / _round_name(state.index), data)
 
     def _read_rounds(self) -> list[RoundState]:
         rounds: list[RoundState] = []
         cells, problems = self._shape
-        for path in sorted(self.folder.glob("round-*.json")):
+        for index, path in enumerate(_round_files(self.folder), start=1):
             data = _read(path)
             try:
                 if data.get("format") != FORMAT or data.get("key") != self._key:
-                    raise ValueError("it belongs to another search")
+                    raise ValueError("it belongs to another search (fields 'format', 'key')")
                 state = RoundState.from_dict(data, cells, problems)
-                previous = rounds[-1] if rounds else None
-                _check_follows(previous, state, cells, problems)
-            except (AttributeError, KeyError, TypeError, ValueError) as exc:
+                if path.name != _round_name(state.index):
+                    raise ValueError(f"field 'round' is {state.index}, not that of the file name")
+                _check_follows(rounds[-1] if rounds else None, state, index, cells, problems)
+            except ValueError as exc:
                 raise _corrupted(path, exc) from exc
             rounds.append(state)
         return rounds
 
 
+def refuse_leftovers(out_dir: Path) -> None:
+    """Raise :class:`SequenceFileError` if a new search in ``out_dir`` would overwrite one.
+
+    A header means a search to resume. Round files or results without a header are what is left
+    of a search whose header was deleted: its PCA basis is lost, so that search can be neither
+    trusted nor continued, and a new one must not overwrite it either.
+    """
+    folder = out_dir / CHECKPOINT
+    if (folder / HEADER).exists():
+        raise SequenceFileError(
+            f"{out_dir} already holds a search; resume it (--resume) or choose another --out"
+        )
+    left = [p.name for p in _round_files(folder)] + [n for n in RESULTS if (out_dir / n).exists()]
+    if left:
+        raise SequenceFileError(
+            f"{out_dir} holds files of a search ({', '.join(left[:4])}) but no "
+            f"{CHECKPOINT}/{HEADER}: its settings and PCA basis are lost, so it cannot be "
+            f"resumed; restore {HEADER}, delete those files, or choose another --out"
+        )
+
+
+def _round_name(index: int) -> str:
+    return f"round-{index:03d}.json"
+
+
+def _round_files(folder: Path) -> list[Path]:
+    """Every ``round-*.json`` in ``folder``, in round order (misnamed ones first: refused)."""
+    return sorted(folder.glob("round-*.json"), key=lambda p: (len(p.name), p.name))
+
+
+def _key(identity: dict[str, Any]) -> str:
+    return hashlib.sha256(json.dumps(identity, sort_keys=True).encode()).hexdigest()
+
+
 def _check_follows(
-    previous: RoundState | None, state: RoundState, cells: int, problems: int
+    previous: RoundState | None, state: RoundState, index: int, cells: int, problems: int
 ) -> None:
-    """Raise ValueError unless ``state`` is the round after ``previous``."""
+    """Raise ValueError unless ``state`` is round ``index``, the round after ``previous``."""
+    if state.index != index:
+        raise ValueError(f"field 'round' is {state.index} but round {index} is missing")
     if previous is None:
-        if (state.index, state.start) != (1, 0):
-            raise ValueError("the first round must be round 1, starting at problem 0")
+        if state.start != 0:
+            raise ValueError("field 'start' of round 1 must be 0")
         return
     if len(previous.cells) != cells or len(previous.problems) != problems:
         raise ValueError(f"round {previous.index} is unfinished but round {state.index} exists")
-    if (state.index, state.start) != (previous.index + 1, previous.problems[-1] + 1):
-        raise ValueError(f"round {state.index} does not follow round {previous.index}")
+    if state.start != previous.problems[-1] + 1:
+        raise ValueError(f"field 'start' does not follow round {previous.index}'s last problem")
 
 
 def _read(path: Path) -> dict[str, Any]:
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        data = json.loads(path.read_bytes().decode("utf-8"), parse_constant=_no_constant)
+    except FileNotFoundError as exc:
+        raise SequenceFileError(
+            f"checkpoint file {path} is missing; delete {path.parent} to start the search over"
+        ) from exc
+    except (OSError, ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
         raise _corrupted(path, exc) from exc
     if not isinstance(data, dict):
         raise _corrupted(path, ValueError("not a JSON object"))
     return data
 
 
-def _corrupted(path: Path, exc: Exception) -> SequenceFileError:
+def _no_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not a number a checkpoint can hold")
+
+
+def _corrupted(path: Path, exc: BaseException) -> SequenceFileError:
+    reason = str(exc) if type(exc) is ValueError else f"{type(exc).__name__}: {exc}"
     return SequenceFileError(
-        f"checkpoint file {path} is unusable ({type(exc).__name__}: {exc}); delete "
-        f"{path.parent} to start the search over"
+        f"checkpoint file {path} is unusable ({reason}); delete {path.parent} to start the "
+        "search over"
     )
 
 
 def _differences(stored: dict[str, Any], wanted: dict[str, Any]) -> str:
     diffs = [
-        f"{key} {stored.get(key)!r} (this run: {wanted[key]!r})"
+        f"{key} {_show(stored.get(key), 400)} (this run: {wanted[key]!r})"
         for key in wanted
         if stored.get(key) != wanted[key]
     ]

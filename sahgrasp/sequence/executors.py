@@ -1,7 +1,8 @@
 """Where the chunks of the search run: any :class:`concurrent.futures.Executor`.
 
-* local worker processes (default): a ``ProcessPoolExecutor`` started with ``spawn``, one worker
-  per core unless told otherwise, each with a single BLAS thread;
+* local worker processes (default): :func:`sahgrasp.parallel.process_pool`, started with
+  ``spawn``, one worker per core unless told otherwise, each with a single BLAS thread, each
+  ending when the process that started it ends (even by ``kill -9``);
 * Dask distributed: a scheduler address (``tcp://HOST:PORT``) or a ``dask.distributed.Client``;
   chunks go through ``Client.get_executor()``. Dask reruns the chunks of a worker that dies;
 * anything else with the ``Executor`` interface, e.g. ``mpi4py.futures.MPIPoolExecutor``.
@@ -12,42 +13,15 @@ them, nor on how many workers they had.
 
 from __future__ import annotations
 
-import multiprocessing
-import os
 from collections.abc import Iterator
-from concurrent.futures import Executor, ProcessPoolExecutor
+from concurrent.futures import Executor
 from contextlib import contextmanager
 from typing import Any
 
 from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.parallel import process_pool
 
 __all__ = ["open_executor"]
-
-SINGLE_THREADED_BLAS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
-"""Environment of local workers, as Dask's nanny gives its workers: with one BLAS thread per
-process, workers do not compete with each other's (spinning) BLAS threads for the cores."""
-
-
-@contextmanager
-def _local_pool(workers: int | None) -> Iterator[ProcessPoolExecutor]:
-    """Worker processes on this machine, started with ``spawn`` (one per core by default).
-
-    The processes are started while :data:`SINGLE_THREADED_BLAS` is in the environment (values
-    the user has set are kept); the environment is restored when the pool closes.
-    """
-    count = (os.cpu_count() or 1) if workers is None else workers
-    if count < 1:
-        raise InvalidSettingsError(f"workers must be >= 1, got {count}")
-    saved = {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS}
-    os.environ.update({k: v for k, v in SINGLE_THREADED_BLAS.items() if saved[k] is None})
-    pool = ProcessPoolExecutor(count, mp_context=multiprocessing.get_context("spawn"))
-    try:
-        yield pool
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
 
 
 @contextmanager
@@ -60,7 +34,7 @@ def open_executor(spec: Any = None, workers: int | None = None) -> Iterator[Exec
         workers: Number of local processes (only when ``spec`` is None).
     """
     if spec is None:
-        with _local_pool(workers) as pool:
+        with process_pool(workers) as pool:
             yield pool
     elif isinstance(spec, Executor):
         yield spec

@@ -33,13 +33,23 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.fileio import write_bytes_atomic, write_json_atomic
 from sahgrasp.hand import Hand, HandDescription, load_hand
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, pose_basis
-from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED
+from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED, expansion_matrix
 from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState
 from sahgrasp.sequence.executors import open_executor
 from sahgrasp.sequence.figure import success_maps_png
+from sahgrasp.sequence.folder import (
+    CHECKPOINT,
+    FIGURE,
+    HEADER,
+    REPORT,
+    SEQUENCE,
+    locked_folder,
+    remove_stale_temporaries,
+    write_bytes,
+    write_json,
+)
 from sahgrasp.sequence.tasks import Chunk, ChunkResult, solve_chunk
 
 __all__ = ["Progress", "RoundResult", "SearchResult", "SearchSettings", "search_sequence"]
@@ -240,8 +250,10 @@ def search_sequence(
 
     Writes ``sequence.json`` (:meth:`Sequence.save`), ``search.json`` (settings, the ``E_i``
     maps and per-round statistics), ``fig4.png`` (the ``E_i`` maps as in the paper's Fig. 4) and
-    keeps ``checkpoint/`` up to date as cells finish. Call it under ``if __name__ ==
-    "__main__":`` in scripts: local workers are started with ``spawn``.
+    keeps ``checkpoint/`` up to date as cells finish. It holds an exclusive lock on ``out_dir``
+    from start to end (:func:`sahgrasp.sequence.folder.locked_folder`) and deletes the temporary
+    files of writes that a kill interrupted. Call it under ``if __name__ == "__main__":`` in
+    scripts: local workers are started with ``spawn``.
 
     Args:
         hand: The hand, a built-in name, or a description.
@@ -255,8 +267,9 @@ def search_sequence(
         progress: Called after every finished chunk.
 
     Raises:
-        SequenceFileError: ``out_dir`` holds a search and ``resume`` is False; or its checkpoint
-            is corrupted or belongs to another hand or settings.
+        SequenceFileError: ``out_dir`` holds a search and ``resume`` is False; or what is left
+            of a search without its header; or its checkpoint is corrupted or belongs to another
+            hand or settings; or another process is running a search in ``out_dir``.
         InvalidSettingsError: ``chunk_size`` or ``workers`` below 1.
     """
     if chunk_size < 1:
@@ -264,31 +277,37 @@ def search_sequence(
     start = time.perf_counter()
     hand = hand if isinstance(hand, Hand) else load_hand(hand)
     out = Path(out_dir)
-    with open_executor(executor, workers) as pool:
+    # The executor first (a bad one is refused before the folder is touched), then the lock,
+    # held until the outputs are written.
+    with open_executor(executor, workers) as pool, locked_folder(out):
         checkpoint = _open_checkpoint(hand, settings, out, resume)
         search = _Search(hand, settings, checkpoint, pool, chunk_size, progress)
         rounds = search.run()
-    result = SearchResult(
-        sequence=_sequence(hand, settings, checkpoint.basis, rounds),
-        settings=settings,
-        rounds=rounds,
-        cells_computed=search.cells_computed,
-        ik_runs_computed=search.ik_runs,
-        wall_seconds=time.perf_counter() - start,
-    )
-    _write_outputs(result, out)
+        result = SearchResult(
+            sequence=_sequence(hand, settings, checkpoint.basis, rounds),
+            settings=settings,
+            rounds=rounds,
+            cells_computed=search.cells_computed,
+            ik_runs_computed=search.ik_runs,
+            wall_seconds=time.perf_counter() - start,
+        )
+        _write_outputs(result, out)
     return result
 
 
 def _open_checkpoint(hand: Hand, settings: SearchSettings, out: Path, resume: bool) -> Checkpoint:
+    """Resume the checkpoint in ``out`` or start one; ``out`` must be locked by this process."""
+    for folder in (out, out / CHECKPOINT):
+        if folder.is_dir():
+            remove_stale_temporaries(folder)
     identity = {
         "hand": hand.description.name,
         "hand_digest": hand.description.digest(),
         "settings": settings.identity(),
     }
     shape = (settings.cells, settings.problems)
-    if resume and (out / "checkpoint" / "header.json").exists():
-        return Checkpoint.open(out, identity, shape)
+    if resume and (out / CHECKPOINT / HEADER).exists():
+        return Checkpoint.open(out, identity, shape, expansion_matrix(hand).shape[0])
     return Checkpoint.create(out, identity, pose_basis(hand), shape)
 
 
@@ -468,9 +487,9 @@ def _sequence(
 
 
 def _write_outputs(result: SearchResult, out: Path) -> None:
-    result.sequence.save(out / "sequence.json")
-    write_json_atomic(out / "search.json", result.to_dict())
+    write_json(out / SEQUENCE, result.sequence.to_dict())  # as Sequence.save writes it
+    write_json(out / REPORT, result.to_dict())
     rounds = result.rounds
     title = f"Success rates E_i of the initial-pose search, hand {result.sequence.hand}"
     png = success_maps_png([r.success_rates for r in rounds], [r.lambdas for r in rounds], title)
-    write_bytes_atomic(out / "fig4.png", png)
+    write_bytes(out / FIGURE, png)

@@ -1,0 +1,157 @@
+"""Local worker processes that never outlive the process that started them.
+
+:func:`process_pool` is the one way sahgrasp starts worker processes on this machine::
+
+    from sahgrasp.parallel import process_pool
+
+    with process_pool(workers=2) as pool:  # a concurrent.futures.ProcessPoolExecutor
+        results = list(pool.map(function, items))
+
+Its workers are started with ``spawn`` and one BLAS thread each, and each runs
+:func:`die_with_parent` before its first task, so a ``kill -9`` or SIGTERM of the parent does not
+leave them running (holding memory and the parent's pipes). Two mechanisms, because each misses a
+case the other covers:
+
+* Linux: ``prctl(PR_SET_PDEATHSIG, SIGTERM)``; the kernel sends the signal even while the worker
+  is inside a long C call holding the GIL, where no Python thread can run;
+* everywhere: a daemon thread blocked on :func:`multiprocessing.parent_process`'s sentinel, which
+  becomes ready when the parent ends; it also catches a parent that died before the worker
+  armed ``PR_SET_PDEATHSIG``.
+
+Linux sends the parent-death signal when the *thread* that started the worker ends, and the pool
+starts workers lazily, from the thread that calls ``submit``: submit from the thread that holds
+the ``with`` block (as a plain ``with process_pool(...)`` does), not from short-lived threads.
+
+Workers ignore SIGINT: Ctrl-C in a terminal reaches the whole process group, and the parent alone
+decides what an interruption means (it cancels the queued work and closes the pool).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import contextmanager
+
+from sahgrasp.errors import InvalidSettingsError
+
+__all__ = [
+    "SINGLE_THREADED_BLAS",
+    "check_workers",
+    "die_with_parent",
+    "process_pool",
+    "watch_parent",
+]
+
+SINGLE_THREADED_BLAS = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""Environment of local workers, as Dask's nanny gives its workers: with one BLAS thread per
+process, workers do not compete with each other's (spinning) BLAS threads for the cores."""
+
+_PR_SET_PDEATHSIG = 1
+"""``PR_SET_PDEATHSIG`` of ``<linux/prctl.h>``."""
+
+_ORPHAN_EXIT_CODE = 128 + signal.SIGTERM
+"""Exit status of a worker that ends because its parent did (as if killed by SIGTERM)."""
+
+
+def check_workers(workers: int | None) -> int:
+    """The number of worker processes for ``workers`` (None: one per core).
+
+    Raises:
+        InvalidSettingsError: ``workers`` is not an integer >= 1.
+    """
+    if workers is None:
+        return os.cpu_count() or 1
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise InvalidSettingsError(
+            f"workers must be an integer >= 1 (or None: one per core), got {workers!r}"
+        )
+    return workers
+
+
+@contextmanager
+def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
+    """Yield a ``ProcessPoolExecutor`` whose workers end when this process ends.
+
+    Workers are started with ``spawn`` while :data:`SINGLE_THREADED_BLAS` is in the environment
+    (values the user has set are kept); the environment is restored when the pool closes. On
+    exit the queued work is cancelled and the running tasks are waited for.
+
+    Args:
+        workers: Worker processes (default: one per core).
+
+    Raises:
+        InvalidSettingsError: ``workers`` is not an integer >= 1.
+    """
+    count = check_workers(workers)
+    saved = {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS}
+    os.environ.update({k: v for k, v in SINGLE_THREADED_BLAS.items() if saved[k] is None})
+    pool = ProcessPoolExecutor(
+        count,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=die_with_parent,
+        initargs=(os.getpid(),),
+    )
+    try:
+        yield pool
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Worker initializer: end this process when its parent ``parent_pid`` ends (module doc).
+
+    Args:
+        parent_pid: Process id of the parent, read in the parent (``os.getpid()``).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # an ignored SIGTERM survives the exec of spawn
+    _arm_parent_death_signal(signal.SIGTERM)
+    watch_parent()
+    if os.getppid() != parent_pid:  # the parent ended before the watch started
+        os._exit(_ORPHAN_EXIT_CODE)
+
+
+def watch_parent() -> threading.Thread | None:
+    """Start a daemon thread that ends this process as soon as its parent process ends.
+
+    Portable (it waits on the parent sentinel that ``multiprocessing`` gives every child it
+    starts); does nothing in a process that ``multiprocessing`` did not start.
+
+    Returns:
+        The watching thread, or None when there is no ``multiprocessing`` parent.
+    """
+    parent = multiprocessing.parent_process()
+    if parent is None:
+        return None
+
+    def wait_for_parent() -> None:
+        parent.join()  # returns when the parent's end of the sentinel pipe closes
+        os._exit(_ORPHAN_EXIT_CODE)
+
+    thread = threading.Thread(target=wait_for_parent, name="sahgrasp-watch-parent", daemon=True)
+    thread.start()
+    return thread
+
+
+def _arm_parent_death_signal(signum: int) -> bool:
+    """Ask Linux to send ``signum`` to this process when its parent ends; False if unsupported."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        status = libc.prctl(
+            ctypes.c_int(_PR_SET_PDEATHSIG), ctypes.c_ulong(signum), ctypes.c_ulong(0),
+            ctypes.c_ulong(0), ctypes.c_ulong(0),
+        )  # fmt: skip
+    except (OSError, AttributeError):  # no C library symbols, or no prctl in it
+        return False
+    return int(status) == 0
