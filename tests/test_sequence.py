@@ -5,8 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import shutil
 import signal
+import subprocess
+import sys
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 from importlib import resources
@@ -28,6 +31,9 @@ from sahgrasp.sequence import (
     search_sequence,
     solve_chunk,
 )
+from sahgrasp.sequence.folder import LOCK_NAME, locked_folder, write_bytes
+
+ROOT = Path(__file__).resolve().parents[1]
 
 SMALL = SearchSettings(grid=3, problems=20, rounds=2, seed=3, ik=IKSettings(max_iterations=30))
 CELLS = SMALL.cells * SMALL.rounds
@@ -63,7 +69,7 @@ def test_reference_run_outputs(reference: tuple[SearchResult, Path], sah: Hand) 
     result, out = reference
     assert result.cells_computed == CELLS
     assert {p.name for p in out.iterdir()} == {
-        "checkpoint", "sequence.json", "search.json", "fig4.png",
+        "checkpoint", "sequence.json", "search.json", "fig4.png", LOCK_NAME,
     }  # fmt: skip
     _assert_clean(out)
     seq = Sequence.load(out / "sequence.json")
@@ -151,9 +157,8 @@ def test_resume_after_a_kill_in_the_middle_of_a_round(
         assert not (tmp_path / "sequence.json").exists()
         saved = json.loads((tmp_path / "checkpoint" / "round-002.json").read_text())
         assert len(saved["cells"]) == 4
-        (tmp_path / "checkpoint" / ".round-002.json.999.tmp").write_text(
-            '{"half": '
-        )  # a killed write
+        killed_write = tmp_path / "checkpoint" / ".round-002.json.999-0123abcd.sahgrasp.tmp"
+        killed_write.write_text('{"half": ')
         resumed = search_sequence("sah", SMALL, tmp_path, executor=pool, resume=True)
     assert resumed.cells_computed == SMALL.cells - 4
     assert _signature(resumed) == _signature(reference[0])
@@ -245,6 +250,210 @@ def test_corrupted_checkpoint_is_refused(finished: Path, damage: Any) -> None:
     damage(finished / "checkpoint")
     with pytest.raises(SequenceFileError, match=r"checkpoint file .* is unusable"):
         _resume(finished)
+
+
+def _edit(path: Path, change: Any) -> None:
+    data = json.loads(path.read_text())
+    change(data)
+    path.write_text(json.dumps(data))  # json.dumps writes NaN as NaN, as a careless tool would
+
+
+def _set(*keys: str, value: Any) -> Any:
+    def change(data: Any) -> None:
+        for key in keys[:-1]:
+            data = data[key]
+        data[keys[-1]] = value
+
+    return change
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (_set("basis", "mean", 0, value=float("nan")), "NaN"),
+        (_set("basis", "sigmas", 1, value=float("inf")), "Infinity"),
+        (lambda d: d["basis"]["mean"].pop(), "basis.mean"),
+        (lambda d: [row.pop() for row in d["basis"]["directions"]], "basis.directions"),
+        (_set("basis", "directions", 0, 0, value=2.0), "basis.directions"),
+        (_set("basis", "sigmas", value=["1", 2]), "basis.sigmas"),
+        (_set("basis", "sigmas", value=[1.0, 0.0]), "basis.sigmas"),
+        (_set("basis", "sigmas", value=[True, 1.0]), "basis.sigmas"),
+        (_set("basis", "mean", value=[[1.0], [1.0, 2.0]]), "basis.mean"),
+        (_set("basis", value=[1.0]), "basis"),
+        (lambda d: d.pop("basis"), "basis"),
+        (_set("key", value="0" * 64), "key"),
+        (_set("format", value="sahgrasp-search-checkpoint-0"), "format"),
+    ],
+)
+def test_header_with_a_bad_field_is_refused(finished: Path, change: Any, field: str) -> None:
+    header = finished / "checkpoint" / "header.json"
+    _edit(header, change)
+    with pytest.raises(
+        SequenceFileError, match=rf"{re.escape(str(header))} is unusable \(.*{field}"
+    ):
+        _resume(finished)
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"", b"\xff\xfe{\x00}", b"[" * 100_000, b"[1, 2]", b'{"format": "sahgrasp-search-chec'],
+    ids=["empty", "utf16", "deep", "array", "truncated"],
+)
+def test_unreadable_header_is_refused(finished: Path, content: bytes) -> None:
+    header = finished / "checkpoint" / "header.json"
+    header.write_bytes(content)
+    with pytest.raises(SequenceFileError, match=rf"{re.escape(str(header))} is unusable"):
+        _resume(finished)
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        (_set("cells", "0", value="x"), "cells.0"),
+        (_set("cells", "0", value=[3, float("nan")]), "NaN"),
+        (_set("cells", "0", value=[3, True]), "cells.0"),
+        (_set("cells", "0", value=[-1, 0.1]), "cells.0"),
+        (lambda d: d["cells"].update({"00": d["cells"]["0"]}), "cells.00"),
+        (_set("cells", value=[]), "cells"),
+        (_set("problems", value="0-19"), "problems"),
+        (_set("problems", 0, value=1.5), "problems"),
+        (_set("screen_seconds", value="1"), "screen_seconds"),
+        (lambda d: d.pop("scanned"), "scanned"),
+        (_set("start", value=5), "problems"),
+        (_set("round", value=2), "round"),
+    ],
+)
+def test_round_file_with_a_bad_field_is_refused(finished: Path, change: Any, field: str) -> None:
+    path = finished / "checkpoint" / "round-001.json"
+    _edit(path, change)
+    with pytest.raises(SequenceFileError, match=rf"{re.escape(str(path))} is unusable \(.*{field}"):
+        _resume(finished)
+
+
+def test_truncated_or_misnamed_round_file_is_refused(finished: Path) -> None:
+    folder = finished / "checkpoint"
+    text = (folder / "round-002.json").read_text()
+    (folder / "round-002.json").write_text(text[: len(text) // 2])
+    with pytest.raises(SequenceFileError, match=r"round-002\.json is unusable"):
+        _resume(finished)
+    (folder / "round-002.json").write_text(text)
+    shutil.copy(folder / "round-002.json", folder / "round-003.json")  # round 2 again, as round 3
+    with pytest.raises(SequenceFileError, match=r"round-003\.json is unusable .*field 'round'"):
+        _resume(finished)
+
+
+def _contents(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize("resume", [True, False])
+def test_rounds_without_their_header_are_kept_and_refused(finished: Path, resume: bool) -> None:
+    (finished / "checkpoint" / "header.json").unlink()
+    before = _contents(finished)
+    with (
+        ThreadPoolExecutor(1) as pool,
+        pytest.raises(
+            SequenceFileError,
+            match=r"round-001\.json, round-002\.json.* no checkpoint/header\.json",
+        ),
+    ):
+        search_sequence("sah", SMALL, finished, executor=pool, resume=resume)
+    assert _contents(finished) == before
+
+
+def test_results_without_a_checkpoint_are_not_overwritten(finished: Path) -> None:
+    shutil.rmtree(finished / "checkpoint")
+    before = _contents(finished)
+    with pytest.raises(SequenceFileError, match=r"sequence\.json, search\.json, fig4\.png"):
+        _resume(finished)
+    assert _contents(finished) == before
+
+
+def test_resume_removes_its_own_stale_temporaries_and_nothing_else(finished: Path) -> None:
+    ours = [
+        finished / ".sequence.json.4242-0123abcd.sahgrasp.tmp",
+        finished / "checkpoint" / ".round-002.json.7-ffffffff.sahgrasp.tmp",
+    ]
+    theirs = [
+        finished / "checkpoint" / ".something.tmp",
+        finished / "checkpoint" / ".round-002.json.999.tmp",
+        finished / ".notes.1-0123abcd.tmp",
+        finished / "my.sahgrasp.tmp",
+        finished / ".x.1-0123ABCD.sahgrasp.tmp",
+    ]
+    for path in ours + theirs:
+        path.write_text("{")
+    (finished / ".dir.1-0123abcd.sahgrasp.tmp").mkdir()
+    _resume(finished)
+    assert not [p for p in ours if p.exists()]
+    assert all(p.read_text() == "{" for p in theirs)
+    assert (finished / ".dir.1-0123abcd.sahgrasp.tmp").is_dir()
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_temporary(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = tmp_path / "round-001.json"
+    path.write_text("old")
+
+    def fail(*args: Any) -> None:
+        raise OSError("disk full")
+
+    monkeypatch.setattr(os, "replace", fail)
+    with pytest.raises(OSError, match="disk full"):
+        write_bytes(path, b"new")
+    assert [p.name for p in tmp_path.iterdir()] == ["round-001.json"]
+    assert path.read_text() == "old"
+
+
+def test_a_locked_folder_is_refused_with_the_holder_pid(finished: Path) -> None:
+    with locked_folder(finished):
+        with pytest.raises(
+            SequenceFileError, match=rf"{re.escape(str(finished))} is in use .*pid {os.getpid()}"
+        ):
+            _resume(finished)
+        with pytest.raises(SequenceFileError, match="in use by another search"):
+            search_sequence("sah", SMALL, finished, workers=1)  # a new search, same folder
+    _resume(finished)  # released at the end of the block
+
+
+def test_the_lock_of_a_killed_process_is_released(finished: Path) -> None:
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLD_LOCK, str(finished)],
+        stdout=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    try:
+        assert holder.stdout is not None
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(
+            SequenceFileError, match=rf"in use by another search \(pid {holder.pid}\)"
+        ):
+            _resume(finished)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert _resume(finished).cells_computed == 0
+
+
+_HOLD_LOCK = """
+import sys, time
+from pathlib import Path
+from sahgrasp.sequence.folder import locked_folder
+with locked_folder(Path(sys.argv[1])):
+    print("locked", flush=True)
+    time.sleep(600)
+"""
+
+
+def test_an_unusable_folder_is_refused(tmp_path: Path) -> None:
+    (tmp_path / "file").write_text("")
+    with pytest.raises(SequenceFileError, match=r"cannot use .*file as the search folder"):
+        search_sequence("sah", SMALL, tmp_path / "file", workers=1)
+    (tmp_path / "dir").mkdir()
+    (tmp_path / "dir" / LOCK_NAME).symlink_to(tmp_path / "elsewhere")
+    with pytest.raises(SequenceFileError, match=r"cannot use .*dir as the search folder"):
+        search_sequence("sah", SMALL, tmp_path / "dir", workers=1)
+    assert not (tmp_path / "elsewhere").exists()
 
 
 def test_corrupted_or_foreign_sequence_is_refused(finished: Path, allegro: Hand) -> None:

@@ -195,14 +195,18 @@ def _basis(data: Any, size: int) -> PoseBasis:
 
 
 def _array(data: dict[str, Any], name: str, shape: tuple[int, ...]) -> NDArray[np.float64]:
-    try:
-        values = np.asarray(data.get(name))
-    except ValueError:  # ragged nested lists
-        values = np.asarray(None)
-    if values.dtype.kind not in "if" or values.shape != shape or not np.all(np.isfinite(values)):
+    """``data[name]``: nested JSON arrays of finite numbers (no booleans, strings) of ``shape``."""
+    values = np.asarray(data.get(name), dtype=object)  # ragged lists stay lists: refused below
+    if values.shape != shape or not all(_finite(x) for x in values.flat):
         wanted = " x ".join(map(str, shape))
         raise ValueError(f"field 'basis.{name}' must be {wanted} finite numbers")
     return values.astype(np.float64)
+
+
+def _finite(value: Any) -> bool:
+    if type(value) is int:  # bool is not int here; huge integers would not fit a float
+        return abs(value) < 2**63
+    return type(value) is float and math.isfinite(value)
 
 
 class Checkpoint:

@@ -36,7 +36,7 @@ from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand, HandDescription, load_hand
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, pose_basis
 from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED, expansion_matrix
-from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState
+from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState, refuse_leftovers
 from sahgrasp.sequence.executors import open_executor
 from sahgrasp.sequence.figure import success_maps_png
 from sahgrasp.sequence.folder import (
@@ -308,6 +308,7 @@ def _open_checkpoint(hand: Hand, settings: SearchSettings, out: Path, resume: bo
     shape = (settings.cells, settings.problems)
     if resume and (out / CHECKPOINT / HEADER).exists():
         return Checkpoint.open(out, identity, shape, expansion_matrix(hand).shape[0])
+    refuse_leftovers(out)  # before the PCA, which takes seconds
     return Checkpoint.create(out, identity, pose_basis(hand), shape)
 
 
