@@ -278,6 +278,7 @@ def _set(*keys: str, value: Any) -> Any:
         (_set("basis", "sigmas", value=["1", 2]), "basis.sigmas"),
         (_set("basis", "sigmas", value=[1.0, 0.0]), "basis.sigmas"),
         (_set("basis", "sigmas", value=[True, 1.0]), "basis.sigmas"),
+        (_set("basis", "sigmas", 0, value=10**400), "basis.sigmas"),
         (_set("basis", "mean", value=[[1.0], [1.0, 2.0]]), "basis.mean"),
         (_set("basis", value=[1.0]), "basis"),
         (lambda d: d.pop("basis"), "basis"),
@@ -312,6 +313,7 @@ def test_unreadable_header_is_refused(finished: Path, content: bytes) -> None:
         (_set("cells", "0", value="x"), "cells.0"),
         (_set("cells", "0", value=[3, float("nan")]), "NaN"),
         (_set("cells", "0", value=[3, True]), "cells.0"),
+        (_set("cells", "0", value=[3, 10**400]), "cells.0"),
         (_set("cells", "0", value=[-1, 0.1]), "cells.0"),
         (lambda d: d["cells"].update({"00": d["cells"]["0"]}), "cells.00"),
         (_set("cells", value=[]), "cells"),
@@ -339,6 +341,10 @@ def test_truncated_or_misnamed_round_file_is_refused(finished: Path) -> None:
     (folder / "round-002.json").write_text(text)
     shutil.copy(folder / "round-002.json", folder / "round-003.json")  # round 2 again, as round 3
     with pytest.raises(SequenceFileError, match=r"round-003\.json is unusable .*field 'round'"):
+        _resume(finished)
+    (folder / "round-003.json").unlink()
+    os.mkfifo(folder / "round-003.json")  # reading it would block
+    with pytest.raises(SequenceFileError, match=r"round-003\.json is unusable .*regular file"):
         _resume(finished)
 
 

@@ -160,12 +160,7 @@ def _int(value: Any, name: str, lower: int, upper: int | None = None) -> int:
 
 
 def _seconds(value: Any, name: str) -> float:
-    if (
-        not isinstance(value, (int, float))
-        or isinstance(value, bool)
-        or not math.isfinite(value)
-        or value < 0
-    ):
+    if not _finite(value) or value < 0:
         raise ValueError(f"field {name!r} must be a time >= 0 s, got {_show(value)}")
     return float(value)
 
@@ -204,6 +199,7 @@ def _array(data: dict[str, Any], name: str, shape: tuple[int, ...]) -> NDArray[n
 
 
 def _finite(value: Any) -> bool:
+    """Whether ``value`` is a JSON number that is a finite float."""
     if type(value) is int:  # bool is not int here; huge integers would not fit a float
         return abs(value) < 2**63
     return type(value) is float and math.isfinite(value)
@@ -370,12 +366,12 @@ def _check_follows(
 
 
 def _read(path: Path) -> dict[str, Any]:
+    if path.exists() and not path.is_file():  # a folder, or a FIFO that would block the read
+        raise _corrupted(path, ValueError("not a regular file"))
     try:
         data = json.loads(path.read_bytes().decode("utf-8"), parse_constant=_no_constant)
     except FileNotFoundError as exc:
-        raise SequenceFileError(
-            f"checkpoint file {path} is missing; delete {path.parent} to start the search over"
-        ) from exc
+        raise SequenceFileError(f"checkpoint file {path} is missing; {_START_OVER}") from exc
     except (OSError, ValueError, RecursionError) as exc:  # JSON and UTF-8 errors are ValueErrors
         raise _corrupted(path, exc) from exc
     if not isinstance(data, dict):
@@ -389,10 +385,10 @@ def _no_constant(name: str) -> Any:
 
 def _corrupted(path: Path, exc: BaseException) -> SequenceFileError:
     reason = str(exc) if type(exc) is ValueError else f"{type(exc).__name__}: {exc}"
-    return SequenceFileError(
-        f"checkpoint file {path} is unusable ({reason}); delete {path.parent} to start the "
-        "search over"
-    )
+    return SequenceFileError(f"checkpoint file {path} is unusable ({reason}); {_START_OVER}")
+
+
+_START_OVER = "restore it, or start the search over in another --out (or in an emptied folder)"
 
 
 def _differences(stored: dict[str, Any], wanted: dict[str, Any]) -> str:
