@@ -451,6 +451,24 @@ with locked_folder(Path(sys.argv[1])):
 """
 
 
+def test_two_searches_started_together_never_share_a_folder(tmp_path: Path) -> None:
+    args = ["sequence", "--grid", "2", "--problems", "4", "--rounds", "1", "--workers", "1",
+            "--out", str(tmp_path / "out")]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    pipes = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE, "text": True}
+    runs = [subprocess.Popen([sys.executable, "-c", _CLI, *args], env=env, **pipes) for _ in "ab"]
+    outcomes = sorted((run.wait(300), *run.communicate()) for run in runs)
+    (ok, ok_out, _), (refused, _, message) = outcomes
+    assert (ok, refused) == (0, 2)
+    assert "wrote" in ok_out
+    refusal = r"is in use by another search \(pid \d+\)|already holds a search"
+    assert re.fullmatch(rf"sahgrasp: error: \S*out ({refusal}).*\n", message)
+    Sequence.load(tmp_path / "out" / "sequence.json")
+
+
+_CLI = "import sys; from sahgrasp.cli import main; sys.exit(main())"
+
+
 def test_an_unusable_folder_is_refused(tmp_path: Path) -> None:
     (tmp_path / "file").write_text("")
     with pytest.raises(SequenceFileError, match=r"cannot use .*file as the search folder"):
