@@ -22,8 +22,10 @@ Linux sends the parent-death signal when the *thread* that started the worker en
 starts workers lazily, from the thread that calls ``submit``: submit from the thread that holds
 the ``with`` block (as a plain ``with process_pool(...)`` does), not from short-lived threads.
 
-Workers ignore SIGINT: Ctrl-C in a terminal reaches the whole process group, and the parent alone
-decides what an interruption means (it cancels the queued work and closes the pool).
+SIGINT ends a worker at once and silently (the default action, not Python's
+``KeyboardInterrupt``): Ctrl-C in a terminal reaches the whole process group, so the workers stop
+without printing a traceback each and without finishing their tasks, and the parent, which gets
+the ``KeyboardInterrupt``, closes a pool that has nothing left to wait for.
 """
 
 from __future__ import annotations
@@ -112,7 +114,7 @@ def die_with_parent(parent_pid: int) -> None:
     Args:
         parent_pid: Process id of the parent, read in the parent (``os.getpid()``).
     """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)  # an ignored SIGTERM survives the exec of spawn
     _arm_parent_death_signal(signal.SIGTERM)
     watch_parent()

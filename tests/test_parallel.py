@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import pytest
@@ -113,16 +114,24 @@ def test_the_portable_watch_ends_a_worker_without_prctl() -> None:
         parent.wait()
 
 
-def test_pool_workers_have_one_blas_thread_and_leave_ctrl_c_to_the_parent() -> None:
+def test_pool_workers_have_one_blas_thread() -> None:
     before = {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS}
     with process_pool(1) as pool:
         blas = {k: pool.submit(os.getenv, k).result() for k in SINGLE_THREADED_BLAS}
-        sigint = pool.submit(signal.getsignal, signal.SIGINT).result()
         parent = pool.submit(os.getppid).result()
     assert blas == {k: before[k] or "1" for k in SINGLE_THREADED_BLAS}
-    assert sigint == signal.SIG_IGN
     assert parent == os.getpid()
     assert {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS} == before
+
+
+def test_sigint_ends_a_busy_worker_at_once() -> None:
+    with process_pool(1) as pool:
+        worker = psutil.Process(pool.submit(os.getpid).result())
+        busy = pool.submit(time.sleep, 30)  # short: a worker that ignores SIGINT is waited for
+        worker.send_signal(signal.SIGINT)
+        with pytest.raises(BrokenProcessPool):
+            busy.result(timeout=20)
+    assert not _alive([worker])
 
 
 @pytest.mark.parametrize("workers", [0, -1, True, 1.5, "2"])
