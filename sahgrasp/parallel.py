@@ -44,6 +44,7 @@ from sahgrasp.errors import InvalidSettingsError
 
 __all__ = [
     "SINGLE_THREADED_BLAS",
+    "WORKERS_PER_CORE_LIMIT",
     "check_workers",
     "die_with_parent",
     "process_pool",
@@ -61,17 +62,25 @@ _ORPHAN_EXIT_CODE = 128 + signal.SIGTERM
 """Exit status of a worker that ends because its parent did (as if killed by SIGTERM)."""
 
 
+WORKERS_PER_CORE_LIMIT = 4
+"""At most this many workers per core: the IK is CPU-bound, so more only add memory (some
+100 MB per worker)."""
+
+
 def check_workers(workers: int | None) -> int:
     """The number of worker processes for ``workers`` (None: one per core).
 
     Raises:
-        InvalidSettingsError: ``workers`` is not an integer >= 1.
+        InvalidSettingsError: ``workers`` is not an integer in 1 .. 4 per core.
     """
+    cores = os.cpu_count() or 1
     if workers is None:
-        return os.cpu_count() or 1
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        return cores
+    limit = WORKERS_PER_CORE_LIMIT * cores
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= limit:
         raise InvalidSettingsError(
-            f"workers must be an integer >= 1 (or None: one per core), got {workers!r}"
+            f"workers must be an integer >= 1 and <= {limit} ({WORKERS_PER_CORE_LIMIT} per "
+            f"core; None: one per core), got {workers!r}"
         )
     return workers
 

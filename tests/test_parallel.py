@@ -134,7 +134,7 @@ def test_sigint_ends_a_busy_worker_at_once() -> None:
     assert not _alive([worker])
 
 
-@pytest.mark.parametrize("workers", [0, -1, True, 1.5, "2"])
+@pytest.mark.parametrize("workers", [0, -1, True, 1.5, "2", 10**6])
 def test_bad_worker_counts_are_refused(workers: object) -> None:
     with pytest.raises(InvalidSettingsError, match=r"workers must be an integer >= 1"):
         check_workers(workers)  # type: ignore[arg-type]
