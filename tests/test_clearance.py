@@ -1,0 +1,128 @@
+"""Hand-object clearance (sahgrasp.objects.clearance), checked against coal directly."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
+from sahgrasp.hand import Hand
+from sahgrasp.objects import BoxSolid, GraspObject, placement
+from sahgrasp.objects.clearance import HandObjectClearance
+
+CUBE_M = 0.004
+
+
+def _cube_at(centre_m: np.ndarray, rotation: np.ndarray | None = None) -> GraspObject:
+    return GraspObject(
+        "cube", (BoxSolid("cube", (CUBE_M,) * 3),), (1, 0, 0, 1), placement(rotation, centre_m)
+    )
+
+
+def _mid_hand(hand: Hand) -> np.ndarray:
+    return hand.configuration(pin.SE3.Identity())  # every joint mid-range
+
+
+def _geometry_world(hand: Hand, q: np.ndarray) -> tuple[list[str], list[pin.SE3]]:
+    gm = hand.collision.geometry_model
+    gd = pin.GeometryData(gm)
+    pin.updateGeometryPlacements(hand.model, hand.model.createData(), gm, gd, q)
+    links = [hand.model.frames[g.parentFrame].name for g in gm.geometryObjects]
+    return links, [gd.oMg[i].copy() for i in range(len(links))]
+
+
+def _link_centre(hand: Hand, q: np.ndarray, link: str) -> np.ndarray:
+    links, placements = _geometry_world(hand, q)
+    return placements[links.index(link)].translation
+
+
+def test_box_through_a_phalanx_is_named(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    cube = _cube_at(_link_centre(sah, q, "index_middle"))
+    checker = HandObjectClearance(sah, cube)
+    result = checker.clearance(q)
+    assert result.link == "index_middle"
+    assert result.distance_m < -CUBE_M / 2
+    assert not result.clear()
+    penetrations = checker.penetrations(q, 0.0)
+    assert {p.joint_b for p in penetrations} == {int(sah.model.getJointId("index_j3"))}
+    assert all(p.joint_a == 0 for p in penetrations)
+    assert penetrations[0].depth_m == pytest.approx(-result.distance_m)
+
+
+def test_far_hand_distance_matches_coal(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    far = np.array([0.3, -0.2, 0.5])
+    checker = HandObjectClearance(sah, _cube_at(far))
+    result = checker.clearance(q)
+    links, placements = _geometry_world(sah, q)
+    box, at_box = coal.Box(CUBE_M, CUBE_M, CUBE_M), coal.Transform3s(np.eye(3), far)
+    expected = {}
+    geometries = sah.collision.geometry_model.geometryObjects
+    for link, geom, M in zip(links, geometries, placements, strict=True):
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        d = coal.distance(
+            box, at_box, geom.geometry, at_link, coal.DistanceRequest(), coal.DistanceResult()
+        )
+        expected[link] = min(expected.get(link, np.inf), d)
+    closest = min(expected, key=expected.__getitem__)
+    assert result.link == closest
+    assert result.distance_m == pytest.approx(expected[closest], abs=1e-9)
+    assert result.distance_m > 0.3
+    assert result.links_m == pytest.approx(expected, abs=1e-9)
+    assert checker.penetrations(q, margin_m=0.01) == []
+
+
+def _tip_probe(hand: Hand, q: np.ndarray, overlap_m: float) -> GraspObject:
+    """A cube beyond the index fingertip whose face enters its sphere by ``overlap_m``."""
+    tip = hand.frame_placements(q)["index_tip"]
+    outward = tip.rotation @ np.array([0.0, 1.0, 0.0])  # the SAH fingertip axis
+    centre = tip.translation + outward * (hand.radius_m - overlap_m + CUBE_M / 2)
+    return _cube_at(centre, tip.rotation)  # a face normal to the fingertip axis
+
+
+def test_contact_tip_within_allowance_is_not_reported(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    checker = HandObjectClearance(sah, _tip_probe(sah, q, 1.0e-3))
+    assert checker.penetrations(q, 0.0, contacts=("index",)) == []
+    touching = checker.clearance(q, contacts=("index",))
+    assert touching.clear()
+    assert touching.link != "index_tip"
+    assert touching.links_m["index_tip"] == pytest.approx(-1.0e-3, abs=1e-6)
+    # Without the contact, the same tip is a penetration.
+    (free,) = checker.penetrations(q, 0.0)
+    assert free.depth_m == pytest.approx(1.0e-3, abs=1e-6)
+    assert checker.clearance(q).link == "index_tip"
+
+
+def test_contact_tip_beyond_allowance_is_reported(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    checker = HandObjectClearance(sah, _tip_probe(sah, q, 2.5e-3))
+    (deep,) = checker.penetrations(q, 1e-3, contacts=("index",), allowance_m=1.5e-3)
+    assert deep.depth_m == pytest.approx(1.0e-3, abs=1e-6)  # the margin does not apply to it
+    assert checker.clearance(q, contacts=("index",)).distance_m == pytest.approx(-2.5e-3, 1e-3)
+    # Moving the tip along the normal by the depth brings it back to the allowance.
+    assert np.linalg.norm(deep.normal) == pytest.approx(1.0)
+    assert deep.normal @ (deep.point_b - deep.point_a) < 0.0  # witnesses cross inside
+
+
+def test_object_placement_override(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    centre = _link_centre(sah, q, "palm")
+    checker = HandObjectClearance(sah, _cube_at(np.zeros(3)))
+    assert checker.clearance(q, T_world_object=placement(None, centre)).link == "palm"
+
+
+def test_bad_input_is_typed(sah: Hand) -> None:
+    checker = HandObjectClearance(sah, _cube_at(np.ones(3)))
+    q = _mid_hand(sah)
+    with pytest.raises(InvalidTargetError, match="pinky"):
+        checker.penetrations(q, contacts=("pinky",))
+    with pytest.raises(InvalidSettingsError, match="allowance_m"):
+        checker.clearance(q, allowance_m=-1.0)
+    with pytest.raises(InvalidSettingsError, match="margin_m"):
+        checker.penetrations(q, margin_m=float("nan"))
+    with pytest.raises(InvalidConfigurationError):
+        checker.clearance(q[:5])
