@@ -9,7 +9,8 @@ import pytest
 
 from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
-from sahgrasp.objects import BoxSolid, GraspObject, placement
+from sahgrasp.ik import solve_ik
+from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object, placement
 from sahgrasp.objects.clearance import HandObjectClearance
 
 CUBE_M = 0.004
@@ -126,3 +127,41 @@ def test_bad_input_is_typed(sah: Hand) -> None:
         checker.penetrations(q, margin_m=float("nan"))
     with pytest.raises(InvalidConfigurationError):
         checker.clearance(q[:5])
+
+
+@pytest.fixture(scope="module")
+def can_grasp(sah: Hand) -> tuple[np.ndarray, GraspObject]:
+    """The IK's three-finger grasp of the atlas paper's can: its free ring finger is in the can."""
+    result = solve_ik(sah, can_patches().target(), free_fingers=("ring",))
+    assert result.success
+    return result.q, load_object("can")
+
+
+def test_free_finger_is_placed_clear(sah: Hand, can_grasp: tuple[np.ndarray, GraspObject]) -> None:
+    q, can = can_grasp
+    checker = HandObjectClearance(sah, can)
+    contacts = ("thumb", "index", "middle")
+    assert checker.clearance(q, contacts).links_m["ring_distal"] < -0.01
+    placed = checker.place_free_fingers(q, ["ring"], margin_m=2e-3)
+    assert placed.clear and placed.distance_m >= 2e-3
+    ring = [sah.coordinate_index(f"ring_j{j}") for j in (1, 2, 3)]
+    moved = np.flatnonzero(placed.q[7:] != q[7:])
+    assert set(moved) <= set(ring) and moved.size
+    assert np.array_equal(placed.q[:7], q[:7])
+    after = checker.clearance(placed.q, contacts)
+    assert (
+        min(after.links_m[f"ring_{link}"] for link in ("proximal", "middle", "distal", "tip"))
+        >= 2e-3
+    )
+    assert not sah.in_collision(placed.q)
+    # A finger that already is clear stays where it is.
+    assert np.array_equal(checker.place_free_fingers(placed.q, ["ring"]).q, placed.q)
+
+
+def test_free_finger_inside_a_big_box_is_not_clear(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    box = GraspObject("box", (BoxSolid("box", (0.5, 0.5, 0.5)),), (1, 0, 0, 1))
+    placed = HandObjectClearance(sah, box).place_free_fingers(q, ["ring"])
+    assert not placed.clear and placed.distance_m < -0.05
+    with pytest.raises(InvalidTargetError, match="pinky"):
+        HandObjectClearance(sah, box).place_free_fingers(q, ["pinky"])
