@@ -10,8 +10,17 @@ import pytest
 from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
-from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object, placement
+from sahgrasp.objects import (
+    GRASP_NAMES,
+    BoxSolid,
+    GraspObject,
+    can_patches,
+    load_object,
+    placement,
+)
 from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.optimization import EXPERIMENTS, run_experiment
+from sahgrasp.viz.paper_examples import solve_example
 
 CUBE_M = 0.004
 
@@ -165,3 +174,51 @@ def test_free_finger_inside_a_big_box_is_not_clear(sah: Hand) -> None:
     assert not placed.clear and placed.distance_m < -0.05
     with pytest.raises(InvalidTargetError, match="pinky"):
         HandObjectClearance(sah, box).place_free_fingers(q, ["pinky"])
+
+
+# ----- every shipped grasp, checked with coal alone -------------------------------------------
+TOLERANCE_M = 0.2e-3
+
+
+def _coal_depths(
+    hand: Hand, q: np.ndarray, obj: GraspObject, T_world_object: np.ndarray, contacts: set[str]
+) -> dict[str, float]:
+    """Depth [m] of every link inside ``obj`` but the contact fingertips, by brute-force coal."""
+    links, placements = _geometry_world(hand, q)
+    geometries = hand.collision.geometry_model.geometryObjects
+    tips = {f.tip_link for f in hand.description.fingers if f.name in contacts}
+    pieces = [(s.geometry, s.transform(T_world_object)) for s in obj.collision_shapes()]
+    depths = {}
+    for link, geometry, M in zip(links, geometries, placements, strict=True):
+        if link in tips:
+            continue
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        request = coal.DistanceRequest()
+        nearest = min(
+            coal.distance(piece, at, geometry.geometry, at_link, request, coal.DistanceResult())
+            for piece, at in pieces
+        )
+        depths[link] = max(depths.get(link, 0.0), -nearest)
+    return depths
+
+
+@pytest.mark.parametrize("name", GRASP_NAMES)
+def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
+    example = solve_example(sah, name)  # what `sahgrasp demo` and examples/grasp_*.py solve
+    assert example.result.success
+    depths = _coal_depths(
+        sah, example.result.q, example.obj, example.obj.T_world_object, set(sah.fingers)
+    )
+    assert max(depths.values()) <= TOLERANCE_M, sorted(depths.items(), key=lambda kv: -kv[1])[:3]
+
+
+@pytest.mark.parametrize("name", sorted(EXPERIMENTS))
+def test_experiment_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
+    result = run_experiment(name)  # as examples/optimize_<name>.py runs it
+    system, obj = result.system, EXPERIMENTS[name].object()
+    contacts = {c.finger for c in system.contacts}
+    assert result.valid[result.best] and result.valid[result.worst]
+    for chart in np.flatnonzero(result.valid):
+        T = system.object_pose(result.atlas.centres[chart]).homogeneous
+        depths = _coal_depths(sah, result.configurations[chart], obj, T, contacts)
+        assert max(depths.values()) <= TOLERANCE_M, (chart, max(depths, key=depths.__getitem__))
