@@ -13,6 +13,9 @@ from sahgrasp.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.optimization import GraspOptimizationResult, optimize_grasp, run_experiment
+from sahgrasp.viz import Viewer
+from sahgrasp.viz.atlas_examples import collision_notes, show_optimization
+from sahgrasp.viz.atlas_view import COLLIDING_RGB
 
 
 @pytest.fixture(scope="module")
@@ -103,3 +106,14 @@ def test_bottle_atlas_moves_the_hand() -> None:
     assert result.system.t == 11 and result.atlas.complete
     hand = result.atlas.centres[:, result.system.actuated_rows]
     assert np.ptp(hand, axis=0).max() > 0.1  # rad; with the spin the hand stayed within 0.002
+
+
+def test_viewer_marks_the_colliding_charts(can: GraspOptimizationResult) -> None:
+    with Viewer() as viewer:
+        plot = show_optimization(viewer, can)
+    purple = np.all(plot.colors_rgb == COLLIDING_RGB, axis=1)
+    assert np.array_equal(purple, ~can.valid)
+    assert (plot.best, plot.worst) == (can.best, can.worst)
+    report = "\n".join(collision_notes(can))
+    assert f"{int((~can.valid).sum())} of {can.atlas.n_charts}" in report
+    assert f"{int(can.object_collision.sum())} hand-object" in report
