@@ -4,7 +4,8 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 :mod:`~sahgrasp.objects.profiles` (planar profiles), :mod:`~sahgrasp.objects.surfaces`
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
-collision shapes; :mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
+collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
+:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
 Lengths in metres, angles in radians.
 """
 
@@ -22,6 +23,7 @@ from sahgrasp.objects.catalog import (
 from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
 from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
 from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
+from sahgrasp.objects.mesh_file import MeshFileError, MeshSolid, load_mesh
 from sahgrasp.objects.meshing import Mesh, tessellate
 from sahgrasp.objects.patches import ContactRegion, CurvePatch, FixedContact, GraspPatches, Patch
 from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline, sample_profile
@@ -53,6 +55,8 @@ __all__ = [
     "HandObjectClearance",
     "IKReport",
     "Mesh",
+    "MeshFileError",
+    "MeshSolid",
     "Patch",
     "RectangleSurface",
     "RevolvedSolid",
@@ -65,6 +69,7 @@ __all__ = [
     "bottle_patches",
     "can_patches",
     "convex_hull",
+    "load_mesh",
     "load_object",
     "paper_grasp",
     "placement",
