@@ -68,7 +68,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     def build(viewer: Viewer) -> None:
         show_grasp(viewer, "grasp", hand, result.q, obj, target, result.history)
         links = [M.translation for M in hand.frame_placements(result.q).values()]
-        viewer.frame(np.vstack([obj.mesh().vertices_m, links]), (0.0, -1.0, 0.35))
+        # Look from the side opposite the palm, a little from above: the object in front.
+        away = np.mean([c.point for c in target.contacts], axis=0) - result.q[:3]
+        away[2] = 0.0
+        view = away / np.linalg.norm(away) + np.array([0.0, 0.0, 0.35])
+        viewer.frame(np.vstack([obj.mesh().vertices_m, links]), view)
 
     present(build, args.html, f"sahgrasp {obj.name}")
     return 0 if result.success and clearance.clear() else 1
