@@ -315,8 +315,10 @@ def _check_charts(system: GraspSystem, atlas: Atlas, obj: GraspObject | None) ->
             if free:
                 configurations[i] = checker.place_free_fingers(configurations[i], free,
                                                                T_world_object=T).q  # fmt: skip
-            clearance = checker.clearance(configurations[i], contacts, T_world_object=T)
-            object_collision[i] = not clearance.clear()
+            # Any penetration, not the clearance: only pieces whose bounding balls overlap a
+            # link are measured.
+            inside = checker.penetrations(configurations[i], 0.0, contacts, T_world_object=T)
+            object_collision[i] = bool(inside)
     self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
     return _ChartChecks(configurations, self_collision, object_collision)
 
