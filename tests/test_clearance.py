@@ -7,6 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sahgrasp.collision import CollisionPair
 from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
@@ -222,3 +223,18 @@ def test_experiment_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
         T = system.object_pose(result.atlas.centres[chart]).homogeneous
         depths = _coal_depths(sah, result.configurations[chart], obj, T, contacts)
         assert max(depths.values()) <= TOLERANCE_M, (chart, max(depths, key=depths.__getitem__))
+
+
+def test_without_an_object_free_fingers_clear_the_other_links(sah: Hand) -> None:
+    def ring_pairs(q: np.ndarray) -> list[CollisionPair]:
+        return [p for p in sah.collision.colliding_pairs(q) if "ring" in p.link_a + p.link_b]
+
+    q = _mid_hand(sah)
+    ring, middle = sah.coordinate_index("ring_j1"), sah.coordinate_index("middle_j1")
+    q[7 + ring], q[7 + middle] = sah.lower[ring], sah.upper[middle]  # spread into each other
+    assert ring_pairs(q)
+    checker = HandObjectClearance(sah, None)
+    assert checker.clearance(q).distance_m == np.inf and checker.penetrations(q) == []
+    placed = checker.place_free_fingers(q, ["ring"])
+    assert placed.clear and not ring_pairs(placed.q)
+    assert placed.q[7 + middle] == sah.upper[middle]  # the other fingers stay

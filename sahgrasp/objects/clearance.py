@@ -120,12 +120,13 @@ class HandObjectClearance:
     Args:
         hand: The hand (its model and coal collision geometry are used, not modified).
         obj: The object; its pieces are placed at ``obj.T_world_object`` unless a query gives
-            another placement.
+            another placement. None: no object (every link is clear of it), e.g. to place free
+            fingers clear of the other links only.
     """
 
-    def __init__(self, hand: Hand, obj: GraspObject) -> None:
+    def __init__(self, hand: Hand, obj: GraspObject | None) -> None:
         self.hand = hand
-        self.object = obj
+        self.object = GraspObject("nothing", (), (0.0, 0.0, 0.0, 0.0)) if obj is None else obj
         self._model = hand.model
         self._data = hand.model.createData()
         self._geometry_model = hand.collision.geometry_model
@@ -133,8 +134,8 @@ class HandObjectClearance:
         geometries = self._geometry_model.geometryObjects
         self._links = tuple(str(hand.model.frames[g.parentFrame].name) for g in geometries)
         self._joints = tuple(int(g.parentJoint) for g in geometries)
-        self._shapes = obj.collision_shapes()
-        self._piece_centres = np.array([s.placement[:3, 3] for s in self._shapes])
+        self._shapes = self.object.collision_shapes()
+        self._piece_centres = np.array([s.placement[:3, 3] for s in self._shapes]).reshape(-1, 3)
         self._piece_radii = np.array([s.bounding_radius_m for s in self._shapes])
         centres, radii = [], []
         for g in geometries:
