@@ -81,7 +81,9 @@ class FreeFingerPlacement:
     Attributes:
         q: The configuration with the free fingers placed (every other coordinate unchanged).
         distance_m: Smallest signed distance [m] of the free fingers' links to the object and to
-            the other links they are checked against.
+            the other links they are checked against: exact below the margin; when clear, some
+            value at least the margin (pairs whose bounding balls are farther apart are not
+            measured; infinite if none is nearer).
         clear: Whether ``distance_m`` reaches the margin asked for.
     """
 
