@@ -96,6 +96,34 @@ def test_invalid_targets_raise(sah: Hand) -> None:
         solve_ik(sah, problem, method="magic")
 
 
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("max_inits", 0, "max_inits must be an integer between 1 and 1000"),
+        ("max_inits", 1001, "max_inits must be an integer between 1 and 1000"),
+        ("max_inits", 10**9, "between 1 and 1000"),
+        ("max_inits", 2.5, "max_inits must be an integer"),
+        ("max_inits", "12", "max_inits must be an integer"),
+        ("seed", -1, "seed must be an integer >= 0"),
+        ("seed", True, "seed must be an integer"),
+        ("max_iterations", 0, "max_iterations must be an integer >= 1"),
+        ("init", "grid", r"init must be one of \['sequence', 'random'\]"),
+        ("method", "magic", r"method must be one of \['auto', 'paper'\]"),
+        ("d_min_m", float("nan"), "d_min_m must be a finite number > 0"),
+        ("alpha", float("inf"), "alpha must be a finite number > 0"),
+        ("refine_m", "1e-5", "refine_m must be a finite number > 0"),
+    ],
+)
+def test_bad_settings_raise_typed_errors(field: str, value: object, message: str) -> None:
+    with pytest.raises(InvalidSettingsError, match=message):
+        IKSettings(**{field: value})
+
+
+def test_settings_bounds_are_inclusive() -> None:
+    assert IKSettings(max_inits=1000, seed=0).max_inits == 1000
+    assert IKSettings(max_inits=1, seed=2**63).max_inits == 1
+
+
 def test_same_seed_same_result_any_workers(sah: Hand) -> None:
     problems = random_problems(sah, 4, seed=8)
     settings = IKSettings(init="random", max_inits=4, seed=3)

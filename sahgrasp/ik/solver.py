@@ -18,10 +18,11 @@ ones) and the acceptance test (Eq. (9) for every finger, joints within limits, n
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal, get_args
 
 import numpy as np
 import pinocchio as pin
@@ -31,6 +32,7 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
+from sahgrasp.ik.starts import initial_lambdas
 
 __all__ = [
     "REASONS",
@@ -39,13 +41,24 @@ __all__ = [
     "ContactProblem",
     "IKResult",
     "IKSettings",
+    "Init",
+    "Method",
+    "Reason",
     "run_algorithm1",
     "solve_ik",
     "stack_rows",
 ]
 
-REASONS = ("converged", "max_inits", "no_progress", "collision", "invalid_input")
+Method = Literal["auto", "paper"]
+"""Inner solver of Algorithm 1."""
+Init = Literal["sequence", "random"]
+"""Where the initial configurations come from."""
+Reason = Literal["converged", "max_inits", "no_progress", "collision", "invalid_input"]
+"""Why a solve ended: ``converged`` on success, otherwise why no start was accepted."""
+REASONS: tuple[Reason, ...] = get_args(Reason)
 """Values of :attr:`IKResult.reason`."""
+MAX_INITS_LIMIT = 1000
+"""Largest accepted ``IKSettings.max_inits``."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +68,7 @@ class IKSettings:
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
         init: ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas, Fig. 9).
-        max_inits: ``i_max``, initial configurations tried.
+        max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
         d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
         s_min_m: Eq. (10) threshold of "no progress" [m].
@@ -65,12 +78,13 @@ class IKSettings:
         repair_iterations: Auto method: steps allowed to push a converged but self-colliding
             configuration out of collision along the solution set.
         collision_margin_m: Clearance those steps aim for [m].
-        seed: Seed of the random initial configurations.
+        seed: Seed (>= 0) of the random initial configurations; each problem draws its own
+            from this seed and its content (:func:`sahgrasp.ik.starts.problem_seed`).
         record_history: Keep every iterate of the returned attempt (for animation).
     """
 
-    method: str = "auto"
-    init: str = "sequence"
+    method: Method = "auto"
+    init: Init = "sequence"
     max_inits: int = 12
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
@@ -84,16 +98,32 @@ class IKSettings:
     record_history: bool = False
 
     def __post_init__(self) -> None:
-        if self.method not in ("auto", "paper"):
-            raise InvalidSettingsError(f"method must be 'auto' or 'paper', got {self.method!r}")
-        if self.init not in ("sequence", "random"):
-            raise InvalidSettingsError(f"init must be 'sequence' or 'random', got {self.init!r}")
-        for name in ("max_inits", "max_iterations", "stall_iterations", "repair_iterations"):
-            if int(getattr(self, name)) < 1:
-                raise InvalidSettingsError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name, valid in (("method", get_args(Method)), ("init", get_args(Init))):
+            if getattr(self, name) not in valid:
+                raise InvalidSettingsError(
+                    f"{name} must be one of {list(valid)}, got {getattr(self, name)!r}"
+                )
+        _check_int("max_inits", self.max_inits, 1, MAX_INITS_LIMIT)
+        for name in ("max_iterations", "stall_iterations", "repair_iterations"):
+            _check_int(name, getattr(self, name), 1)
+        _check_int("seed", self.seed, 0)
         for name in ("d_min_m", "s_min_m", "alpha", "refine_m", "collision_margin_m"):
-            if not float(getattr(self, name)) > 0.0:
-                raise InvalidSettingsError(f"{name} must be > 0, got {getattr(self, name)}")
+            value = getattr(self, name)
+            if not _is_real(value) or not (math.isfinite(value) and value > 0.0):
+                raise InvalidSettingsError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def _check_int(name: str, value: object, low: int, high: int | None = None) -> None:
+    """Raise :class:`InvalidSettingsError` unless ``value`` is an integer in ``[low, high]``."""
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    if ok and low <= int(value) and (high is None or int(value) <= high):  # type: ignore[call-overload]
+        return
+    bounds = f">= {low}" if high is None else f"between {low} and {high}"
+    raise InvalidSettingsError(f"{name} must be an integer {bounds}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -119,7 +149,7 @@ class IKResult:
 
     name: str
     success: bool
-    reason: str
+    reason: Reason
     q: NDArray[np.float64]
     position_errors_m: NDArray[np.float64]
     centre_errors_m: NDArray[np.float64]
@@ -452,15 +482,6 @@ def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArr
     return np.asarray(J[:3] + np.cross(J[3:].T, lever).T)
 
 
-def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[float, float]]:
-    if settings.init == "random":
-        rng = np.random.default_rng(settings.seed)
-        pairs = rng.uniform(0.0, 1.0, (settings.max_inits, 2))
-        return [(float(a), float(b)) for a, b in pairs]
-    lambdas = list(sequence.lambdas)
-    return [lambdas[i % len(lambdas)] for i in range(settings.max_inits)]
-
-
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
 """An inner solver: from the initial coordinates of one start to an :class:`Attempt`."""
 
@@ -510,7 +531,10 @@ def run_algorithm1(
     sequence.check_hand(hand)
     start = time.perf_counter()
     attempts: list[Attempt] = []
-    for lambdas in _initial_lambdas(settings, sequence):
+    starts = initial_lambdas(
+        settings.init, settings.max_inits, settings.seed, sequence, problem.target
+    )
+    for lambdas in starts:
         attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), settings)
         if attempt.outcome == "converged" and hand.in_collision(attempt.q):  # Step 8
             attempt.outcome = "collision"
@@ -522,17 +546,25 @@ def run_algorithm1(
     return _result(hand, problem, best, attempts, False)
 
 
+_FAILURE_REASONS: dict[str, Reason] = {
+    "max_iterations": "max_inits",
+    "converged": "max_inits",  # converged with refine_m, but above d_min: out of starts
+    "no_progress": "no_progress",
+    "collision": "collision",
+}
+"""The failure reason of a solve whose best start ended with this :attr:`Attempt.outcome`."""
+
+
 def _result(
     hand: Hand, problem: ContactProblem, chosen: Attempt, attempts: list[Attempt], success: bool
 ) -> IKResult:
     pos, cen = problem.errors(hand.contact_state(chosen.q))
+    reason: Reason
     if success:
         reason, collision_free = "converged", True
     else:
         collision_free = not hand.in_collision(chosen.q)
-        reason = {"max_iterations": "max_inits", "converged": "max_inits"}.get(
-            chosen.outcome, chosen.outcome
-        )
+        reason = _FAILURE_REASONS[chosen.outcome]
     return IKResult(
         name=problem.target.name,
         success=success,
