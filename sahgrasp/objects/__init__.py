@@ -4,7 +4,8 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 :mod:`~sahgrasp.objects.profiles` (planar profiles), :mod:`~sahgrasp.objects.surfaces`
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
-collision shapes. Lengths in metres, angles in radians.
+collision shapes; :mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
+Lengths in metres, angles in radians.
 """
 
 from sahgrasp.objects.body import GraspObject
@@ -18,6 +19,7 @@ from sahgrasp.objects.catalog import (
     load_object,
     paper_grasp,
 )
+from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
 from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
 from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
 from sahgrasp.objects.meshing import Mesh, tessellate
@@ -33,11 +35,13 @@ from sahgrasp.objects.surfaces import (
 )
 
 __all__ = [
+    "CONTACT_ALLOWANCE_M",
     "GRASP_NAMES",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
     "Arc",
     "BoxSolid",
+    "Clearance",
     "CollisionShape",
     "ContactRegion",
     "CurvePatch",
@@ -46,6 +50,7 @@ __all__ = [
     "FixedContact",
     "GraspObject",
     "GraspPatches",
+    "HandObjectClearance",
     "IKReport",
     "Mesh",
     "Patch",
