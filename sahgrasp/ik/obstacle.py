@@ -61,7 +61,7 @@ class Obstacle:
 
         if not isinstance(obj, GraspObject):
             raise InvalidTargetError(
-                f"obstacle must be a sahgrasp.objects.GraspObject (load_object(name) or a loaded "
+                f"obstacle must be a GraspObject (sahgrasp.objects: load_object(name) or a loaded "
                 f"mesh), got {type(obj).__name__}"
             )
         self.checker = _checker(hand, obj)
