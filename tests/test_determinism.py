@@ -8,10 +8,18 @@ from collections.abc import Sequence
 
 import pytest
 
-from sahgrasp.contacts import GraspTarget
+from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.hand import Hand, load_hand
-from sahgrasp.ik import IKResult, IKSettings, random_problems, solve_ik, solve_many
+from sahgrasp.ik import (
+    IKResult,
+    IKSettings,
+    default_sequence,
+    random_problems,
+    solve_ik,
+    solve_many,
+)
 from sahgrasp.ik.starts import initial_lambdas, problem_seed
+from sahgrasp.objects import BoxSolid, GraspObject
 
 PROBLEMS = 40
 
@@ -74,8 +82,6 @@ def test_problem_seed_depends_on_content_not_position(problems: list[GraspTarget
 
 
 def test_starts_are_drawn_lazily(problems: list[GraspTarget], sah: Hand) -> None:
-    from sahgrasp.ik import default_sequence
-
     starts = initial_lambdas("random", 1000, 0, default_sequence(sah), problems[0])
     first = [next(starts) for _ in range(3)]
     assert len(set(first)) == 3
@@ -84,3 +90,21 @@ def test_starts_are_drawn_lazily(problems: list[GraspTarget], sah: Hand) -> None
     cycled = list(initial_lambdas("sequence", 30, 0, default_sequence(sah), problems[0]))
     lambdas = default_sequence(sah).lambdas
     assert cycled == [lambdas[i % len(lambdas)] for i in range(30)]
+
+
+def test_obstacle_results_match_on_any_workers(sah: Hand) -> None:
+    box = GraspObject("box", (BoxSolid("box", (0.05, 0.12, 0.05)),), (1, 0, 0, 1))
+    targets = []
+    for spacing in (0.03, 0.032, 0.035):
+        contacts = [ContactTarget("thumb", [0.025, 0, 0], [1, 0, 0])]
+        for finger, y in zip(("index", "middle", "ring"), (-spacing, 0.0, spacing), strict=True):
+            contacts.append(ContactTarget(finger, [-0.025, y, 0.0], [-1, 0, 0]))
+        targets.append(GraspTarget(f"pinch-{spacing}", contacts))
+    settings = IKSettings(max_inits=4)
+    one = solve_many(sah, targets, settings, workers=1, obstacle=box)
+    two = solve_many(sah, targets, settings, workers=2, obstacle=box)
+    alone = [solve_ik(load_hand("sah"), t, settings, obstacle=box) for t in targets]
+    for results in (two, alone):
+        assert [_key(r) for r in results] == [_key(r) for r in one]
+        assert [r.object_clearance_m for r in results] == [r.object_clearance_m for r in one]
+    assert all(r.success and r.object_clearance_m is not None for r in one)

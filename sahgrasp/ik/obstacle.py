@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
     from sahgrasp.objects.clearance import Clearance, HandObjectClearance
 
-__all__ = ["Obstacle"]
+__all__ = ["Obstacle", "check_obstacle"]
 
 
 @functools.lru_cache(maxsize=8)
@@ -39,6 +39,17 @@ def _checker(hand: Hand, obj: GraspObject) -> HandObjectClearance:
     from sahgrasp.objects.clearance import HandObjectClearance
 
     return HandObjectClearance(hand, obj)
+
+
+def check_obstacle(obj: object) -> None:
+    """Raise :class:`InvalidTargetError` unless ``obj`` is a GraspObject."""
+    from sahgrasp.objects import GraspObject
+
+    if not isinstance(obj, GraspObject):
+        raise InvalidTargetError(
+            f"obstacle must be a GraspObject (sahgrasp.objects: load_object(name) or a loaded "
+            f"mesh), got {type(obj).__name__}"
+        )
 
 
 class Obstacle:
@@ -57,13 +68,7 @@ class Obstacle:
     def __init__(
         self, hand: Hand, obj: GraspObject, contacts: tuple[str, ...], allowance_m: float
     ) -> None:
-        from sahgrasp.objects import GraspObject
-
-        if not isinstance(obj, GraspObject):
-            raise InvalidTargetError(
-                f"obstacle must be a GraspObject (sahgrasp.objects: load_object(name) or a loaded "
-                f"mesh), got {type(obj).__name__}"
-            )
+        check_obstacle(obj)
         self.checker = _checker(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
