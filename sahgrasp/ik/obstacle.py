@@ -72,6 +72,7 @@ class Obstacle:
         self.checker = _checker(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
+        self._last: tuple[bytes, bool] = (b"", False)
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Links closer to the object than ``margin_m`` [m] (contact tips: deeper than allowed)."""
@@ -79,7 +80,11 @@ class Obstacle:
 
     def penetrated(self, q: NDArray[np.float64]) -> bool:
         """True if a link is inside the object (contact tips: deeper than the allowance)."""
-        return bool(self.penetrations(q, 0.0))
+        # The inner solver and Algorithm 1's Step 8 both ask about each converged start.
+        key = q.tobytes()
+        if self._last[0] != key:
+            self._last = (key, bool(self.penetrations(q, 0.0)))
+        return self._last[1]
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link."""
