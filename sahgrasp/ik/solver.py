@@ -124,10 +124,10 @@ def _is_real(value: object) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
-def _check_int(name: str, value: object, low: int, high: int | None = None) -> None:
+def _check_int(name: str, value: Any, low: int, high: int | None = None) -> None:
     """Raise :class:`InvalidSettingsError` unless ``value`` is an integer in ``[low, high]``."""
-    ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
-    if ok and low <= int(value) and (high is None or int(value) <= high):  # type: ignore[call-overload]
+    integer = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    if integer and low <= int(value) and (high is None or int(value) <= high):
         return
     bounds = f">= {low}" if high is None else f"between {low} and {high}"
     raise InvalidSettingsError(f"{name} must be an integer {bounds}, got {value!r}")
@@ -238,7 +238,7 @@ class ContactProblem:
         target: GraspTarget,
         free_fingers: tuple[str, ...] = (),
         obstacle: GraspObject | None = None,
-        allowance_m: float = 1.5e-3,
+        allowance_m: float = IKSettings.d_min_m,
     ) -> None:
         unknown = [f for f in free_fingers if f not in hand.fingers]
         if unknown:
