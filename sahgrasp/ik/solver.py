@@ -622,7 +622,8 @@ def _result(
         reason, collision_free = "converged", True
     else:
         collision_free = not hand.in_collision(chosen.q)
-        reason = _FAILURE_REASONS[chosen.outcome]
+        # An inner solver plugged in by a benchmark may name other outcomes: out of starts.
+        reason = _FAILURE_REASONS.get(chosen.outcome, "max_inits")
     clearance = problem.obstacle.clearance(chosen.q) if problem.obstacle is not None else None
     return IKResult(
         name=problem.target.name,
