@@ -2,17 +2,21 @@
 
 Workers receive the picklable :class:`HandDescription` and its digest and rebuild the hand once
 per worker thread (Pinocchio's GeometryModel does not pickle); :func:`worker_hand` also serves the
-offline sequence search. Each problem's random initial configurations are
-seeded from ``(seed, problem index)``, so a result never depends on which worker solved it.
+offline sequence search. A problem's random initial configurations are seeded from the settings'
+seed and the problem's content (:func:`sahgrasp.ik.starts.problem_seed`), and the collision
+queries carry no state between problems, so a result depends neither on which worker solved it
+nor on the problems solved before it. An obstacle travels with every job; each worker keeps the
+first copy it receives (by content), so its collision pieces are built once per worker.
 """
 
 from __future__ import annotations
 
+import hashlib
+import pickle
 import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
-from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,7 +24,11 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidTargetError, SequenceFileError
 from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 from sahgrasp.ik.initial import Sequence as PoseSequence
+from sahgrasp.ik.obstacle import check_obstacle
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
+
+if TYPE_CHECKING:
+    from sahgrasp.objects import GraspObject
 
 __all__ = ["invalid_result", "solve_many", "worker_hand"]
 
@@ -28,6 +36,7 @@ __all__ = ["invalid_result", "solve_many", "worker_hand"]
 class _WorkerHands(threading.local):
     def __init__(self) -> None:
         self.hands: dict[str, Hand] = {}
+        self.obstacles: dict[str, GraspObject] = {}
 
 
 _HANDS = _WorkerHands()
@@ -58,6 +67,26 @@ def worker_hand(description: HandDescription, digest: str) -> Hand:
     return hand
 
 
+_KEPT_OBSTACLES = 8
+"""Obstacles a worker keeps (with their collision pieces) for the next problems."""
+
+
+def _worker_obstacle(obstacle: GraspObject | None, key: str) -> GraspObject | None:
+    """The first copy of ``obstacle`` (by content ``key``) this worker thread received.
+
+    Every job carries its own unpickled copy; solving against one kept copy lets the solver reuse
+    that object's collision pieces instead of building them for every problem.
+    """
+    if obstacle is None:
+        return None
+    kept = _HANDS.obstacles
+    if key not in kept:
+        if len(kept) >= _KEPT_OBSTACLES:
+            del kept[next(iter(kept))]
+        kept[key] = obstacle
+    return kept[key]
+
+
 def invalid_result(hand: Hand, name: str) -> IKResult:
     """The result of a problem refused as invalid input (nothing was solved)."""
     nan = np.full(len(hand.fingers), np.nan)
@@ -74,13 +103,13 @@ def _solve_one(
     target: GraspTarget,
     settings: IKSettings,
     sequence: PoseSequence | None,
-    index: int,
+    obstacle: GraspObject | None,
+    obstacle_key: str,
 ) -> IKResult:
     hand = worker_hand(description, digest)
-    problem_seed = np.random.SeedSequence([settings.seed, index]).generate_state(1)[0]
-    seeded = replace(settings, seed=int(problem_seed))
+    obstacle = _worker_obstacle(obstacle, obstacle_key)
     try:
-        return solve_ik(hand, target, seeded, sequence)
+        return solve_ik(hand, target, settings, sequence, obstacle=obstacle)
     except InvalidTargetError:
         return invalid_result(hand, target.name)
 
@@ -92,14 +121,23 @@ def solve_many(
     sequence: PoseSequence | None = None,
     workers: int = 1,
     executor: Executor | None = None,
+    obstacle: GraspObject | None = None,
 ) -> list[IKResult]:
     """Solve every target; ``workers > 1`` (or an ``executor``) spreads them over processes.
 
-    Targets whose fingers do not match the hand get a ``reason="invalid_input"`` result.
+    Targets whose fingers do not match the hand get a ``reason="invalid_input"`` result. An
+    ``obstacle`` is the object every target grasps (see :func:`solve_ik`).
+
+    Raises:
+        InvalidTargetError: ``obstacle`` is not a GraspObject.
     """
     settings = settings or IKSettings()
     digest = hand.description.digest()
-    jobs = [(hand.description, digest, t, settings, sequence, i) for i, t in enumerate(targets)]
+    key = ""
+    if obstacle is not None:
+        check_obstacle(obstacle)
+        key = hashlib.sha256(pickle.dumps(obstacle)).hexdigest()
+    jobs = [(hand.description, digest, t, settings, sequence, obstacle, key) for t in targets]
     if executor is None and workers <= 1:
         _HANDS.hands.setdefault(digest, hand)
         return [_solve_one(*job) for job in jobs]
