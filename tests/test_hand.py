@@ -187,7 +187,7 @@ def test_unknown_hand_and_missing_urdf(tmp_path: Path) -> None:
 
 def test_malformed_urdf(tmp_path: Path) -> None:
     (tmp_path / "bad.urdf").write_text("<robot name='x'><link name='a'>")
-    with pytest.raises(HandModelError, match="does not load"):
+    with pytest.raises(HandModelError, match="not well-formed XML"):
         load_hand(_description_json(tmp_path, urdf="bad.urdf"))
 
 
@@ -200,7 +200,7 @@ def test_missing_tip_link(tmp_path: Path) -> None:
 def test_malformed_description(tmp_path: Path) -> None:
     path = tmp_path / "hand.json"
     path.write_text(json.dumps({"name": "x"}))
-    with pytest.raises(HandModelError, match="malformed"):
+    with pytest.raises(HandModelError, match=r"missing keys \[.urdf."):
         HandDescription.from_json(path)
 
 
