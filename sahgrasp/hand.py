@@ -53,6 +53,9 @@ BUILTIN_HANDS = ("sah", "allegro")
 """Hand names that ``load_hand`` knows without a description file."""
 
 _DEG = math.pi / 180.0
+_FINITE_WEIGHT = 1e-10
+"""Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
+q_i (at most 1.8e298 each), nor fall into the slow subnormal range for joint-sized values."""
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
@@ -419,6 +422,7 @@ class Hand:
         self.model = model
         self.data = model.createData()
         self._q_shape = (model.nq,)
+        self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
         self._jacobian_frames = self._contact_frames + self._tip_frames
         self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
         self._check_excluded(description.excluded_collisions)
@@ -728,12 +732,11 @@ class Hand:
     def _finite(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``q`` if it is a finite configuration of the right size, else :meth:`check_q`'s error.
 
-        The hot-path test is one dot product (about 1 us): NaN or inf make it non-finite. Only
-        then, or for a wrong shape or type, does :meth:`check_q` look closer (a finite ``q``
-        whose squares overflow passes there).
+        The hot-path test is one dot product (about 1 us): NaN or inf make it non-finite, and
+        the weights of :data:`_FINITE_WEIGHT` keep it from overflowing for any finite ``q``.
         """
         try:
-            if q.shape == self._q_shape and math.isfinite(q @ q):
+            if q.shape == self._q_shape and math.isfinite(q @ self._finite_weights):
                 return q
         except (AttributeError, TypeError, ValueError):
             pass
