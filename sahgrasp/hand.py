@@ -22,6 +22,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
@@ -35,7 +36,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.collision import SelfCollision
 from sahgrasp.errors import HandModelError, InvalidConfigurationError
-from sahgrasp.hand_checks import check_name, check_urdf, number, numbers, read_json, shown
+from sahgrasp.hand_checks import (
+    check_name,
+    check_urdf,
+    native_stderr,
+    number,
+    numbers,
+    read_json,
+    shown,
+)
 
 __all__ = [
     "BUILTIN_HANDS",
@@ -784,16 +793,27 @@ def _build_models(description: HandDescription, urdf: str) -> tuple[pin.Model, p
     """Pinocchio's model and collision geometry from the checked URDF text.
 
     Built from the text whose bytes the digest hashes (not from the path again), so the hand
-    is the one its digest names. Relative mesh paths resolve in the URDF's folder.
+    is the one its digest names. Relative mesh paths resolve in the URDF's folder. An error the
+    URDF parser only logs (it then drops the element) fails the load too.
     """
-    try:
-        model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer(), "wrist", True)
-        dirs = [str(p) for p in (*description.package_dirs, description.urdf_path.parent)]
-        geometry = pin.buildGeomFromUrdfString(model, urdf, pin.GeometryType.COLLISION, None, dirs)
-    except (ValueError, RuntimeError, OSError) as exc:
+    dirs = [str(p) for p in (*description.package_dirs, description.urdf_path.parent)]
+    failure = ""
+    with native_stderr() as log:
+        try:
+            model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer(), "wrist", True)
+            geometry = pin.buildGeomFromUrdfString(
+                model, urdf, pin.GeometryType.COLLISION, None, dirs
+            )
+        except (ValueError, RuntimeError, OSError) as exc:
+            failure = str(exc)
+    errors = [shown(line.strip()) for line in log if line.startswith("Error:")]
+    if failure or errors:
+        reasons = "; ".join(dict.fromkeys(errors[:4] + [shown(failure)] * bool(failure)))
         raise HandModelError(
-            f"URDF {shown(description.urdf_path)} does not load in Pinocchio: {exc}"
-        ) from exc
+            f"URDF {shown(description.urdf_path)} does not load in Pinocchio: {reasons}"
+        )
+    for line in log:
+        print(shown(line), file=sys.stderr)
     return model, geometry
 
 

@@ -14,8 +14,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import sys
+import tempfile
+import threading
 import xml.etree.ElementTree as ET
 from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, cast
 
@@ -26,6 +31,7 @@ __all__ = [
     "MAX_XML_DEPTH",
     "check_name",
     "check_urdf",
+    "native_stderr",
     "number",
     "numbers",
     "read_json",
@@ -68,6 +74,33 @@ _NUMBERS: dict[tuple[str, str], tuple[int, bool]] = {
 _FINITE_ONLY = {("mass", "value")} | {
     ("inertia", a) for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 }
+
+
+_STDERR_LOCK = threading.Lock()
+
+
+@contextmanager
+def native_stderr() -> Iterator[list[str]]:
+    """Capture what native code writes to file descriptor 2 while the block runs.
+
+    Pinocchio's URDF parser (urdfdom) reports some errors only there, and then drops the faulty
+    element (a link's collision shape, say) instead of failing: the caller must see those lines.
+    The list is filled when the block exits. Captures are serialized by a lock, since file
+    descriptor 2 is shared by the whole process; what other threads write meanwhile is captured
+    too.
+    """
+    lines: list[str] = []
+    with _STDERR_LOCK, tempfile.TemporaryFile() as log:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(log.fileno(), 2)
+        try:
+            yield lines
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            log.seek(0)
+            lines.extend(log.read().decode("utf-8", "replace").splitlines())
 
 
 def shown(value: object) -> str:

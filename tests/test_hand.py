@@ -328,6 +328,11 @@ BAD_URDFS = {
     ),
     "deep nesting": (_with("<a>" * 5000 + "</a>" * 5000), "nests elements more than 32 deep"),
     "not XML": ("robot", "not well-formed"),
+    # urdfdom only logs this and drops the palm's collision box: the load must fail instead.
+    "inertial without mass": (
+        _edited('<mass value="0.05"/>', ""),
+        r"Inertial element must have a mass element; .*Link \[palm\]",
+    ),
     "not a robot": ("<model/>", "not <robot>"),
 }
 
