@@ -677,8 +677,9 @@ class Hand:
         H = np.array(
             [pin.updateFramePlacement(model, data, f).homogeneous for f in self._contact_frames]
         )
-        # One matmul for the centres (r = p - R n): numpy's fixed cost per operation dominates.
-        return ContactState(H[:, :3, 3], H[:, :3] @ self._centre_selector, H[:, :3, 0])
+        # One product for the centres (r = p - R n): numpy's fixed cost per call dominates, and
+        # ndarray.dot dispatches faster than the @ operator.
+        return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
 
     def contact_jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
         """Contact state and its Jacobians w.r.t. ``v`` (see :class:`ContactJacobians`).
@@ -741,11 +742,11 @@ class Hand:
     def _finite(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """``q`` if it is a finite configuration of the right size, else :meth:`check_q`'s error.
 
-        The hot-path test is one dot product (about 1 us): NaN or inf make it non-finite, and
+        The hot-path test is one dot product (about 0.6 us): NaN or inf make it non-finite, and
         the weights of :data:`_FINITE_WEIGHT` keep it from overflowing for any finite ``q``.
         """
         try:
-            if q.shape == self._q_shape and math.isfinite(q @ self._finite_weights):
+            if q.shape == self._q_shape and math.isfinite(q.dot(self._finite_weights)):
                 return q
         except (AttributeError, TypeError, ValueError):
             pass
