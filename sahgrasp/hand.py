@@ -8,8 +8,8 @@
   independent coordinates);
 * two virtual revolute joints per fingertip, ``<finger>_contact_pitch`` (from the fingertip axis
   towards the pad) and ``<finger>_contact_yaw`` (sideways), placing the contact point on the
-  fingertip sphere of radius ``R`` (ik-initial-sequence Section 2, Fig. 2b); the contact frame's
-  x axis is the fingertip's outward normal at the contact point;
+  fingertip sphere of radius ``R`` (Claret & Suárez's IK paper, Section 2, Fig. 2b); the contact
+  frame's x axis is the fingertip's outward normal at the contact point;
 * the coal self-collision model of the URDF collision shapes.
 
 For the SAH this is the paper's 27 DoF: 6 wrist + 13 finger + 8 virtual.
@@ -322,11 +322,11 @@ def _finish_digest(urdf_hash: hashlib._Hash, kinematic_json: bytes) -> str:
 
 
 def sah_description() -> HandDescription:
-    """The right Schunk Anthropomorphic Hand (``urdf/sah_right.urdf``, sah-kinematics.md).
+    """The right Schunk Anthropomorphic Hand (``urdf/sah_right.urdf``, from its public fact sheet).
 
     The fingertip sphere has radius 10 mm, centred 29.5 mm along the distal phalanx, as in the
     IK model of the paper's lab; the accepted contact region is -15..80 deg towards the pad and
-    -35..35 deg sideways (ik-initial-sequence Fig. 2b).
+    -35..35 deg sideways (Claret & Suárez's IK paper, Fig. 2b).
     """
     urdf = resources.files("sahgrasp") / "urdf" / "sah_right.urdf"
     fingers = tuple(

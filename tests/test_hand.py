@@ -1,5 +1,9 @@
+import importlib.util
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -496,3 +500,32 @@ def test_loaded_hand_digest_is_pinned_to_the_urdf_it_was_built_from(tmp_path: Pa
 def test_digest_is_the_same_for_a_description_and_its_loaded_hand(sah: Hand) -> None:
     assert sah_description().digest() == sah.description.digest()
     assert sah.description == sah_description()
+
+
+def test_generator_reproduces_the_shipped_urdf() -> None:
+    # The URDF bytes are hashed into the digest the shipped sequences are keyed by.
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("make_sah_urdf", root / "tools/make_sah_urdf.py")
+    assert spec is not None and spec.loader is not None
+    generator = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generator)
+    assert generator.urdf() == (root / "urdf/sah_right.urdf").read_text(encoding="utf-8")
+
+
+_CLI = "import sys; from sahgrasp.cli import main; sys.exit(main())"
+
+
+@pytest.mark.parametrize("calls", ["0", "-1"])
+def test_bench_kinematics_refuses_non_positive_calls(calls: str) -> None:
+    root = Path(__file__).resolve().parents[1]
+    run = subprocess.run(
+        [sys.executable, "-c", _CLI, "bench", "kinematics", "--calls", calls],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        timeout=120,
+    )
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip() == (
+        f"sahgrasp: error: calls must be a positive integer, got {calls}"
+    ), run.stderr
