@@ -60,8 +60,6 @@ _NUMBERS: dict[tuple[str, str], tuple[int, bool]] = {
     ("axis", "xyz"): (3, False),
     ("limit", "lower"): (1, False),
     ("limit", "upper"): (1, False),
-    ("limit", "effort"): (1, False),
-    ("limit", "velocity"): (1, False),
     ("mimic", "multiplier"): (1, False),
     ("mimic", "offset"): (1, False),
     ("box", "size"): (3, True),
@@ -70,8 +68,9 @@ _NUMBERS: dict[tuple[str, str], tuple[int, bool]] = {
     ("sphere", "radius"): (1, True),
     ("mesh", "scale"): (3, False),
 }
-# Inertial values are never used by the kinematics; they only need to be finite.
-_FINITE_ONLY = {("mass", "value")} | {
+# Never used by the kinematics, and large values are common placeholders ("no limit"): they only
+# need to be finite.
+_FINITE_ONLY = {("mass", "value"), ("limit", "effort"), ("limit", "velocity")} | {
     ("inertia", a) for a in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")
 }
 

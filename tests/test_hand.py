@@ -305,6 +305,7 @@ BAD_URDFS = {
     "infinite limit": (_edited(_J2_LIMIT, _J2_LIMIT.replace("-1.30899694", "-inf")), "finite"),
     "huge limit": (_edited(_J2_LIMIT, _J2_LIMIT.replace("-1.30899694", "-1e300")), "unit mistake"),
     "no limit": (_edited(_J2_LIMIT, ""), r"needs <limit lower upper>"),
+    "NaN effort": (_edited(_J2_LIMIT, _J2_LIMIT.replace('effort="5"', 'effort="nan"')), "finite"),
     "continuous": (
         _edited('name="index_j2" type="revolute"', 'name="index_j2" type="continuous"'),
         "no limits",
@@ -355,6 +356,12 @@ def test_non_utf8_urdf_is_refused(tmp_path: Path, data: bytes) -> None:
     (tmp_path / "hand.urdf").write_bytes(data)
     with pytest.raises(HandModelError, match="not UTF-8"):
         load_hand(_description_json(tmp_path, urdf="hand.urdf"))
+
+
+def test_placeholder_effort_and_velocity_are_accepted(tmp_path: Path) -> None:
+    limit = _J2_LIMIT.replace('effort="5" velocity="2"', 'effort="1e9" velocity="1e9"')
+    (tmp_path / "hand.urdf").write_text(_edited(_J2_LIMIT, limit))
+    assert load_hand(_description_json(tmp_path, urdf="hand.urdf")).nv == 27
 
 
 def test_tip_link_must_be_a_link_not_a_joint(tmp_path: Path) -> None:
