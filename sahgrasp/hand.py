@@ -840,4 +840,9 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
             f"unknown hand {text!r}: use one of {list(BUILTIN_HANDS)} or the path of a hand "
             "description JSON file"
         )
+    if path.suffix.lower() == ".urdf":
+        raise HandModelError(
+            f"{shown(path)} is a URDF; give the path of a hand description JSON that names it "
+            "(its fingers, tip links and fingertip radius: see docs/hand.md)"
+        )
     return Hand(HandDescription.from_json(path))

@@ -190,6 +190,11 @@ def test_unknown_hand_and_missing_urdf(tmp_path: Path) -> None:
         load_hand(desc)
 
 
+def test_urdf_given_for_a_description_is_explained() -> None:
+    with pytest.raises(HandModelError, match="is a URDF; give the path of a hand description"):
+        load_hand(sah_description().urdf_path)
+
+
 def test_malformed_urdf(tmp_path: Path) -> None:
     (tmp_path / "bad.urdf").write_text("<robot name='x'><link name='a'>")
     with pytest.raises(HandModelError, match="not well-formed XML"):
