@@ -91,7 +91,11 @@ def native_stderr() -> Iterator[list[str]]:
     lines: list[str] = []
     with _STDERR_LOCK, tempfile.TemporaryFile() as log:
         sys.stderr.flush()
-        saved = os.dup(2)
+        try:
+            saved = os.dup(2)
+        except OSError:  # no file descriptor 2 (a daemon): nothing to capture, nothing shown
+            yield lines
+            return
         os.dup2(log.fileno(), 2)
         try:
             yield lines
