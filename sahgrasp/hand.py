@@ -468,6 +468,11 @@ class Hand:
         name: str,
         limits: tuple[float, float],
     ) -> int:
+        if model.existJointName(name):
+            raise HandModelError(
+                f"the URDF has a joint named {name!r}, the name of a virtual contact joint "
+                "sahgrasp adds; rename that joint or the finger"
+            )
         one = np.ones(1)
         lo, hi = np.array([limits[0]]), np.array([limits[1]])
         return int(model.addJoint(parent, joint, placement, name, one, one, lo, hi))

@@ -338,6 +338,10 @@ BAD_URDFS = {
     ),
     "deep nesting": (_with("<a>" * 5000 + "</a>" * 5000), "nests elements more than 32 deep"),
     "not XML": ("robot", "not well-formed"),
+    "virtual joint name taken": (
+        _SAH_URDF.replace('"index_j1"', '"index_contact_pitch"'),
+        "a joint named 'index_contact_pitch', the name of a virtual contact joint",
+    ),
     # urdfdom only logs this and drops the palm's collision box: the load must fail instead.
     "inertial without mass": (
         _edited('<mass value="0.05"/>', ""),
