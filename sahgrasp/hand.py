@@ -8,8 +8,8 @@
   independent coordinates);
 * two virtual revolute joints per fingertip, ``<finger>_contact_pitch`` (from the fingertip axis
   towards the pad) and ``<finger>_contact_yaw`` (sideways), placing the contact point on the
-  fingertip sphere of radius ``R`` (ik-initial-sequence Section 2, Fig. 2b); the contact frame's
-  x axis is the fingertip's outward normal at the contact point;
+  fingertip sphere of radius ``R`` (Claret & Suárez's IK paper, Section 2, Fig. 2b); the contact
+  frame's x axis is the fingertip's outward normal at the contact point;
 * the coal self-collision model of the URDF collision shapes.
 
 For the SAH this is the paper's 27 DoF: 6 wrist + 13 finger + 8 virtual.
@@ -17,16 +17,18 @@ For the SAH this is the paper's 27 DoF: 6 wrist + 13 finger + 8 virtual.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
 from importlib import metadata, resources
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pinocchio as pin
@@ -34,6 +36,15 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.collision import SelfCollision
 from sahgrasp.errors import HandModelError, InvalidConfigurationError
+from sahgrasp.hand_checks import (
+    check_name,
+    check_urdf,
+    native_stderr,
+    number,
+    numbers,
+    read_json,
+    shown,
+)
 
 __all__ = [
     "BUILTIN_HANDS",
@@ -51,6 +62,9 @@ BUILTIN_HANDS = ("sah", "allegro")
 """Hand names that ``load_hand`` knows without a description file."""
 
 _DEG = math.pi / 180.0
+_FINITE_WEIGHT = 1e-10
+"""Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
+q_i (at most 1.8e298 each), nor fall into the slow subnormal range for joint-sized values."""
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
@@ -100,80 +114,219 @@ class HandDescription:
         """Finger names in order."""
         return tuple(f.name for f in self.fingers)
 
-    def digest(self) -> str:
-        """SHA-256 of the kinematic description (URDF text and this description, not paths)."""
-        h = hashlib.sha256(self.urdf_path.read_bytes())
-        h.update(json.dumps(self._kinematic_fields(), sort_keys=True).encode())
-        return h.hexdigest()
+    _loaded_digest: ClassVar[str | None] = None
+    """Set on the copy a :class:`Hand` keeps: the digest of the URDF bytes it was built from."""
 
-    def _kinematic_fields(self) -> dict[str, Any]:
-        return {
+    def __post_init__(self) -> None:
+        _check_description(self)
+
+    def digest(self) -> str:
+        """SHA-256 of the kinematic description (URDF text and this description, not paths).
+
+        The description a :class:`Hand` keeps returns the digest of the URDF bytes the hand was
+        built from, computed once, so a file edited on disk afterwards cannot make a loaded hand
+        claim another hand's checkpoints. Any other description hashes the file as it is now,
+        cached per file path, modification time, size and inode.
+
+        Raises:
+            HandModelError: The URDF file cannot be read.
+        """
+        if self._loaded_digest is not None:
+            return self._loaded_digest
+        return _finish_digest(_urdf_hash(self.urdf_path).copy(), self._kinematic_json)
+
+    def _loaded_from(self, urdf: bytes) -> HandDescription:
+        """A copy whose digest is pinned to ``urdf``, the bytes a hand is built from."""
+        loaded = copy.copy(self)
+        digest = _finish_digest(hashlib.sha256(urdf), self._kinematic_json)
+        object.__setattr__(loaded, "_loaded_digest", digest)
+        return loaded
+
+    @cached_property
+    def _kinematic_json(self) -> bytes:
+        fields = {
             "fingers": [[f.name, f.tip_link, f.tip_axis, f.pad_axis] for f in self.fingers],
             "fingertip_radius_m": self.fingertip_radius_m,
             "contact_pitch_limits_rad": self.contact_pitch_limits_rad,
             "contact_yaw_limits_rad": self.contact_yaw_limits_rad,
         }
+        return json.dumps(fields, sort_keys=True).encode()
 
     @classmethod
     def from_json(cls, path: str | os.PathLike[str]) -> HandDescription:
         """Read a hand description file; its ``urdf`` is relative to the file's folder.
 
-        The file holds ``name``, ``urdf``, ``fingertip_radius_m``, ``contact_pitch_limits_rad``,
-        ``contact_yaw_limits_rad``, ``fingers`` (a list of ``{"name", "tip_link", "tip_axis",
-        "pad_axis"}``) and optionally ``excluded_collisions`` and ``package_dirs``.
+        The file is a UTF-8 JSON object with exactly these keys: ``name``, ``urdf``,
+        ``fingertip_radius_m``, ``contact_pitch_limits_rad``, ``contact_yaw_limits_rad``,
+        ``fingers`` (a list of ``{"name", "tip_link", "tip_axis", "pad_axis"}``) and optionally
+        ``excluded_collisions`` and ``package_dirs``. Axes are normalised.
+
+        Raises:
+            HandModelError: Unreadable, not UTF-8 JSON, a key missing or unknown, or a value
+                invalid (see ``docs/hand.md``).
         """
         path = Path(path)
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-            folder = path.parent
-            return cls(
-                name=str(data["name"]),
-                urdf_path=folder / data["urdf"],
-                fingers=tuple(
-                    FingerSpec(
-                        f["name"], f["tip_link"], _unit3(f["tip_axis"]), _unit3(f["pad_axis"])
-                    )
-                    for f in data["fingers"]
-                ),
-                fingertip_radius_m=float(data["fingertip_radius_m"]),
-                contact_pitch_limits_rad=_pair(data["contact_pitch_limits_rad"]),
-                contact_yaw_limits_rad=_pair(data["contact_yaw_limits_rad"]),
-                excluded_collisions=tuple(
-                    (str(a), str(b)) for a, b in data.get("excluded_collisions", [])
-                ),
-                package_dirs=tuple(folder / p for p in data.get("package_dirs", [])),
-            )
-        except OSError as exc:
-            raise HandModelError(f"cannot read hand description {path}: {exc.strerror}") from exc
-        except (ValueError, KeyError, TypeError) as exc:
+        data = read_json(path, "hand description")
+        where = f"hand description {shown(path)}"
+        if not isinstance(data, dict):
+            raise HandModelError(f"{where} must hold a JSON object, got {type(data).__name__}")
+        missing = [k for k in _REQUIRED_KEYS if k not in data]
+        unknown = [k for k in data if k not in _REQUIRED_KEYS + _OPTIONAL_KEYS]
+        if missing or unknown:
             raise HandModelError(
-                f"hand description {path} is malformed ({type(exc).__name__}: {exc}); it needs "
-                "name, urdf, fingertip_radius_m, contact_pitch_limits_rad, "
-                "contact_yaw_limits_rad and fingers [{name, tip_link, tip_axis, pad_axis}]"
-            ) from exc
+                f"{where}: missing keys {missing}, unknown keys {[shown(k) for k in unknown]}; "
+                f"it needs {list(_REQUIRED_KEYS)} and may have {list(_OPTIONAL_KEYS)}"
+            )
+        folder = path.parent
+        return cls(
+            name=check_name(f"{where}: name", data["name"]),
+            urdf_path=folder / check_name(f"{where}: urdf", data["urdf"]),
+            fingers=tuple(_finger(f"{where}: fingers", f) for f in _list(where, data, "fingers")),
+            fingertip_radius_m=number(f"{where}: fingertip_radius_m", data["fingertip_radius_m"]),
+            contact_pitch_limits_rad=_pair(where, data, "contact_pitch_limits_rad"),
+            contact_yaw_limits_rad=_pair(where, data, "contact_yaw_limits_rad"),
+            excluded_collisions=tuple(
+                _link_pair(f"{where}: excluded_collisions", p)
+                for p in _list(where, data, "excluded_collisions")
+            ),
+            package_dirs=tuple(
+                folder / check_name(f"{where}: package_dirs", p)
+                for p in _list(where, data, "package_dirs")
+            ),
+        )
 
 
-def _unit3(values: Sequence[float]) -> tuple[float, float, float]:
-    vec = np.asarray(values, dtype=float)
-    if vec.shape != (3,) or not np.all(np.isfinite(vec)) or np.linalg.norm(vec) == 0.0:
-        raise ValueError(f"axis must be 3 finite numbers, not all zero, got {values!r}")
-    vec = vec / np.linalg.norm(vec)
-    return (float(vec[0]), float(vec[1]), float(vec[2]))
+_REQUIRED_KEYS = (
+    "name",
+    "urdf",
+    "fingertip_radius_m",
+    "contact_pitch_limits_rad",
+    "contact_yaw_limits_rad",
+    "fingers",
+)
+_OPTIONAL_KEYS = ("excluded_collisions", "package_dirs")
+_FINGER_KEYS = ("name", "tip_link", "tip_axis", "pad_axis")
 
 
-def _pair(values: Sequence[float]) -> tuple[float, float]:
-    lo, hi = (float(v) for v in values)
-    if not lo < hi:
-        raise ValueError(f"limits must be [lower, upper] with lower < upper, got {values!r}")
+def _list(where: str, data: Mapping[str, Any], key: str) -> list[Any]:
+    value = data.get(key, [])
+    if not isinstance(value, list):
+        raise HandModelError(f"{where}: {key} must be a list, got {type(value).__name__}")
+    return value
+
+
+def _pair(where: str, data: Mapping[str, Any], key: str) -> tuple[float, float]:
+    lo, hi = numbers(f"{where}: {key}", data[key], 2)
     return (lo, hi)
 
 
+def _link_pair(what: str, value: object) -> tuple[str, str]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise HandModelError(f"{what}: each entry must be a pair of link names, got {value!r}")
+    return (check_name(what, value[0]), check_name(what, value[1]))
+
+
+def _finger(what: str, value: object) -> FingerSpec:
+    if not isinstance(value, dict) or sorted(value) != sorted(_FINGER_KEYS):
+        raise HandModelError(
+            f"{what}: each finger must be an object with exactly the keys {list(_FINGER_KEYS)}, "
+            f"got {shown(value)[:200]}"
+        )
+    name = check_name(f"{what}: finger name", value["name"])
+    return FingerSpec(
+        name,
+        check_name(f"{what}: {name} tip_link", value["tip_link"]),
+        _unit3(f"{what}: {name} tip_axis", value["tip_axis"]),
+        _unit3(f"{what}: {name} pad_axis", value["pad_axis"]),
+    )
+
+
+def _unit3(what: str, values: object) -> tuple[float, float, float]:
+    x, y, z = numbers(what, values, 3)
+    norm = math.sqrt(x * x + y * y + z * z)
+    if not 0.0 < norm < math.inf:
+        raise HandModelError(f"{what} must be a non-zero finite vector, got {values!r}")
+    return (x / norm, y / norm, z / norm)
+
+
+def _check_description(d: HandDescription) -> None:
+    """The rules of ``docs/hand.md`` on a description, however it was built."""
+    what = f"hand description {d.name!r}"
+    check_name("hand description name", d.name)
+    if not d.fingers:
+        raise HandModelError(f"{what} has no fingers; give at least one")
+    for kind in ("name", "tip_link"):
+        values = [check_name(f"{what}: finger {kind}", getattr(f, kind)) for f in d.fingers]
+        repeated = sorted({v for v in values if values.count(v) > 1})
+        if repeated:
+            raise HandModelError(f"{what}: finger {kind}s {repeated} appear more than once")
+    for f in d.fingers:
+        _check_axes(f"{what}: finger {f.name!r}", f)
+    radius = number(f"{what}: fingertip_radius_m", d.fingertip_radius_m)
+    if not 0.0 < radius <= _MAX_RADIUS_M:
+        raise HandModelError(
+            f"{what}: fingertip_radius_m must be in (0, {_MAX_RADIUS_M}] m, got {radius}"
+        )
+    for key in ("contact_pitch_limits_rad", "contact_yaw_limits_rad"):
+        lo, hi = numbers(f"{what}: {key}", getattr(d, key), 2)
+        if not -math.pi < lo < hi < math.pi:
+            raise HandModelError(
+                f"{what}: {key} must be [lower, upper] with -pi < lower < upper < pi, "
+                f"got [{lo}, {hi}]"
+            )
+    for a, b in d.excluded_collisions:
+        check_name(f"{what}: excluded_collisions link", a)
+        check_name(f"{what}: excluded_collisions link", b)
+
+
+_MAX_RADIUS_M = 1.0
+"""Largest fingertip radius [m]: a larger one is a unit mistake (mm given as m)."""
+
+
+def _check_axes(what: str, finger: FingerSpec) -> None:
+    axes = []
+    for name in ("tip_axis", "pad_axis"):
+        vec = np.array(numbers(f"{what} {name}", getattr(finger, name), 3))
+        if abs(float(vec @ vec) - 1.0) > _AXIS_TOL:
+            raise HandModelError(f"{what}: {name} must be a unit vector, got {tuple(vec)}")
+        axes.append(vec)
+    if abs(float(axes[0] @ axes[1])) > _AXIS_TOL:
+        raise HandModelError(
+            f"{what}: tip_axis {finger.tip_axis} and pad_axis {finger.pad_axis} must be "
+            "orthogonal unit vectors"
+        )
+
+
+_AXIS_TOL = 1e-9
+"""Tolerance on unit length and orthogonality of the fingertip axes (they become rotation
+columns, so a larger error would distort the contact frames)."""
+
+
+@lru_cache(maxsize=16)
+def _urdf_file_hash(path: str, stamp: tuple[int, int, int]) -> hashlib._Hash:
+    del stamp  # part of the cache key only: a changed file is hashed again
+    return hashlib.sha256(Path(path).read_bytes())
+
+
+def _urdf_hash(path: Path) -> hashlib._Hash:
+    try:
+        st = path.stat()
+        return _urdf_file_hash(str(path), (st.st_mtime_ns, st.st_size, st.st_ino))
+    except OSError as exc:
+        raise HandModelError(f"cannot read URDF {shown(path)}: {exc.strerror}") from exc
+
+
+def _finish_digest(urdf_hash: hashlib._Hash, kinematic_json: bytes) -> str:
+    urdf_hash.update(kinematic_json)
+    return urdf_hash.hexdigest()
+
+
 def sah_description() -> HandDescription:
-    """The right Schunk Anthropomorphic Hand (``urdf/sah_right.urdf``, sah-kinematics.md).
+    """The right Schunk Anthropomorphic Hand (``urdf/sah_right.urdf``, from its public fact sheet).
 
     The fingertip sphere has radius 10 mm, centred 29.5 mm along the distal phalanx, as in the
     IK model of the paper's lab; the accepted contact region is -15..80 deg towards the pad and
-    -35..35 deg sideways (ik-initial-sequence Fig. 2b).
+    -35..35 deg sideways (Claret & Suárez's IK paper, Fig. 2b).
     """
     urdf = resources.files("sahgrasp") / "urdf" / "sah_right.urdf"
     fingers = tuple(
@@ -266,31 +419,29 @@ class Hand:
     """
 
     def __init__(self, description: HandDescription) -> None:
-        self.description = description
-        model, geometry = _build_models(description)
+        urdf = _read_urdf(description)
+        self.description = description._loaded_from(urdf)
+        model, geometry = _build_models(description, check_urdf(urdf, shown(description.urdf_path)))
         self.fingers = description.finger_names
         self.radius_m = description.fingertip_radius_m
         self._tip_frames = [_frame_id(model, f.tip_link) for f in description.fingers]
         self._contact_frames: list[int] = []
         for spec, tip in zip(description.fingers, self._tip_frames, strict=True):
             self._contact_frames.append(self._add_contact_joints(model, spec, tip))
-        self._jacobian_frames = self._contact_frames + self._tip_frames
-        self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
         self.model = model
         self.data = model.createData()
+        self._q_shape = (model.nq,)
+        self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
+        self._jacobian_frames = self._contact_frames + self._tip_frames
+        self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
+        self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
-        self._check_revolute()
 
     # ----- construction -------------------------------------------------------------------------
     def _add_contact_joints(self, model: pin.Model, spec: FingerSpec, tip_frame: int) -> int:
         tip = model.frames[tip_frame]
         x = np.asarray(spec.tip_axis)
         y = np.asarray(spec.pad_axis)
-        if abs(float(x @ y)) > 1e-9:
-            raise HandModelError(
-                f"finger {spec.name}: tip_axis {spec.tip_axis} and pad_axis {spec.pad_axis} "
-                "must be orthogonal unit vectors"
-            )
         # Joint frame x = fingertip axis, y = pad: pitch (about z) turns x towards the pad and
         # yaw (about the pitched y) turns it sideways; x then is the outward contact normal.
         R0 = np.column_stack([x, y, np.cross(x, y)])
@@ -317,18 +468,23 @@ class Hand:
         name: str,
         limits: tuple[float, float],
     ) -> int:
+        if model.existJointName(name):
+            raise HandModelError(
+                f"the URDF has a joint named {name!r}, the name of a virtual contact joint "
+                "sahgrasp adds; rename that joint or the finger"
+            )
         one = np.ones(1)
         lo, hi = np.array([limits[0]]), np.array([limits[1]])
         return int(model.addJoint(parent, joint, placement, name, one, one, lo, hi))
 
-    def _check_revolute(self) -> None:
-        for jid in range(2, self.model.njoints):
-            j = self.model.joints[jid]
-            if j.nq != j.nv or j.nq > 1:
-                raise HandModelError(
-                    f"joint {self.model.names[jid]} of {self.description.urdf_path} is "
-                    f"{j.shortname()}; sahgrasp models hands of revolute/prismatic joints"
-                )
+    def _check_excluded(self, pairs: tuple[tuple[str, str], ...]) -> None:
+        links = {f.name for f in self.model.frames if f.type == pin.FrameType.BODY}
+        unknown = sorted({name for pair in pairs for name in pair} - links)
+        if unknown:
+            raise HandModelError(
+                f"excluded_collisions of hand {self.description.name!r} name {unknown}, which "
+                f"are not links of its URDF; its links are {sorted(links)}"
+            )
 
     # ----- sizes and names ----------------------------------------------------------------------
     @property
@@ -512,31 +668,37 @@ class Hand:
 
     # ----- kinematics ---------------------------------------------------------------------------
     def contact_state(self, q: NDArray[np.float64]) -> ContactState:
-        """Contact points, sphere centres and normals of all fingers at ``q`` (world frame)."""
-        pin.forwardKinematics(self.model, self.data, q)
-        H = np.array(
-            [
-                pin.updateFramePlacement(self.model, self.data, f).homogeneous
-                for f in self._contact_frames
-            ]
-        )
-        return self._state(H)
+        """Contact points, sphere centres and normals of all fingers at ``q`` (world frame).
 
-    def _state(self, H: NDArray[np.float64]) -> ContactState:
-        # Homogeneous contact placements: x axis = normal, origin = point; r = p - R n.
-        return ContactState(H[:, :3, 3], H[:, :3] @ self._centre_selector, H[:, :3, 0])
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.forwardKinematics(self.model, self.data, self._finite(q))
+        return self._state()
 
-    def contact_jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
-        """Contact state and its Jacobians w.r.t. ``v`` (see :class:`ContactJacobians`)."""
+    def _state(self) -> ContactState:
+        # Contact placements after forward kinematics: x axis = normal, origin = point.
         model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
-        # updateFramePlacement returns the placement faster than indexing data.oMf.
         H = np.array(
             [pin.updateFramePlacement(model, data, f).homogeneous for f in self._contact_frames]
         )
+        # One product for the centres (r = p - R n): numpy's fixed cost per call dominates, and
+        # ndarray.dot dispatches faster than the @ operator.
+        return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
+
+    def contact_jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
+        """Contact state and its Jacobians w.r.t. ``v`` (see :class:`ContactJacobians`).
+
+        Leaves the joint Jacobians and placements of ``q`` in ``data`` (``data.J``, ``oMi``).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, self._finite(q))
+        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
         F = len(self.fingers)
-        return ContactJacobians(self._state(H), J[:F, :3], J[F:, :3], J[:F, 3:])
+        return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""
@@ -567,12 +729,33 @@ class Hand:
             ) from None
 
     def in_collision(self, q: NDArray[np.float64]) -> bool:
-        """True if the hand collides with itself at ``q``."""
-        return self.collision.in_collision(q)
+        """True if the hand collides with itself at ``q``.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        return self.collision.in_collision(self._finite(q))
 
     def min_distance(self, q: NDArray[np.float64]) -> float:
-        """Smallest signed distance [m] between checked pairs of hand bodies at ``q``."""
-        return self.collision.min_distance(q)
+        """Smallest signed distance [m] between checked pairs of hand bodies at ``q``.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        return self.collision.min_distance(self._finite(q))
+
+    def _finite(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``q`` if it is a finite configuration of the right size, else :meth:`check_q`'s error.
+
+        The hot-path test is one dot product (about 0.6 us): NaN or inf make it non-finite, and
+        the weights of :data:`_FINITE_WEIGHT` keep it from overflowing for any finite ``q``.
+        """
+        try:
+            if q.shape == self._q_shape and math.isfinite(q.dot(self._finite_weights)):
+                return q
+        except (AttributeError, TypeError, ValueError):
+            pass
+        return self.check_q(q)
 
     def dof(self) -> dict[str, int]:
         """Degrees of freedom: wrist, fingers (independent joints), virtual, total."""
@@ -595,22 +778,48 @@ def _random_rotation(rng: np.random.Generator) -> pin.SE3:
 
 
 def _frame_id(model: pin.Model, link: str) -> int:
-    if not model.existFrame(link):
+    # BODY only: a joint of the same name must not stand in for a link.
+    if not model.existFrame(link, pin.FrameType.BODY):
         links = sorted(f.name for f in model.frames if f.type == pin.FrameType.BODY)
         raise HandModelError(f"tip link {link!r} is not in the URDF; its links are {links}")
-    return int(model.getFrameId(link))
+    return int(model.getFrameId(link, pin.FrameType.BODY))
 
 
-def _build_models(description: HandDescription) -> tuple[pin.Model, pin.GeometryModel]:
+def _read_urdf(description: HandDescription) -> bytes:
     urdf = description.urdf_path
     if not urdf.is_file():
-        raise HandModelError(f"URDF of hand {description.name!r} not found: {urdf}")
+        raise HandModelError(f"URDF of hand {description.name!r} not found: {shown(urdf)}")
     try:
-        model = pin.buildModelFromUrdf(str(urdf), pin.JointModelFreeFlyer(), "wrist", True)
-        dirs = [str(p) for p in description.package_dirs]
-        geometry = pin.buildGeomFromUrdf(model, str(urdf), pin.GeometryType.COLLISION, None, dirs)
-    except (ValueError, RuntimeError, OSError) as exc:
-        raise HandModelError(f"URDF {urdf} does not load in Pinocchio: {exc}") from exc
+        return urdf.read_bytes()
+    except OSError as exc:
+        raise HandModelError(f"cannot read URDF {shown(urdf)}: {exc.strerror}") from exc
+
+
+def _build_models(description: HandDescription, urdf: str) -> tuple[pin.Model, pin.GeometryModel]:
+    """Pinocchio's model and collision geometry from the checked URDF text.
+
+    Built from the text whose bytes the digest hashes (not from the path again), so the hand
+    is the one its digest names. Relative mesh paths resolve in the URDF's folder. An error the
+    URDF parser only logs (it then drops the element) fails the load too.
+    """
+    dirs = [str(p) for p in (*description.package_dirs, description.urdf_path.parent)]
+    failure = ""
+    with native_stderr() as log:
+        try:
+            model = pin.buildModelFromXML(urdf, pin.JointModelFreeFlyer(), "wrist", True)
+            geometry = pin.buildGeomFromUrdfString(
+                model, urdf, pin.GeometryType.COLLISION, None, dirs
+            )
+        except (ValueError, RuntimeError, OSError) as exc:
+            failure = str(exc)
+    errors = [shown(line.strip()) for line in log if line.startswith("Error:")]
+    if failure or errors:
+        reasons = "; ".join(dict.fromkeys(errors[:4] + [shown(failure)] * bool(failure)))
+        raise HandModelError(
+            f"URDF {shown(description.urdf_path)} does not load in Pinocchio: {reasons}"
+        )
+    for line in log:
+        print(shown(line), file=sys.stderr)
     return model, geometry
 
 
@@ -635,5 +844,10 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
         raise HandModelError(
             f"unknown hand {text!r}: use one of {list(BUILTIN_HANDS)} or the path of a hand "
             "description JSON file"
+        )
+    if path.suffix.lower() == ".urdf":
+        raise HandModelError(
+            f"{shown(path)} is a URDF; give the path of a hand description JSON that names it "
+            "(its fingers, tip links and fingertip radius: see docs/hand.md)"
         )
     return Hand(HandDescription.from_json(path))

@@ -1,6 +1,11 @@
+import importlib.util
 import json
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -185,9 +190,14 @@ def test_unknown_hand_and_missing_urdf(tmp_path: Path) -> None:
         load_hand(desc)
 
 
+def test_urdf_given_for_a_description_is_explained() -> None:
+    with pytest.raises(HandModelError, match="is a URDF; give the path of a hand description"):
+        load_hand(sah_description().urdf_path)
+
+
 def test_malformed_urdf(tmp_path: Path) -> None:
     (tmp_path / "bad.urdf").write_text("<robot name='x'><link name='a'>")
-    with pytest.raises(HandModelError, match="does not load"):
+    with pytest.raises(HandModelError, match="not well-formed XML"):
         load_hand(_description_json(tmp_path, urdf="bad.urdf"))
 
 
@@ -200,7 +210,7 @@ def test_missing_tip_link(tmp_path: Path) -> None:
 def test_malformed_description(tmp_path: Path) -> None:
     path = tmp_path / "hand.json"
     path.write_text(json.dumps({"name": "x"}))
-    with pytest.raises(HandModelError, match="malformed"):
+    with pytest.raises(HandModelError, match=r"missing keys \[.urdf."):
         HandDescription.from_json(path)
 
 
@@ -214,12 +224,12 @@ def test_digest_depends_on_kinematics(sah: Hand, allegro: Hand) -> None:
     assert sah.description.digest() != allegro.description.digest()
 
 
-def _description_json(folder: Path, urdf: str, tip: str = "tip") -> Path:
+def _description_data(urdf: str, tip: str = "tip") -> dict[str, Any]:
     fingers = [
         {"name": f, "tip_link": f"{f}_{tip}", "tip_axis": [0, 1, 0], "pad_axis": [1, 0, 0]}
         for f in ("thumb", "index", "middle", "ring")
     ]
-    data = {
+    return {
         "name": "mine",
         "urdf": urdf,
         "fingertip_radius_m": 0.01,
@@ -227,6 +237,311 @@ def _description_json(folder: Path, urdf: str, tip: str = "tip") -> Path:
         "contact_yaw_limits_rad": [-0.6, 0.6],
         "fingers": fingers,
     }
+
+
+def _description_json(folder: Path, urdf: str, tip: str = "tip") -> Path:
     path = folder / "hand.json"
-    path.write_text(json.dumps(data))
+    path.write_text(json.dumps(_description_data(urdf, tip)))
     return path
+
+
+# ----- validation of URDFs (before Pinocchio sees them) -------------------------------------------
+_SAH_URDF = sah_description().urdf_path.read_text()
+_EXTRA_JOINT = """<joint name="{name}" type="fixed"><parent link="{parent}"/><child link="{child}"/>
+</joint>"""
+_TWO_LINKS = '<link name="a"/><link name="b"/>'
+
+
+def _edited(old: str, new: str, count: int = 1) -> str:
+    assert old in _SAH_URDF, old
+    return _SAH_URDF.replace(old, new, count)
+
+
+def _with(extra: str) -> str:
+    return _SAH_URDF.replace("</robot>", extra + "</robot>")
+
+
+_J4 = '<mimic joint="index_j3" multiplier="1" offset="0"/>'
+_J2_LIMIT = '<limit lower="-1.30899694" upper="0.0698131701" effort="5" velocity="2"/>'
+
+BAD_URDFS = {
+    "two parents": (
+        _with(_EXTRA_JOINT.format(name="x", parent="palm", child="index_tip")),
+        r"'index_tip' has two parent joints",
+    ),
+    "missing link": (
+        _with(_EXTRA_JOINT.format(name="x", parent="palm", child="nowhere")),
+        r"child link 'nowhere', which is not a link",
+    ),
+    "two roots": (_with('<link name="orphan"/>'), r"2 root links \['palm', 'orphan'\]"),
+    "detached cycle": (
+        _with(
+            _TWO_LINKS
+            + _EXTRA_JOINT.format(name="x", parent="a", child="b")
+            + _EXTRA_JOINT.format(name="y", parent="b", child="a")
+        ),
+        r"links \['a', 'b'\] form a cycle",
+    ),
+    "root in a cycle": (
+        _with(_EXTRA_JOINT.format(name="x", parent="index_tip", child="palm")),
+        "0 root links",
+    ),
+    "duplicate link": (_with('<link name="palm"/>'), "two links are named 'palm'"),
+    "mimic leader missing": (
+        _edited(_J4, _J4.replace("index_j3", "index_j9")),
+        "mimics 'index_j9'",
+    ),
+    "mimic of itself": (_edited(_J4, _J4.replace("index_j3", "index_j4")), "mimics 'index_j4'"),
+    "mimic of a mimic": (
+        _edited('<mimic joint="middle_j3"', '<mimic joint="index_j4"'),
+        "itself a mimic joint",
+    ),
+    "mimic multiplier 0": (_edited(_J4, _J4.replace('"1"', '"0"')), "multiplier 0"),
+    "zero axis": (_edited('<axis xyz="0 0 1"/>', '<axis xyz="0 0 0"/>'), "zero axis"),
+    "NaN axis": (_edited('<axis xyz="0 0 1"/>', '<axis xyz="0 nan 1"/>'), "3 finite number"),
+    "inverted limits": (
+        _edited(_J2_LIMIT, _J2_LIMIT.replace("-1.30899694", "0.5")),
+        r"lower < upper, got lower=0.5",
+    ),
+    "equal limits": (
+        _edited(_J2_LIMIT, _J2_LIMIT.replace("0.0698131701", "-1.30899694")),
+        "lower <",
+    ),
+    "infinite limit": (_edited(_J2_LIMIT, _J2_LIMIT.replace("-1.30899694", "-inf")), "finite"),
+    "huge limit": (_edited(_J2_LIMIT, _J2_LIMIT.replace("-1.30899694", "-1e300")), "unit mistake"),
+    "no limit": (_edited(_J2_LIMIT, ""), r"needs <limit lower upper>"),
+    "NaN effort": (_edited(_J2_LIMIT, _J2_LIMIT.replace('effort="5"', 'effort="nan"')), "finite"),
+    "continuous": (
+        _edited('name="index_j2" type="revolute"', 'name="index_j2" type="continuous"'),
+        "no limits",
+    ),
+    "floating": (
+        _edited('name="index_j2" type="revolute"', 'name="index_j2" type="floating"'),
+        "free flyer",
+    ),
+    "unknown type": (
+        _edited('name="index_j2" type="revolute"', 'name="index_j2" type="screw"'),
+        "valid",
+    ),
+    "NaN origin": (_edited('<origin xyz="0.03 0 0"', '<origin xyz="0.03 NaN 0"'), "finite"),
+    "negative box": (
+        _edited('<box size="0.022 0.03 0.026"/>', '<box size="0.022 -0.03 0.026"/>'),
+        "> 0",
+    ),
+    # XML 1.0 forbids C0 controls such as ESC; C1 controls (8-bit CSI) and bidi overrides parse.
+    "ANSI link name": (_SAH_URDF.replace("index_tip", "index_\x1b[31mtip"), "not well-formed"),
+    "C1 CSI link name": (_SAH_URDF.replace("index_tip", "index_\x9b31mtip"), r"printable.*\\x9b"),
+    "bidi joint name": (_SAH_URDF.replace("index_j2", "index\u202ej2"), r"printable.*\\u202e"),
+    "DOCTYPE": (
+        '<?xml version="1.0"?><!DOCTYPE robot [<!ENTITY x "palm">]>' + _SAH_URDF.split("?>", 1)[1],
+        "DOCTYPE",
+    ),
+    "deep nesting": (_with("<a>" * 5000 + "</a>" * 5000), "nests elements more than 32 deep"),
+    "not XML": ("robot", "not well-formed"),
+    "virtual joint name taken": (
+        _SAH_URDF.replace('"index_j1"', '"index_contact_pitch"'),
+        "a joint named 'index_contact_pitch', the name of a virtual contact joint",
+    ),
+    # urdfdom only logs this and drops the palm's collision box: the load must fail instead.
+    "inertial without mass": (
+        _edited('<mass value="0.05"/>', ""),
+        r"Inertial element must have a mass element; .*Link \[palm\]",
+    ),
+    "not a robot": ("<model/>", "not <robot>"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_URDFS))
+def test_bad_urdf_is_refused_with_its_reason(tmp_path: Path, case: str) -> None:
+    text, reason = BAD_URDFS[case]
+    (tmp_path / "hand.urdf").write_text(text)
+    with pytest.raises(HandModelError, match=reason) as info:
+        load_hand(_description_json(tmp_path, urdf="hand.urdf"))
+    assert str(info.value).isprintable()
+
+
+@pytest.mark.parametrize("data", [b"\xff\xfe<\x00r\x00", "<robot/>".encode("utf-16")])
+def test_non_utf8_urdf_is_refused(tmp_path: Path, data: bytes) -> None:
+    (tmp_path / "hand.urdf").write_bytes(data)
+    with pytest.raises(HandModelError, match="not UTF-8"):
+        load_hand(_description_json(tmp_path, urdf="hand.urdf"))
+
+
+def test_placeholder_effort_and_velocity_are_accepted(tmp_path: Path) -> None:
+    limit = _J2_LIMIT.replace('effort="5" velocity="2"', 'effort="1e9" velocity="1e9"')
+    (tmp_path / "hand.urdf").write_text(_edited(_J2_LIMIT, limit))
+    assert load_hand(_description_json(tmp_path, urdf="hand.urdf")).nv == 27
+
+
+def test_tip_link_must_be_a_link_not_a_joint(tmp_path: Path) -> None:
+    desc = _description_json(tmp_path, urdf=str(sah_description().urdf_path), tip="j2")
+    with pytest.raises(HandModelError, match=r"'thumb_j2' is not in the URDF"):
+        load_hand(desc)
+
+
+def test_excluded_collisions_must_name_links(tmp_path: Path) -> None:
+    path = _description_json(tmp_path, urdf=str(sah_description().urdf_path))
+    data = json.loads(path.read_text())
+    data["excluded_collisions"] = [["palm", "pinky_base"]]
+    path.write_text(json.dumps(data))
+    with pytest.raises(HandModelError, match=r"\['pinky_base'\], which are not links"):
+        load_hand(path)
+
+
+# ----- validation of hand descriptions ------------------------------------------------------------
+def _finger_edit(key: str, value: object, index: int = 1) -> dict[str, object]:
+    fingers = _description_data("")["fingers"]
+    fingers[index][key] = value
+    return {"fingers": fingers}
+
+
+BAD_DESCRIPTIONS: dict[str, tuple[dict[str, object], str]] = {
+    "zero radius": ({"fingertip_radius_m": 0.0}, r"fingertip_radius_m must be in \(0, 1.0\]"),
+    "negative radius": ({"fingertip_radius_m": -0.01}, "must be in"),
+    "radius in mm": ({"fingertip_radius_m": 10}, "must be in"),
+    "NaN radius": ({"fingertip_radius_m": math.nan}, "must be finite"),
+    "huge int radius": ({"fingertip_radius_m": 10**400}, "must be finite"),
+    "string radius": ({"fingertip_radius_m": "0.01"}, "must be a number"),
+    "boolean radius": ({"fingertip_radius_m": True}, "must be a number"),
+    "no fingers": ({"fingers": []}, "has no fingers"),
+    "fingers not a list": ({"fingers": {}}, "fingers must be a list"),
+    "duplicate finger": (_finger_edit("name", "thumb"), r"finger names \['thumb'\] appear more"),
+    "duplicate tip": (_finger_edit("tip_link", "thumb_tip"), r"tip_links \['thumb_tip'\]"),
+    "inverted pitch": ({"contact_pitch_limits_rad": [1.0, -1.0]}, "-pi < lower < upper < pi"),
+    "pitch beyond pi": ({"contact_pitch_limits_rad": [-0.2, 3.5]}, "-pi < lower < upper < pi"),
+    "infinite yaw": ({"contact_yaw_limits_rad": [-math.inf, 0.5]}, "must be finite"),
+    "one yaw limit": ({"contact_yaw_limits_rad": [0.5]}, "list of 2 numbers"),
+    "zero axis": (_finger_edit("tip_axis", [0, 0, 0]), "non-zero finite vector"),
+    "short axis": (_finger_edit("pad_axis", [1, 0]), "list of 3 numbers"),
+    "axes not orthogonal": (_finger_edit("pad_axis", [1, 1, 0]), "must be orthogonal"),
+    "ANSI hand name": ({"name": "\x1b[2Jmine"}, r"printable.*\\x1b"),
+    "ANSI finger name": (_finger_edit("name", "in\x1bdex"), "printable"),
+    "empty finger name": (_finger_edit("name", ""), "non-empty"),
+    "unknown key": ({"fingertip_radius": 0.01}, r"unknown keys \['fingertip_radius'\]"),
+    "finger key missing": (
+        {"fingers": [{"name": "thumb", "tip_link": "thumb_tip", "tip_axis": [0, 1, 0]}]},
+        "exactly the keys",
+    ),
+    "urdf not a string": ({"urdf": 3}, "urdf must be a non-empty string"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_DESCRIPTIONS))
+def test_bad_description_is_refused_with_its_reason(tmp_path: Path, case: str) -> None:
+    edit, reason = BAD_DESCRIPTIONS[case]
+    data = _description_data(str(sah_description().urdf_path)) | edit
+    path = tmp_path / "hand.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(HandModelError, match=reason) as info:
+        load_hand(path)
+    assert "\x1b" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    ("data", "reason"),
+    [
+        (b"\x89PNG\r\n\x1a\n\x00\x00", "not UTF-8 text"),
+        ('{"name": "x"}'.encode("utf-16"), "not UTF-8 text"),
+        (b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
+        (b"[1, 2]", "must hold a JSON object, got list"),
+        (b"{name: x}", "not valid JSON"),
+    ],
+)
+def test_unreadable_description_files(tmp_path: Path, data: bytes, reason: str) -> None:
+    path = tmp_path / "hand.json"
+    path.write_bytes(data)
+    with pytest.raises(HandModelError, match=reason):
+        load_hand(path)
+
+
+def test_description_built_in_code_is_checked_too() -> None:
+    sah = sah_description()
+    with pytest.raises(HandModelError, match="unit vector"):
+        HandDescription(
+            **{
+                **sah.__dict__,
+                "fingers": (sah.fingers[0].__class__("t", "t", (0.0, 2.0, 0.0), (1.0, 0.0, 0.0)),),
+            }
+        )
+    with pytest.raises(HandModelError, match="has no fingers"):
+        HandDescription(**{**sah.__dict__, "fingers": ()})
+
+
+# ----- configurations -----------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "query", ["contact_state", "contact_jacobians", "in_collision", "min_distance"]
+)
+@pytest.mark.parametrize(
+    ("index", "value"), [(3, math.nan), (9, math.nan), (0, math.inf), (20, -math.inf)]
+)
+def test_queries_refuse_non_finite_configurations(
+    sah: Hand, query: str, index: int, value: float
+) -> None:
+    q = sah.configuration()
+    q[index] = value
+    with pytest.raises(InvalidConfigurationError, match="NaN or inf"):
+        getattr(sah, query)(q)
+
+
+@pytest.mark.parametrize(
+    "query", ["contact_state", "contact_jacobians", "in_collision", "min_distance"]
+)
+def test_queries_refuse_wrong_sizes(sah: Hand, query: str) -> None:
+    with pytest.raises(InvalidConfigurationError, match="must have 28 values"):
+        getattr(sah, query)(np.zeros(27))
+
+
+def test_huge_but_finite_configuration_is_not_called_nan(sah: Hand) -> None:
+    q = sah.configuration()
+    q[0] = 1e300  # its square, or a sum of such values, would overflow
+    assert np.isfinite(sah.contact_state(q).normals).all()
+
+
+# ----- digest -------------------------------------------------------------------------------------
+def test_loaded_hand_digest_is_pinned_to_the_urdf_it_was_built_from(tmp_path: Path) -> None:
+    urdf = tmp_path / "hand.urdf"
+    urdf.write_text(_SAH_URDF)
+    hand = load_hand(_description_json(tmp_path, urdf="hand.urdf"))
+    digest = hand.description.digest()
+    urdf.write_text(_SAH_URDF.replace('effort="5"', 'effort="6"'))
+    assert hand.description.digest() == digest  # the hand in memory did not change
+    fresh = HandDescription.from_json(tmp_path / "hand.json")
+    assert fresh.digest() != digest  # the file did: a new description sees it
+    urdf.unlink()
+    assert hand.description.digest() == digest  # no file access at all
+    with pytest.raises(HandModelError, match="cannot read URDF"):
+        fresh.digest()
+
+
+def test_digest_is_the_same_for_a_description_and_its_loaded_hand(sah: Hand) -> None:
+    assert sah_description().digest() == sah.description.digest()
+    assert sah.description == sah_description()
+
+
+def test_generator_reproduces_the_shipped_urdf() -> None:
+    # The URDF bytes are hashed into the digest the shipped sequences are keyed by.
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("make_sah_urdf", root / "tools/make_sah_urdf.py")
+    assert spec is not None and spec.loader is not None
+    generator = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(generator)
+    assert generator.urdf() == (root / "urdf/sah_right.urdf").read_text(encoding="utf-8")
+
+
+_CLI = "import sys; from sahgrasp.cli import main; sys.exit(main())"
+
+
+@pytest.mark.parametrize("calls", ["0", "-1"])
+def test_bench_kinematics_refuses_non_positive_calls(calls: str) -> None:
+    root = Path(__file__).resolve().parents[1]
+    run = subprocess.run(
+        [sys.executable, "-c", _CLI, "bench", "kinematics", "--calls", calls],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(root)},
+        timeout=120,
+    )
+    assert run.returncode == 2, run.stderr
+    assert run.stderr.strip() == (
+        f"sahgrasp: error: calls must be a positive integer, got {calls}"
+    ), run.stderr
