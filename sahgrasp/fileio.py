@@ -70,10 +70,11 @@ def _is_special(info: os.stat_result | None) -> bool:
 
 
 def _same_file(a: Path, b: Path) -> bool:
+    """Whether both exist and are one file (through links, hard links included)."""
     try:
         return os.path.samefile(a, b)
-    except OSError:
-        return os.path.realpath(a) == os.path.realpath(b)
+    except OSError:  # one of them does not exist (or cannot be looked at): not one file
+        return False
 
 
 def _writable_folder(folder: Path, shown: PathLike) -> None:
