@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numbers
 import os
+import re
 import reprlib
 from collections import Counter
 from collections.abc import Iterable, Sequence
@@ -37,6 +38,7 @@ __all__ = [
 NORMAL_TOLERANCE = 1e-6
 """Largest accepted deviation of a normal's length from 1."""
 
+_SURROGATE = re.compile("[\ud800-\udfff]")
 _PREVIEW = reprlib.Repr()
 _PREVIEW.maxlevel, _PREVIEW.maxstring, _PREVIEW.maxother = 3, 60, 60
 
@@ -48,7 +50,7 @@ def _preview(value: Any) -> str:
 
 def _clean_name(name: str) -> str:
     """``name`` with each lone surrogate (JSON allows them, UTF-8 does not) replaced by U+FFFD."""
-    return "".join("\ufffd" if 0xD800 <= ord(c) <= 0xDFFF else c for c in name)
+    return _SURROGATE.sub("\ufffd", name)
 
 
 def _is_number(value: Any) -> bool:
