@@ -229,6 +229,8 @@ class TargetsFile:
 
 
 def _problem(raw: Any, index: int) -> GraspTarget | InvalidProblem:
+    if isinstance(raw, dict) and "name" not in raw:
+        raw = {**raw, "name": f"problem-{index}"}
     try:
         return GraspTarget.from_dict(raw)
     except InvalidTargetError as exc:
@@ -240,7 +242,8 @@ def _problem(raw: Any, index: int) -> GraspTarget | InvalidProblem:
 def read_problems(path: str | os.PathLike[str]) -> tuple[str, list[GraspTarget | InvalidProblem]]:
     """Read a targets file; a problem that fails validation is kept as an :class:`InvalidProblem`.
 
-    A relative hand-description path in the file (a ``hand`` with a suffix, such as
+    A problem without a name is called ``problem-<index>`` (from 0, in file order). A relative
+    hand-description path in the file (a ``hand`` with a suffix, such as
     ``hands/my_hand.json``) is resolved against the targets file's folder.
 
     Returns:
