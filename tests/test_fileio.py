@@ -180,6 +180,7 @@ def test_check_refuses_unwritable_places(tmp_path: Path) -> None:
         (b"{not json", "not valid JSON"),
         (b"[" + b"9" * 5000 + b"]", "not valid JSON"),
     ],
+    ids=["utf16", "binary", "deep", "truncated", "huge-integer"],
 )
 def test_read_json_typed_errors(tmp_path: Path, payload: bytes, match: str) -> None:
     path = tmp_path / "f.json"

@@ -61,7 +61,9 @@ def _parser() -> argparse.ArgumentParser:
         prog="sahgrasp", description="Precision grasps for anthropomorphic robot hands."
     )
     parser.add_argument("--version", action=_Version)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", help="see 'sahgrasp COMMAND --help'"
+    )
     for name in COMMANDS:
         module = importlib.import_module(f"sahgrasp.cli.{name}")
         module.add_parser(sub)

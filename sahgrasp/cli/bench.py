@@ -75,7 +75,7 @@ def _sequence(benches: Any) -> None:
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print or write its JSON")
-    benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK")
+    benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
     for add in (_kinematics, _ik, _atlas, _sequence):
         add(benches)
     p.set_defaults(run=run)
