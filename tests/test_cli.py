@@ -348,10 +348,13 @@ def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int
 def test_interrupted_sequence_prints_the_resume_command(tmp_path: Path) -> None:
     process = start("sequence", "--grid", "3", "--problems", "30", "--rounds", "2",
                     "--workers", "1", "--out", "out dir", cwd=tmp_path)  # fmt: skip
-    _wait_for_workers(process, 1)
+    for _ in range(1200):  # the search is under way once its checkpoint folder exists
+        if (tmp_path / "out dir" / "checkpoint").is_dir() or process.poll() is not None:
+            break
+        time.sleep(0.1)
     process.send_signal(signal.SIGTERM)
     _, err = process.communicate(timeout=120)
-    assert process.returncode == 130
+    assert process.returncode == 130, err
     assert err.strip().splitlines()[-1] == (
         "sahgrasp: interrupted; continue from the last checkpoint with: sahgrasp sequence "
         "--hand sah --grid 3 --problems 30 --rounds 2 --seed 0 --method auto --out 'out dir' "

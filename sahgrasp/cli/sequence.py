@@ -69,9 +69,8 @@ def resume_command(args: argparse.Namespace) -> str:
         words += ["--workers", str(args.workers)]
     if args.scheduler is not None:
         words += ["--scheduler", args.scheduler]
-    return (
-        f"interrupted; the finished work is saved, resume with: {shlex.join([*words, '--resume'])}"
-    )
+    resume = shlex.join([*words, "--resume"])
+    return f"interrupted; continue from the last checkpoint with: {resume}"
 
 
 class _Bar:
