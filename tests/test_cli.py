@@ -372,3 +372,21 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
     err = process.stderr.read()
     assert process.wait(timeout=120) == 141
     assert err == ""
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["info", "--hand", "deep.json"], r"hand description deep\.json nests .* too deeply"),
+        (["solve", "one.json", "--hand", "u16.json"], r"hand description u16\.json is not UTF-8"),
+        (["solve", "one.json", "--sequence", "deep.json"], r"sequence file deep\.json nests"),
+        (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
+    ],
+)
+def test_malformed_hand_and_sequence_files(
+    files: Path, tmp_path: Path, args: list[str], pattern: str
+) -> None:
+    (tmp_path / "one.json").write_bytes((files / "one.json").read_bytes())
+    (tmp_path / "deep.json").write_bytes(b"[" * 100_000 + b"]" * 100_000)
+    (tmp_path / "u16.json").write_bytes('{"name": "x"}'.encode("utf-16"))
+    one_line_error(sahgrasp(*args, cwd=tmp_path), r"^sahgrasp: error: " + pattern)

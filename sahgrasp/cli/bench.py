@@ -10,6 +10,7 @@ from sahgrasp.cli.common import (
     HAND_HELP,
     add_command,
     add_json_argument,
+    check_json_inputs,
     check_outputs,
     emit_json,
     nonnegative_int,
@@ -85,6 +86,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp bench``."""
     options = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
     check_outputs([args.json, options.get("plot")], inputs=[options.get("targets")])
+    check_json_inputs(options.get("hand"))
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")
     with output_file(options.get("plot")) as plot:
         if plot is not None:

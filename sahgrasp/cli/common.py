@@ -15,7 +15,14 @@ from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
-from sahgrasp.fileio import OutputPathError, atomic_path, check_output_path, write_bytes_atomic
+from sahgrasp.errors import HandModelError, SequenceFileError
+from sahgrasp.fileio import (
+    OutputPathError,
+    atomic_path,
+    check_output_path,
+    read_json,
+    write_bytes_atomic,
+)
 
 __all__ = [
     "HAND_HELP",
@@ -28,6 +35,7 @@ __all__ = [
     "add_command",
     "add_ik_arguments",
     "add_json_argument",
+    "check_json_inputs",
     "check_outputs",
     "emit_json",
     "human_stream",
@@ -138,6 +146,23 @@ def printable(text: str) -> str:
     if text.isprintable():
         return text
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def check_json_inputs(hand: str | None = None, sequence: str | Path | None = None) -> None:
+    """Read a user's hand-description and sequence files as JSON first, for a one-line error.
+
+    The hand and sequence loaders let some malformed files (binary, UTF-16, nested thousands of
+    levels deep) escape as RecursionError or UnicodeDecodeError; :func:`read_json` turns each into
+    the loader's own error type. A hand name (``sah``) or a missing file is left to the loader.
+
+    Raises:
+        HandModelError: The hand description is not UTF-8 JSON.
+        SequenceFileError: The sequence file is not UTF-8 JSON.
+    """
+    if hand is not None and Path(hand).suffix and Path(hand).is_file():
+        read_json(hand, "hand description", HandModelError)
+    if sequence is not None and Path(sequence).is_file():
+        read_json(sequence, "sequence file", SequenceFileError)
 
 
 def check_outputs(outputs: Iterable[str | None], inputs: Iterable[str | Path | None] = ()) -> None:

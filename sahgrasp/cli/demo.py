@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from sahgrasp.cli.common import add_command, add_ik_arguments, check_outputs
+from sahgrasp.cli.common import add_command, add_ik_arguments, check_json_inputs, check_outputs
 
 __all__ = ["DEFAULT_HTML", "add_parser", "run"]
 
@@ -30,6 +30,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp demo``; returns 0 if every grasp was solved, 1 otherwise."""
     check_outputs([args.html], inputs=[args.hand])
+    check_json_inputs(args.hand)
     from tqdm import tqdm
 
     from sahgrasp.hand import load_hand

@@ -6,7 +6,14 @@ import argparse
 import math
 from typing import TYPE_CHECKING, Any
 
-from sahgrasp.cli.common import HAND_HELP, add_command, check_outputs, emit_json, printable
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    printable,
+)
 
 if TYPE_CHECKING:
     from sahgrasp.hand import Hand
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     from sahgrasp.hand import load_hand
 
     check_outputs([args.json], inputs=[args.hand])
+    check_json_inputs(args.hand)
     info = describe(load_hand(args.hand))
     if args.json is None:
         _print_text(info)

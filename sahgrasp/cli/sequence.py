@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING, Any
 from sahgrasp.cli.common import (
     HAND_HELP,
     add_command,
+    check_json_inputs,
     int_at_least,
     nonnegative_int,
     positive_int,
@@ -112,6 +113,7 @@ def _print_summary(result: SearchResult, out: str) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp sequence``."""
     check_output_path(args.out, inputs=[args.hand], folder=True)
+    check_json_inputs(args.hand)
     from sahgrasp.ik import IKSettings
     from sahgrasp.sequence import SearchSettings, search_sequence
 

@@ -14,6 +14,7 @@ from sahgrasp.cli.common import (
     METHOD_HELP,
     add_command,
     add_json_argument,
+    check_json_inputs,
     check_outputs,
     emit_json,
     human_stream,
@@ -114,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     file_hand, problems = read_problems(args.targets)
     hand_name = args.hand or file_hand
     check_outputs([args.json], inputs=[args.targets, args.sequence, hand_name])
+    check_json_inputs(hand_name, args.sequence)
 
     from sahgrasp.hand import load_hand
     from sahgrasp.ik import IKSettings, Sequence, solve_many
