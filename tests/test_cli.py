@@ -315,7 +315,9 @@ def test_relative_hand_path_is_read_from_the_targets_folder(files: Path, tmp_pat
     (sub / "mysah.json").write_text(json.dumps(hand))
     targets = json.loads((files / "one.json").read_text())
     (sub / "t.json").write_text(json.dumps({**targets, "hand": "mysah.json"}))
-    done = sahgrasp("solve", "sub/t.json", "--init", "random", "--json", "-", cwd=tmp_path)
+    done = sahgrasp(
+        "solve", "sub/t.json", "--init", "random", "--inits", "1", "--json", "-", cwd=tmp_path
+    )
     assert "Traceback" not in done.stderr
     assert json.loads(done.stdout)["hand"] == "mysah"
 
