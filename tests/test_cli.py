@@ -392,3 +392,19 @@ def test_malformed_hand_and_sequence_files(
     (tmp_path / "deep.json").write_bytes(b"[" * 100_000 + b"]" * 100_000)
     (tmp_path / "u16.json").write_bytes('{"name": "x"}'.encode("utf-16"))
     one_line_error(sahgrasp(*args, cwd=tmp_path), r"^sahgrasp: error: " + pattern)
+
+
+def test_bench_json_to_stdout(tmp_path: Path) -> None:
+    done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    document = json.loads(done.stdout, parse_constant=pytest.fail)
+    assert document["calls"] == 3 and set(document["hands"]) == {"sah", "allegro"}
+
+
+def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
+    done = sahgrasp("atlas", "planar", "--r", "0.3", "--plot", "p.png", "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout, parse_constant=pytest.fail)["radius"] == 0.3
+    assert "wrote p.png" in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.png"]
+    assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
