@@ -133,7 +133,10 @@ def test_cli_defaults_are_the_library_defaults() -> None:
     for module in (atlas, ik, kinematics, bench_sequence):
         name = module.__name__.rsplit(".", 1)[1]
         parser = parsers[f"sahgrasp bench {name}"]
-        for param in inspect.signature(module.run).parameters.values():
+        params = inspect.signature(module.run).parameters
+        options = {a.dest for a in parser._actions if a.option_strings} - {"help", "json"}
+        assert options <= set(params), (name, options - set(params))
+        for param in params.values():
             if parser.get_default(param.name) is not None:
                 expected = param.default
                 got = parser.get_default(param.name)
