@@ -112,8 +112,14 @@ def _os_error(exc: OSError) -> str:
     return str(exc)
 
 
-def _run(args: argparse.Namespace) -> int:
-    code = int(args.run(args))
+def _run(argv: Sequence[str] | None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        code = int(args.run(args))
+    except KeyboardInterrupt:
+        hint = getattr(args, "on_interrupt", None)
+        print(f"sahgrasp: {hint(args) if hint else 'interrupted'}", file=sys.stderr)
+        return EXIT_INTERRUPTED
     sys.stdout.flush()  # a closed pipe shows here, while BrokenPipeError can still be handled
     return code
 
@@ -123,15 +129,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     with contextlib.suppress(AttributeError, ValueError):  # a stream replaced by a test harness
         sys.stdout.reconfigure(errors="backslashreplace")  # type: ignore[union-attr]
     try:
-        args = _parser().parse_args(argv)
-    except SystemExit as exc:  # --help, --version, or a usage error already printed
-        return exc.code if isinstance(exc.code, int) else EXIT_INPUT
-    try:
         with _stop_signals_interrupt():
-            return _run(args)
-    except KeyboardInterrupt:
-        hint = getattr(args, "on_interrupt", None)
-        print(f"sahgrasp: {hint(args) if hint else 'interrupted'}", file=sys.stderr)
+            return _run(argv)
+    except SystemExit as exc:  # --help, --version, or a usage error already printed
+        return exc.code if isinstance(exc.code, int) else 0 if exc.code is None else EXIT_INPUT
+    except KeyboardInterrupt:  # before the command started
+        print("sahgrasp: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
     except BrokenPipeError:
         # Point stdout at /dev/null so that the interpreter's last flush does not fail again.
