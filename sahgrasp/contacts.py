@@ -1,14 +1,18 @@
 """Contact targets: a point on the object and the object's outward unit normal there, per finger.
 
 A fingertip of radius ``R`` satisfies a target when the contact point on the fingertip sphere equals
-the target point and the sphere centre equals ``point + R * normal`` (conventions.md). Targets are
-given in the ``world`` frame. This module validates them and reads/writes the targets JSON format.
+the target point and the sphere centre equals ``point + R * normal``. Targets are given in the
+``world`` frame. This module validates them and reads/writes the targets JSON format
+(``docs/formats.md``).
 """
 
 from __future__ import annotations
 
-import json
+import numbers
 import os
+import re
+import reprlib
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,28 +22,53 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.errors import InvalidTargetError
-from sahgrasp.fileio import write_json_atomic
+from sahgrasp.fileio import read_json, write_json_atomic
 
 __all__ = [
     "NORMAL_TOLERANCE",
     "ContactTarget",
     "GraspTarget",
+    "InvalidProblem",
     "TargetsFile",
     "load_targets",
+    "read_problems",
     "save_targets",
 ]
 
 NORMAL_TOLERANCE = 1e-6
-"""Largest accepted deviation of a normal's length from 1 (conventions.md)."""
+"""Largest accepted deviation of a normal's length from 1."""
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
+_PREVIEW = reprlib.Repr()
+_PREVIEW.maxlevel, _PREVIEW.maxstring, _PREVIEW.maxother = 3, 60, 60
+
+
+def _preview(value: Any) -> str:
+    """A short repr of user data for a message, whatever its size or depth."""
+    return _PREVIEW.repr(value)
+
+
+def _clean_name(name: str) -> str:
+    """``name`` with each lone surrogate (JSON allows them, UTF-8 does not) replaced by U+FFFD."""
+    return _SURROGATE.sub("\ufffd", name)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
 
 
 def _vector3(value: ArrayLike, what: str) -> NDArray[np.float64]:
+    items = np.asarray(value).reshape(-1).tolist() if isinstance(value, np.ndarray) else value
+    if not isinstance(items, list | tuple) or not all(_is_number(v) for v in items):
+        raise InvalidTargetError(f"{what} must be 3 numbers [m], got {_preview(value)}")
+    if len(items) != 3:
+        raise InvalidTargetError(f"{what} must have 3 components [m], got {len(items)}")
     try:
-        vec = np.array(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise InvalidTargetError(f"{what} must be 3 numbers, got {value!r}") from exc
-    if vec.shape != (3,):
-        raise InvalidTargetError(f"{what} must have 3 components [m], got {vec.size}")
+        vec = np.array(items, dtype=np.float64)
+    except OverflowError:
+        raise InvalidTargetError(
+            f"{what} holds a number too large for a float: {_preview(items)}; all must be finite"
+        ) from None
     if not np.all(np.isfinite(vec)):
         raise InvalidTargetError(f"{what} holds NaN or inf: {vec.tolist()}; all must be finite")
     vec.setflags(write=False)
@@ -62,13 +91,13 @@ class ContactTarget:
 
     def __init__(self, finger: str, point: ArrayLike, normal: ArrayLike) -> None:
         if not isinstance(finger, str) or not finger:
-            raise InvalidTargetError(f"finger must be a non-empty name, got {finger!r}")
-        point_v = _vector3(point, f"{finger} contact point")
-        normal_v = _vector3(normal, f"{finger} contact normal")
+            raise InvalidTargetError(f"finger must be a non-empty name, got {_preview(finger)}")
+        point_v = _vector3(point, f"{finger!r} contact point")
+        normal_v = _vector3(normal, f"{finger!r} contact normal")
         norm = float(np.linalg.norm(normal_v))
         if abs(norm - 1.0) > NORMAL_TOLERANCE:
             raise InvalidTargetError(
-                f"{finger} contact normal has length {norm:.9g}; it must be a unit vector "
+                f"{finger!r} contact normal has length {norm:.9g}; it must be a unit vector "
                 f"(tolerance {NORMAL_TOLERANCE:g}), normals are not normalised silently"
             )
         object.__setattr__(self, "finger", finger)
@@ -80,7 +109,7 @@ class ContactTarget:
         return self.point + radius_m * self.normal
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of conventions.md."""
+        """Return the JSON form of ``docs/formats.md``."""
         return {"finger": self.finger, "point": self.point.tolist(), "normal": self.normal.tolist()}
 
     def __eq__(self, other: object) -> bool:
@@ -109,16 +138,16 @@ class GraspTarget:
     contacts: tuple[ContactTarget, ...]
 
     def __init__(self, name: str, contacts: Iterable[ContactTarget]) -> None:
+        name = _clean_name(str(name))
         contacts_t = tuple(contacts)
         if not contacts_t:
             raise InvalidTargetError(f"grasp {name!r} has no contacts; give one per finger")
-        fingers = [c.finger for c in contacts_t]
-        repeated = sorted({f for f in fingers if fingers.count(f) > 1})
+        repeated = sorted(f for f, n in Counter(c.finger for c in contacts_t).items() if n > 1)
         if repeated:
             raise InvalidTargetError(
                 f"grasp {name!r} names finger(s) {repeated} more than once; each finger once"
             )
-        object.__setattr__(self, "name", str(name))
+        object.__setattr__(self, "name", name)
         object.__setattr__(self, "contacts", contacts_t)
 
     @property
@@ -150,29 +179,45 @@ class GraspTarget:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of conventions.md."""
+        """Return the JSON form of ``docs/formats.md``."""
         return {"name": self.name, "contacts": [c.to_dict() for c in self.contacts]}
 
     @classmethod
     def from_dict(cls, data: Any) -> GraspTarget:
-        """Build from the JSON form of conventions.md, raising :class:`InvalidTargetError`."""
+        """Build from the JSON form of ``docs/formats.md``, raising :class:`InvalidTargetError`."""
         if not isinstance(data, dict) or "contacts" not in data:
             raise InvalidTargetError(
-                f"a problem must be an object with 'name' and 'contacts', got {data!r:.200}"
+                f"a problem must be an object with 'name' and 'contacts', got {_preview(data)}"
             )
-        name = str(data.get("name", "unnamed"))
+        name = data.get("name", "unnamed")
+        if not isinstance(name, str):
+            raise InvalidTargetError(f"a problem's 'name' must be a string, got {_preview(name)}")
         raw = data["contacts"]
         if not isinstance(raw, list):
-            raise InvalidTargetError(f"problem {name!r}: 'contacts' must be a list")
-        contacts = []
-        for item in raw:
-            if not isinstance(item, dict) or not {"finger", "point", "normal"} <= item.keys():
-                raise InvalidTargetError(
-                    f"problem {name!r}: each contact needs 'finger', 'point' and 'normal', "
-                    f"got {item!r:.200}"
-                )
-            contacts.append(ContactTarget(item["finger"], item["point"], item["normal"]))
-        return cls(name, contacts)
+            raise InvalidTargetError(f"problem {_clean_name(name)!r}: 'contacts' must be a list")
+        return cls(name, [_contact_from_dict(item, name) for item in raw])
+
+
+def _contact_from_dict(item: Any, problem: str) -> ContactTarget:
+    if not isinstance(item, dict) or not {"finger", "point", "normal"} <= item.keys():
+        raise InvalidTargetError(
+            f"problem {_clean_name(problem)!r}: each contact needs 'finger', 'point' and 'normal', "
+            f"got {_preview(item)}"
+        )
+    return ContactTarget(item["finger"], item["point"], item["normal"])
+
+
+@dataclass(frozen=True)
+class InvalidProblem:
+    """A problem of a targets file that failed validation: nothing to solve, only the reason.
+
+    Attributes:
+        name: The problem's name, or ``problem-<index>`` when it has none.
+        detail: Why it is invalid (the :class:`InvalidTargetError` message).
+    """
+
+    name: str
+    detail: str
 
 
 @dataclass(frozen=True)
@@ -183,31 +228,62 @@ class TargetsFile:
     problems: tuple[GraspTarget, ...] = field(default_factory=tuple)
 
 
-def load_targets(path: str | os.PathLike[str]) -> TargetsFile:
-    """Read a targets file (conventions.md, "Targets file").
+def _problem(raw: Any, index: int) -> GraspTarget | InvalidProblem:
+    if isinstance(raw, dict) and "name" not in raw:
+        raw = {**raw, "name": f"problem-{index}"}
+    try:
+        return GraspTarget.from_dict(raw)
+    except InvalidTargetError as exc:
+        name = raw.get("name") if isinstance(raw, dict) else None
+        shown = _clean_name(name) if isinstance(name, str) else f"problem-{index}"
+        return InvalidProblem(shown, str(exc))
+
+
+def read_problems(path: str | os.PathLike[str]) -> tuple[str, list[GraspTarget | InvalidProblem]]:
+    """Read a targets file; a problem that fails validation is kept as an :class:`InvalidProblem`.
+
+    A problem without a name is called ``problem-<index>`` (from 0, in file order). A relative
+    hand-description path in the file (a ``hand`` with a suffix, such as
+    ``hands/my_hand.json``) is resolved against the targets file's folder.
+
+    Returns:
+        The hand (``"sah"``, ``"allegro"`` or a description path) and the problems in file order.
 
     Raises:
-        InvalidTargetError: The file is missing, is not JSON, or holds an invalid target.
+        InvalidTargetError: The file is missing, a folder, not UTF-8 JSON, nested too deeply, or
+            not an object with a string ``hand`` and a ``problems`` list.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InvalidTargetError(f"cannot read targets file {path}: {exc.strerror}") from exc
-    try:
-        data = json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        raise InvalidTargetError(f"targets file {path} is not valid JSON: {exc}") from exc
+    data = read_json(path, "targets file", InvalidTargetError)
     if not isinstance(data, dict) or not isinstance(data.get("problems"), list):
         raise InvalidTargetError(
             f"targets file {path} must be an object with 'hand' and a 'problems' list"
         )
-    problems = tuple(GraspTarget.from_dict(p) for p in data["problems"])
-    return TargetsFile(hand=str(data.get("hand", "sah")), problems=problems)
+    hand = data.get("hand", "sah")
+    if not isinstance(hand, str) or not hand:
+        raise InvalidTargetError(
+            f"targets file {path}: 'hand' must be 'sah', 'allegro' or a hand-description path, "
+            f"got {_preview(hand)}"
+        )
+    if Path(hand).suffix and not Path(hand).is_absolute():
+        hand = str(path.parent / hand)
+    return hand, [_problem(raw, i) for i, raw in enumerate(data["problems"])]
 
 
-def _reject_constant(name: str) -> float:
-    raise InvalidTargetError(f"targets hold {name}; every number must be finite")
+def load_targets(path: str | os.PathLike[str]) -> TargetsFile:
+    """Read a targets file (``docs/formats.md``, "Targets"), every problem valid.
+
+    Raises:
+        InvalidTargetError: The file cannot be read (see :func:`read_problems`) or holds an invalid
+            problem.
+    """
+    hand, problems = read_problems(path)
+    valid = []
+    for problem in problems:
+        if isinstance(problem, InvalidProblem):
+            raise InvalidTargetError(f"targets file {path}: {problem.detail}")
+        valid.append(problem)
+    return TargetsFile(hand=hand, problems=tuple(valid))
 
 
 def save_targets(path: str | os.PathLike[str], hand: str, problems: Iterable[GraspTarget]) -> None:

@@ -6,49 +6,91 @@ import argparse
 import importlib
 from typing import Any
 
-from sahgrasp.cli.common import emit_json
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    add_json_argument,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    nonnegative_int,
+    output_file,
+    positive_int,
+)
 
 __all__ = ["add_parser", "run"]
+
+_NOT_OPTIONS = ("command", "bench", "json", "run")
+"""Namespace entries that are not keyword arguments of the benchmark's ``run``."""
+
+
+def _kinematics(benches: Any) -> None:
+    k = add_command(benches, "kinematics", "contact queries vs raw Pinocchio calls")
+    k.add_argument("--calls", type=positive_int, default=20_000, help="timed calls per query")
+    add_json_argument(k, "the timings")
+
+
+def _ik(benches: Any) -> None:
+    ik = add_command(benches, "ik", "Algorithm 1: success and time vs initial poses, with peers")
+    ik.add_argument("--hand", default="sah", help=HAND_HELP)
+    ik.add_argument("--problems", type=positive_int, default=1000, help="random feasible problems")
+    ik.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the problems (>= 0)")
+    ik.add_argument("--targets", default=None, help="targets file instead of random problems")
+    ik.add_argument(
+        "--peers",
+        nargs="*",
+        default=["scipy", "pink"],
+        choices=["scipy", "pink"],
+        help="peer solvers to compare with (pink needs the [bench] extra)",
+    )
+    ik.add_argument(
+        "--peer-problems", type=positive_int, default=200, help="problems the peers solve"
+    )
+    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure, PNG")
+    add_json_argument(ik, "the results")
+
+
+def _atlas(benches: Any) -> None:
+    atlas = add_command(benches, "atlas", "atlas on spheres and the planar hand vs CuikSuite")
+    atlas.add_argument("--repeats", type=positive_int, default=5, help="builds per timed case")
+    add_json_argument(atlas, "the timings")
+
+
+def _sequence(benches: Any) -> None:
+    seq = add_command(benches, "sequence", "offline search: 1 vs 2 workers, cluster estimate")
+    seq.add_argument("--hand", default="sah", help=HAND_HELP)
+    seq.add_argument("--grid", type=positive_int, default=5, help="N values per lambda (>= 2)")
+    seq.add_argument("--problems", type=positive_int, default=60, help="M problems per round")
+    seq.add_argument("--rounds", type=positive_int, default=2, help="rounds of the search")
+    seq.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the problems (>= 0)")
+    seq.add_argument("--method", choices=("auto", "paper"), default="auto", help="IK method")
+    seq.add_argument(
+        "--workers", type=positive_int, nargs="+", default=[1, 2], help="worker counts to time"
+    )
+    seq.add_argument(
+        "--cluster-workers", type=positive_int, default=16, help="workers of the estimate"
+    )
+    add_json_argument(seq, "the timings")
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
-    p = sub.add_parser("bench", help="run a benchmark, write JSON")
-    benches = p.add_subparsers(dest="bench", required=True)
-    k = benches.add_parser("kinematics", help="contact queries vs raw Pinocchio")
-    k.add_argument("--calls", type=int, default=20_000)
-    k.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    k.set_defaults(run=run)
-    ik = benches.add_parser("ik", help="Algorithm 1: success/time vs initial poses, with peers")
-    ik.add_argument("--hand", default="sah")
-    ik.add_argument("--problems", type=int, default=1000)
-    ik.add_argument("--seed", type=int, default=0)
-    ik.add_argument("--targets", default=None, help="targets file instead of random problems")
-    ik.add_argument("--peers", nargs="*", default=["scipy", "pink"], choices=["scipy", "pink"])
-    ik.add_argument("--peer-problems", type=int, default=200)
-    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure")
-    ik.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    ik.set_defaults(run=run)
-    atlas = benches.add_parser("atlas", help="atlas on spheres and the planar hand vs CuikSuite")
-    atlas.add_argument("--repeats", type=int, default=5)
-    atlas.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    atlas.set_defaults(run=run)
-    seq = benches.add_parser("sequence", help="offline search: 1 vs 2 workers, cluster estimate")
-    seq.add_argument("--hand", default="sah")
-    seq.add_argument("--grid", type=int, default=5)
-    seq.add_argument("--problems", type=int, default=60)
-    seq.add_argument("--rounds", type=int, default=2)
-    seq.add_argument("--seed", type=int, default=0)
-    seq.add_argument("--method", choices=("auto", "paper"), default="auto")
-    seq.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    seq.add_argument("--cluster-workers", type=int, default=16)
-    seq.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    seq.set_defaults(run=run)
+    p = add_command(sub, "bench", "run a benchmark, print or write its JSON")
+    benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
+    for add in (_kinematics, _ik, _atlas, _sequence):
+        add(benches)
+    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp bench``."""
+    options = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
+    check_outputs([args.json, options.get("plot")], inputs=[options.get("targets")])
+    check_json_inputs(options.get("hand"))
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")
-    options = {k: v for k, v in vars(args).items() if k not in ("command", "bench", "json", "run")}
-    emit_json(module.run(**options), args.json)
+    with output_file(options.get("plot")) as plot:
+        if plot is not None:
+            options["plot"] = plot
+        data = module.run(**options)
+    emit_json(data, args.json)
     return 0
