@@ -68,14 +68,17 @@ def test_help_version_and_lazy_parser(tmp_path: Path) -> None:
         assert command in done.stdout
     version = sahgrasp("--version", cwd=tmp_path)
     assert version.returncode == 0 and re.fullmatch(r"sahgrasp \S+\n", version.stdout)
-    # Building the parser imports no heavy module (the package's own __init__ is left out).
+    # Building the parser (and importing the package) imports no heavy module.
     probe = (
-        "import sys, types; pkg = types.ModuleType('sahgrasp'); "
-        f"pkg.__path__ = [{str(ROOT / 'sahgrasp')!r}]; sys.modules['sahgrasp'] = pkg; "
-        "from sahgrasp.cli import _parser; _parser(); "
+        "import sys; from sahgrasp.cli import _parser; _parser(); "
         f"print(sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r}))"
     )
-    loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True)
+    loaded = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert loaded.stdout.strip() == "[]", loaded.stderr
 
 
@@ -411,3 +414,15 @@ def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
     assert "wrote p.png" in done.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.png"]
     assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_package_exports_load_lazily() -> None:
+    code = (
+        "import sys, sahgrasp; assert 'pinocchio' not in sys.modules; "
+        "from sahgrasp import _MODULE_OF; assert sorted(_MODULE_OF) == sahgrasp.__all__; "
+        "assert all(getattr(sahgrasp, n) is not None for n in sahgrasp.__all__); "
+        "assert 'pinocchio' in sys.modules"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(ROOT)}
+    )
