@@ -2,11 +2,12 @@
 
 Output: a regular file is replaced atomically, so a reader (or a resumed run) never sees a
 half-written file. The bytes go to a temporary file created with exclusive create (``O_EXCL``) in
-the target's folder, named ``.NAME.PID.tmp`` (``.NAME.PID-N.tmp`` if that name is taken;
-:func:`atomic_path` appends the target's suffix, ``.NAME.PID.tmp.png``, for writers that pick the
-format from it), flushed to disk and renamed over the target; the temporary file is removed when
-the write or the rename fails. An existing file keeps its permission bits, a new one gets the
-umask's. Other kinds of output path are handled as follows:
+the target's folder, named ``.NAME.PID-XXXXXXXX.sahgrasp.tmp`` (eight random hex digits;
+:func:`atomic_path` appends the target's suffix, ``...sahgrasp.tmp.png``, for writers that pick
+the format from it), a name no user file is mistaken for, so :func:`is_temporary` tells the
+leftovers of a killed write from anything else. It is flushed to disk and renamed over the
+target, and removed when the write or the rename fails. An existing file keeps its permission
+bits, a new one gets the umask's. Other kinds of output path are handled as follows:
 
 - a symbolic link is followed: the file it points to is replaced, the link stays;
 - a file that is not a regular file (``/dev/null``, a named pipe, a terminal) is written through,
@@ -25,6 +26,7 @@ import contextlib
 import json
 import os
 import re
+import secrets
 import stat
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -42,7 +44,7 @@ __all__ = [
     "write_json_atomic",
 ]
 
-_TEMPORARY = re.compile(r"^\..+\.\d+(?:-\d+)?\.tmp(?:\.[^.]+)?$")
+_TEMPORARY = re.compile(r"\..+\.[0-9]+-[0-9a-f]{8}\.sahgrasp\.tmp(?:\.[^.]+)?")
 _TEMPORARY_ATTEMPTS = 1000
 
 PathLike = str | os.PathLike[str]
@@ -54,7 +56,7 @@ class OutputPathError(SahGraspError):
 
 def is_temporary(name: str) -> bool:
     """Whether ``name`` is a file name this module gives its temporary files (see the module)."""
-    return _TEMPORARY.match(name) is not None
+    return _TEMPORARY.fullmatch(name) is not None
 
 
 def _stat(path: Path) -> os.stat_result | None:
@@ -141,9 +143,9 @@ def _create_temporary(target: Path, info: os.stat_result | None, suffix: str) ->
     """Create and open a new temporary file beside ``target``, with ``target``'s permissions."""
     target.parent.mkdir(parents=True, exist_ok=True)
     flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0)
-    for attempt in range(_TEMPORARY_ATTEMPTS):
-        tag = str(os.getpid()) + (f"-{attempt}" if attempt else "")
-        tmp = target.with_name(f".{target.name}.{tag}.tmp{suffix}")
+    for _ in range(_TEMPORARY_ATTEMPTS):
+        tag = f"{os.getpid()}-{secrets.token_hex(4)}"
+        tmp = target.with_name(f".{target.name}.{tag}.sahgrasp.tmp{suffix}")
         try:
             fd = os.open(tmp, flags, 0o666)
         except FileExistsError:

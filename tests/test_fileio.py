@@ -138,10 +138,11 @@ def test_exclusive_create_never_reuses_a_stale_temporary(tmp_path: Path) -> None
 
 
 def test_temporary_names() -> None:
-    assert is_temporary(".round-002.json.999.tmp")
-    assert is_temporary(".out.json.12-3.tmp")
-    assert is_temporary(".fig.png.12.tmp.png")
+    assert is_temporary(".round-002.json.999-0123abcd.sahgrasp.tmp")
+    assert is_temporary(".fig.png.12-ffffffff.sahgrasp.tmp.png")
     assert not is_temporary(".notes.tmp")
+    assert not is_temporary(".round-002.json.999.tmp")  # a user's file, not ours
+    assert not is_temporary(".x.1-0123ABCD.sahgrasp.tmp")
     assert not is_temporary("out.json")
 
 
