@@ -32,6 +32,8 @@ from sahgrasp.viz import (
     solve_example,
     visual_model,
 )
+from sahgrasp.viz.screenshot import ScreenshotError, screenshot
+from sahgrasp.viz.screenshot import main as screenshot_main
 
 
 def by_path(html: str, kind: str) -> dict[str, dict[str, Any]]:
@@ -281,3 +283,74 @@ def test_present_writes_html_without_a_server(tmp_path: Path) -> None:
     present(lambda v: v.meshcat["x"].set_transform(np.eye(4)), str(tmp_path / "x.html"))
     assert (tmp_path / "x.html").stat().st_size > 100_000  # meshcat's viewer is inlined
     assert {p.pid for p in psutil.Process().children(recursive=True)} == before
+
+
+# ----- screenshots ----------------------------------------------------------------------------
+def fake_chromium(folder: Path, body: str) -> str:
+    """An executable standing in for Chromium: a shell script running ``body``."""
+    path = folder / "fake-chromium"
+    path.write_text(f"#!/bin/sh\n{body}\n")
+    path.chmod(0o755)
+    return str(path)
+
+
+WRITE_SHOT = 'for a in "$@"; do case "$a" in --screenshot=*) printf PNG > "${a#*=}";; esac; done'
+
+
+def processes_running(executable: str) -> list[psutil.Process]:
+    found = []
+    for proc in psutil.process_iter(["cmdline", "status"]):
+        cmdline = proc.info["cmdline"] or []
+        if any(executable in part for part in cmdline) and proc.info["status"] != "zombie":
+            found.append(proc)
+    return found
+
+
+@pytest.fixture
+def page(tmp_path: Path) -> Path:
+    html = tmp_path / "scene.html"
+    html.write_text("<html></html>")
+    return html
+
+
+def test_a_hanging_chromium_is_killed_whole_retried_then_one_error(
+    tmp_path: Path, page: Path
+) -> None:
+    chromium = fake_chromium(tmp_path, "sleep 300 &\nsleep 300")  # a child in its group too
+    with pytest.raises(ScreenshotError, match=r"failed 2 times.*hung.*install Chromium"):
+        screenshot(page, tmp_path / "out.png", timeout_s=0.5, attempts=2, chromium=chromium)
+    assert processes_running(chromium) == []
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_failing_chromium_reports_its_exit_code_and_last_line(tmp_path: Path, page: Path) -> None:
+    chromium = fake_chromium(tmp_path, "echo 'first' >&2\necho 'GPU process died' >&2\nexit 3")
+    with pytest.raises(ScreenshotError, match=r"exit code 3 \(GPU process died\)"):
+        screenshot(page, tmp_path / "out.png", attempts=1, chromium=chromium)
+
+
+def test_an_image_written_before_chromium_hangs_on_exit_is_kept(tmp_path: Path, page: Path) -> None:
+    chromium = fake_chromium(tmp_path, f"{WRITE_SHOT}\nsleep 300")
+    out = screenshot(page, tmp_path / "sub" / "out.png", timeout_s=30, chromium=chromium)
+    assert out.read_bytes() == b"PNG"
+    assert processes_running(chromium) == []
+
+
+def test_no_chromium_is_one_typed_error_and_one_line(
+    tmp_path: Path, page: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(ScreenshotError, match=r"no Chromium found.*apt-get install -y chromium"):
+        screenshot(page, tmp_path / "out.png")
+    assert screenshot_main([str(page), str(tmp_path / "out.png")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("screenshot: error: no Chromium found")
+
+
+def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None:
+    with pytest.raises(ScreenshotError, match="not a file"):
+        screenshot(tmp_path / "missing.html", tmp_path / "out.png")
+    with pytest.raises(ScreenshotError, match="attempts >= 1"):
+        screenshot(page, tmp_path / "out.png", attempts=0)
+    with pytest.raises(SystemExit):
+        screenshot_main([str(page), str(tmp_path / "out.png"), "--size", "12x"])
