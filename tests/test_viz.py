@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +40,7 @@ from sahgrasp.viz import (
 )
 from sahgrasp.viz.screenshot import ScreenshotError, screenshot
 from sahgrasp.viz.screenshot import main as screenshot_main
+from sahgrasp.viz.viewer import ViewerError
 
 
 def by_path(html: str, kind: str) -> dict[str, dict[str, Any]]:
@@ -87,6 +94,80 @@ def test_live_viewer_server_is_gone_after_an_error() -> None:
         pid = viewer.server_pid
         raise RuntimeError("boom")
     assert pid is not None and not psutil.pid_exists(pid)
+
+
+ROOT = Path(__file__).resolve().parent.parent
+LIVE_SCRIPT = """
+import signal, sys, time
+from sahgrasp.viz.viewer import Viewer
+if sys.argv[1] == "own-handler":
+    signal.signal(signal.SIGTERM, lambda *_: (print("own handler", flush=True), sys.exit(3)))
+viewer = Viewer(live=True)
+print(viewer.server_pid, flush=True)
+time.sleep(120)
+"""
+
+
+def gone(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True
+
+
+def until(condition: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.1)
+    return condition()
+
+
+def listening(pid: int) -> set[str]:
+    return {c.laddr.ip for c in psutil.Process(pid).net_connections() if c.status == "LISTEN"}
+
+
+@pytest.mark.parametrize(
+    ("signum", "mode", "code"),
+    [
+        (signal.SIGTERM, "plain", -signal.SIGTERM),
+        (signal.SIGHUP, "plain", -signal.SIGHUP),
+        (signal.SIGKILL, "plain", -signal.SIGKILL),
+        (signal.SIGTERM, "own-handler", 3),
+    ],
+)
+def test_a_signalled_script_leaves_no_meshcat_server(signum: int, mode: str, code: int) -> None:
+    script = subprocess.Popen(
+        [sys.executable, "-c", LIVE_SCRIPT, mode], stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    try:
+        assert script.stdout is not None
+        lines = iter(script.stdout.readline, "")
+        server = int(next(line for line in lines if line.strip().isdigit()))
+        assert listening(server) == {"127.0.0.1"}  # zmq and web ports, this machine only
+        script.send_signal(signum)
+        assert until(lambda: script.poll() is not None), "the script did not end"
+        assert until(lambda: gone(server)), "the meshcat server outlived the script"
+        assert script.returncode == code
+        if mode == "own-handler":
+            assert "own handler" in script.stdout.read()
+    finally:
+        script.kill()
+        script.communicate(timeout=10)
+
+
+def test_live_viewer_puts_back_the_signal_handlers() -> None:
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    with Viewer(live=True) as viewer:
+        assert signal.getsignal(signal.SIGTERM) == viewer._on_signal
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+
+
+def test_live_viewer_on_a_bad_host_is_a_typed_error() -> None:
+    with pytest.raises(ViewerError, match=r"did not start on host '256\.1\.1\.1'"):
+        Viewer(live=True, host="256.1.1.1")
 
 
 def test_offline_viewer_cannot_open_a_browser() -> None:
