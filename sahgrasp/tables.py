@@ -46,7 +46,8 @@ def format_table(
         markdown: A Markdown (GitHub) table instead of space-separated columns.
 
     Returns:
-        The table, lines joined by newlines, no trailing newline. Columns whose cells are all
+        The table, lines joined by newlines, no trailing newline: the header line, (in Markdown
+        its rule,) then one line per row. Columns whose cells are all
         numbers (or ``-``) are right-aligned, the others left-aligned.
 
     Raises:
@@ -70,7 +71,5 @@ def format_table(
     if markdown:
         lines.append("|" + "|".join(("-" * (w + 1) + ":") if r else "-" * (w + 2)
                                     for w, r in zip(widths, right, strict=True)) + "|")  # fmt: skip
-    else:
-        lines.append("  ".join("-" * w for w in widths))
     lines += [line(row) for row in cells]
     return "\n".join(lines)

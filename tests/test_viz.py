@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -357,6 +358,23 @@ def test_example_report_beside_the_paper(sah: Hand) -> None:
     row = report.splitlines()[1]
     assert row.split()[0] == "fork" and "(1)" in row and "(6)" in row
     assert example.result.history is not None
+
+
+def test_example_report_columns_stay_aligned_on_a_long_reason(sah: Hand) -> None:
+    solved = solve_example(sah, "fork")
+    failed = dataclasses.replace(
+        solved, name="can", result=dataclasses.replace(solved.result, success=False,
+                                                        reason="no_progress"),
+    )  # fmt: skip
+    header, *rows = format_report([solved, failed]).splitlines()
+    assert rows[1].split()[1:3] == ["no", "(no_progress)"]
+    for title in ("inits (paper)", "iterations (paper)"):  # text: left-aligned
+        start = header.index(title)
+        for row in rows:
+            assert row[start - 2 : start] == "  " and row[start] != " ", (title, row)
+    end = header.index("time [ms]") + len("time [ms]")  # numbers: right-aligned
+    assert all(row[end - 1] != " " and row[end : end + 2] == "  " for row in rows)
+    assert len({len(line) for line in (header, *rows)}) == 1
 
 
 def test_present_writes_html_without_a_server(tmp_path: Path) -> None:
