@@ -30,7 +30,7 @@ from sahgrasp.objects import (
     transform_points,
 )
 from sahgrasp.tables import format_table
-from sahgrasp.viz.grasp_view import show_grasp
+from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.present import add_html_argument, present
 from sahgrasp.viz.viewer import Viewer
 
@@ -126,7 +126,7 @@ def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) 
     extents, cursor = [], 0.0
     for ex in examples:
         T = _facing_placement(ex)
-        extent = transform_points(T, _extent_m(hand, ex))
+        extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
         T[0, 3] += shift
         extent[:, 0] += shift
@@ -161,13 +161,6 @@ def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
     T[:3, :3] = pin.Quaternion.FromTwoVectors(back, _BEHIND).toRotationMatrix()
     T[:3, 3] = -T[:3, :3] @ example.contact_centre_m
     return T
-
-
-def _extent_m(hand: Hand, example: GraspExample) -> NDArray[np.float64]:
-    """Points spanning the drawn grasp: object mesh vertices and hand link origins [m]."""
-    obj = example.obj
-    links = [M.translation for M in hand.frame_placements(example.result.q).values()]
-    return np.concatenate([transform_points(obj.T_world_object, obj.mesh().vertices_m), links])
 
 
 def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
