@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
-from sahgrasp.viz.hand_view import HandView
+from sahgrasp.viz.hand_view import HandView, visual_corners
 from sahgrasp.viz.markers import show_contacts, show_object
 from sahgrasp.viz.viewer import Viewer
 
@@ -62,11 +62,16 @@ def show_grasp(
 def grasp_points(
     hand: Hand, q: NDArray[np.float64], obj: GraspObject | None = None
 ) -> NDArray[np.float64]:
-    """Points spanning a drawn grasp: hand link origins at ``q`` and object mesh vertices [m]."""
-    links = [M.translation for M in hand.frame_placements(q).values()]
+    """Points spanning a drawn grasp (world frame) [m].
+
+    The corners of the hand's visual bounding boxes at ``q`` and the object's mesh vertices.
+    """
+    hand_points = visual_corners(hand, q)
     if obj is None:
-        return np.array(links)
-    return np.concatenate([transform_points(obj.T_world_object, obj.mesh().vertices_m), links])
+        return hand_points
+    return np.concatenate(
+        [transform_points(obj.T_world_object, obj.mesh().vertices_m), hand_points]
+    )
 
 
 def frame_grasp(

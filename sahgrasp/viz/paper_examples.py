@@ -53,8 +53,8 @@ EXAMPLE_NAMES = GRASP_NAMES
 EXAMPLE_GAP_M = 0.06
 """Gap along x between the extents of neighbouring grasps in a row [m]."""
 
-ROW_ASPECT = 2.0
-"""Width/height ratio of the window a row of grasps is framed for."""
+ROW_ASPECT = 1.5
+"""Smallest width/height ratio of the window a row of grasps fits in (1280x800 is 1.6)."""
 
 
 @dataclass(frozen=True)
