@@ -19,15 +19,18 @@ import pytest
 from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.hand import Hand
 from sahgrasp.ik import random_problem, solve_ik
-from sahgrasp.objects import load_object, paper_grasp
+from sahgrasp.objects import load_object, paper_grasp, transform_points
 from sahgrasp.viz import (
     CAMERA_FOV_DEG,
+    EXAMPLE_NAMES,
     ChartGrasp,
     HandView,
     RecordingWindow,
     Viewer,
     display_points,
     format_report,
+    frame_grasp,
+    grasp_points,
     hex_color,
     present,
     quality_colors,
@@ -35,10 +38,12 @@ from sahgrasp.viz import (
     show_atlas,
     show_atlas_grasps,
     show_contacts,
+    show_examples,
     show_grasp,
     solve_example,
     visual_model,
 )
+from sahgrasp.viz.hand_view import visual_corners
 from sahgrasp.viz.screenshot import ScreenshotError, screenshot
 from sahgrasp.viz.screenshot import main as screenshot_main
 from sahgrasp.viz.viewer import ViewerError
@@ -210,6 +215,70 @@ def test_frame_holds_every_point_in_the_field_of_view() -> None:
     depth = rel[:, 1]  # looking along +y
     half = np.tan(np.radians(0.5 * CAMERA_FOV_DEG))
     assert np.all(np.abs(rel[:, 0]) <= depth * half) and np.all(np.abs(rel[:, 2]) <= depth * half)
+
+
+def camera_eye(html: str) -> np.ndarray:
+    """The camera position (world frame) of an exported scene framed by ``look_at``."""
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    (position,) = [c for c in scene_commands(html) if c.get("property") == "position"]
+    x, z, minus_y = position["value"]
+    return centre + np.array([x, -minus_y, z])
+
+
+def in_view(points: np.ndarray, eye: np.ndarray, centre: np.ndarray, aspect: float) -> bool:
+    """Every point inside the field of view of a camera at ``eye`` looking at ``centre``."""
+    forward = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = points - eye
+    depth = rel @ forward
+    tan_v = np.tan(np.radians(0.5 * CAMERA_FOV_DEG))
+    return bool(np.all(np.abs(rel @ up) <= depth * tan_v)
+                and np.all(np.abs(rel @ right) <= depth * tan_v * aspect))  # fmt: skip
+
+
+def test_visual_corners_bound_every_visual_geometry(sah: Hand) -> None:
+    q = sah.configuration()
+    corners = visual_corners(sah, q)
+    assert corners.shape == (8 * visual_model(sah).ngeoms, 3)
+    with Viewer() as viewer:
+        placements = HandView(viewer, sah, "h", q).placements(q)
+    palm = corners[:8]  # a box: its corners lie at its half-diagonal from its placement
+    assert np.allclose(palm.mean(axis=0), placements[0][:3, 3])
+    assert np.allclose(np.linalg.norm(palm - placements[0][:3, 3], axis=1),
+                       np.linalg.norm([0.03285, 0.06, 0.065]))  # fmt: skip
+
+
+def test_frame_grasp_looks_at_the_inside_of_the_hand_with_all_in_view(sah: Hand) -> None:
+    can, target = load_object("can"), paper_grasp("can")
+    result = solve_ik(sah, target)
+    with Viewer() as viewer:
+        show_grasp(viewer, "g", sah, result.q, can, target)
+        frame_grasp(viewer, sah, result.q, target, can)
+        html = viewer.html()
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    contacts = np.mean([c.point for c in target.contacts], axis=0)
+    outward = contacts - result.q[:3]
+    assert (eye - contacts)[:2] @ outward[:2] > 0  # beyond the contacts, seen from the wrist
+    assert eye[2] > centre[2]  # from above
+    assert in_view(grasp_points(sah, result.q, can), eye, centre, aspect=1.0)
+
+
+def test_a_row_of_examples_fits_a_1280x800_window(sah: Hand) -> None:
+    examples = [solve_example(sah, name) for name in EXAMPLE_NAMES]
+    with Viewer() as viewer:
+        show_examples(viewer, sah, examples)
+        html = viewer.html()
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    placed = [
+        transform_points(transform(by_path(html, "set_transform")[f"/meshcat/grasps/{ex.name}"]),
+                         grasp_points(sah, ex.result.q, ex.obj))
+        for ex in examples
+    ]  # fmt: skip
+    assert in_view(np.concatenate(placed), eye, centre, aspect=1280 / 800)
 
 
 # ----- colours --------------------------------------------------------------------------------
