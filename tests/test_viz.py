@@ -171,6 +171,17 @@ def test_live_viewer_puts_back_the_signal_handlers() -> None:
     assert {sig: signal.getsignal(sig) for sig in before} == before
 
 
+def test_an_ignored_signal_stays_ignored() -> None:
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as under nohup
+    try:
+        with Viewer(live=True) as viewer:
+            assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) == viewer._on_signal
+        assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+
+
 def test_live_viewer_on_a_bad_host_is_a_typed_error() -> None:
     with pytest.raises(ViewerError, match=r"did not start on host '256\.1\.1\.1'"):
         Viewer(live=True, host="256.1.1.1")

@@ -21,31 +21,39 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from meshcat.servers.zmqserver import ZMQWebSocketBridge
-from tornado.ioloop import PeriodicCallback
-
 _PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
 _PARENT_POLL_MS = 500
 
 
-class LocalBridge(ZMQWebSocketBridge):
-    """meshcat's bridge with its web server listening on ``host`` only (upstream: all)."""
+def _local_bridge(host: str) -> Any:
+    """Meshcat's bridge with its web server listening on ``host`` only (upstream: all).
 
-    def make_app(self) -> Any:
-        """The tornado app, whose ``listen`` binds ``self.host`` (set before the app is made)."""
-        app = super().make_app()
-        listen = app.listen
-        app.listen = lambda port, **kwargs: listen(port, address=self.host, **kwargs)
-        return app
+    meshcat and tornado are imported here, after the parent-death request: they take a second.
+    """
+    from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+    class LocalBridge(ZMQWebSocketBridge):
+        def make_app(self) -> Any:
+            app = super().make_app()  # self.host is set before the app is made
+            listen = app.listen
+            app.listen = lambda port, **kwargs: listen(port, address=self.host, **kwargs)
+            return app
+
+    return LocalBridge(host=host)
 
 
 def _die_with_parent(parent: int) -> None:
-    """End this process when ``parent`` ends (the kernel's signal on Linux, else a poll)."""
+    """Ask the kernel (Linux) for SIGTERM when ``parent`` ends; exit if it already has."""
     if sys.platform.startswith("linux"):
         libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
     if os.getppid() != parent:  # the parent died before the request above took effect
         sys.exit(0)
+
+
+def _poll_parent(parent: int) -> None:
+    """End this process within ``_PARENT_POLL_MS`` of ``parent``'s end (where no kernel signal)."""
+    from tornado.ioloop import PeriodicCallback
 
     def check() -> None:
         if os.getppid() != parent:
@@ -60,8 +68,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--host", default="127.0.0.1", help="interface for zmq and the browser")
     parser.add_argument("--parent", type=int, required=True, help="exit when this process ends")
     args = parser.parse_args(argv)
-    bridge = LocalBridge(host=args.host)
     _die_with_parent(args.parent)
+    bridge = _local_bridge(args.host)
+    _poll_parent(args.parent)
     print(f"zmq_url={bridge.zmq_url}")
     print(f"web_url={bridge.web_url}", flush=True)
     # Nobody reads the pipe after these lines: later output must not fill it and block us.

@@ -24,9 +24,10 @@ import sys
 import tempfile
 import threading
 import webbrowser
+from contextlib import suppress
 from pathlib import Path
 from types import FrameType, TracebackType
-from typing import Any
+from typing import IO, Any
 
 import meshcat
 import meshcat.animation
@@ -67,30 +68,30 @@ def translation(offset_m: ArrayLike) -> NDArray[np.float64]:
     return T
 
 
-def _start_server(host: str) -> tuple[subprocess.Popen[bytes], str]:
-    """Start the meshcat server on ``host``; the process and its zmq address.
+def _spawn_server(host: str, errors: IO[bytes]) -> subprocess.Popen[bytes]:
+    """Start the meshcat server on ``host``, its stderr into ``errors``.
 
     It runs in its own session (a Ctrl-C at the terminal reaches the script, which closes the
     viewer, not the server directly) and exits by itself when this process dies.
+    """
+    command = [sys.executable, "-u", str(_SERVER_SCRIPT), "--host", host,
+               "--parent", str(os.getpid())]  # fmt: skip
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=errors, start_new_session=True)
+
+
+def _server_address(server: subprocess.Popen[bytes], errors: IO[bytes], host: str) -> str:
+    """The zmq address the server prints once it listens.
 
     Raises:
         ViewerError: The server exited before giving its address (the message has its last line).
     """
-    command = [sys.executable, "-u", str(_SERVER_SCRIPT), "--host", host,
-               "--parent", str(os.getpid())]  # fmt: skip
-    with tempfile.TemporaryFile() as errors:
-        server = subprocess.Popen(
-            command, stdout=subprocess.PIPE, stderr=errors, start_new_session=True
-        )
-        assert server.stdout is not None  # stdout=PIPE
-        first = server.stdout.readline().decode("utf-8", "replace").strip()
-        server.stdout.readline()  # web_url=..., asked from the server itself later
-        if first.startswith("zmq_url="):
-            return server, first.removeprefix("zmq_url=")
-        server.kill()
-        server.wait()  # killed: returns at once
-        errors.seek(0)
-        lines = errors.read().decode("utf-8", "replace").strip().splitlines() or ["no output"]
+    assert server.stdout is not None  # stdout=PIPE
+    first = server.stdout.readline().decode("utf-8", "replace").strip()
+    server.stdout.readline()  # web_url=..., asked from the server itself later
+    if first.startswith("zmq_url="):
+        return first.removeprefix("zmq_url=")
+    errors.seek(0)
+    lines = errors.read().decode("utf-8", "replace").strip().splitlines() or ["no output"]
     raise ViewerError(f"the meshcat server did not start on host {host!r}: {lines[-1][:200]}")
 
 
@@ -122,12 +123,9 @@ class Viewer:
         self._closed = False
         self._server: subprocess.Popen[bytes] | None = None
         self._previous_handlers: dict[int, Any] = {}
-        window: Any = RecordingWindow(title)
+        self._window: Any = RecordingWindow(title)
         if live:
-            self._server, zmq_url = _start_server(host)
-            self._watch_exit()
-            window = meshcat.visualizer.ViewerWindow(zmq_url, False, [])
-        self._window = window
+            self._window = meshcat.visualizer.ViewerWindow(self._start(host), False, [])
         self.meshcat = meshcat.Visualizer(window=self._window)
         self.animation = meshcat.animation.Animation(default_framerate=animation_fps)
         self.meshcat["/Background"].set_property("top_color", _BACKGROUND_TOP)
@@ -158,16 +156,31 @@ class Viewer:
         self._server.wait()  # killed: returns at once
         if self._server.stdout is not None:
             self._server.stdout.close()
-        if isinstance(self._window, meshcat.visualizer.ViewerWindow):
+        if isinstance(self._window, meshcat.visualizer.ViewerWindow):  # else it failed to start
             self._window.zmq_socket.close(linger=0)
         self._unwatch_exit()
 
+    def _start(self, host: str) -> str:
+        """Start the server, watched from the start (its startup takes a second); its address."""
+        with tempfile.TemporaryFile() as errors:
+            self._server = _spawn_server(host, errors)
+            self._watch_exit()
+            try:
+                return _server_address(self._server, errors, host)
+            except ViewerError:
+                self.close()
+                raise
+
     def _watch_exit(self) -> None:
-        """Close at interpreter exit and on :data:`CLEANUP_SIGNALS` (main thread only)."""
+        """Close at interpreter exit and on :data:`CLEANUP_SIGNALS` (main thread only).
+
+        A signal the process ignores (``nohup`` ignores SIGHUP) stays ignored.
+        """
         atexit.register(self.close)
         if threading.current_thread() is threading.main_thread():
             for sig in CLEANUP_SIGNALS:
-                self._previous_handlers[sig] = signal.signal(sig, self._on_signal)
+                if signal.getsignal(sig) != signal.SIG_IGN:
+                    self._previous_handlers[sig] = signal.signal(sig, self._on_signal)
 
     def _unwatch_exit(self) -> None:
         """Put back the handlers replaced by :meth:`_watch_exit` if ours are still in place."""
@@ -179,12 +192,19 @@ class Viewer:
                 signal.signal(sig, previous)
 
     def _on_signal(self, signum: int, frame: FrameType | None) -> None:
-        """Stop the server, then let the signal do what it did before this viewer."""
+        """Kill the server, then let the signal do what it did before this viewer.
+
+        Only the kill happens here: the handler may interrupt the main thread inside a read of
+        the server's pipe, a zmq call or :meth:`close` itself, so the rest of the cleanup is left
+        to :meth:`close` (the ``with`` block, ``atexit``) or to the end of the process.
+        """
+        if self._server is not None and not self._closed:
+            with suppress(ProcessLookupError):
+                os.kill(self._server.pid, signal.SIGKILL)
         previous = self._previous_handlers.get(signum, signal.SIG_DFL)
-        self.close()
         if callable(previous):
             previous(signum, frame)
-        elif previous != signal.SIG_IGN:  # SIG_DFL, or a handler not set from Python
+        else:  # SIG_DFL, or a handler not set from Python: end as the signal would have
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
 
