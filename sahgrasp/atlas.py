@@ -40,11 +40,11 @@ from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dgetrf as _dgetrf
 from scipy.linalg.lapack import dorgqr as _dorgqr
 from scipy.spatial import ConvexHull, QhullError, cKDTree
-from tqdm import tqdm
 
 from sahgrasp.errors import AtlasError
+from sahgrasp.progress import ProgressCallback, StderrProgress
 
-__all__ = ["Atlas", "AtlasSettings", "build_atlas", "project"]
+__all__ = ["STOP_REASONS", "Atlas", "AtlasSettings", "build_atlas", "project"]
 
 FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.int64]
@@ -55,6 +55,10 @@ _MASK_BITS = 62  # facets a Qhull-built polytope may have (one bit each of an in
 _CUT_TOL = 1e-9  # a vertex closer than this (times r) to a plane lies on it
 _RANK_TOL = 1e-8  # relative size of the smallest R diagonal of qr(J^T) below which J drops rank
 _BISECTIONS = 40  # steps to locate a branch crossing along a chart's parameter ray
+_PROGRESS_STAGE = "atlas charts"
+
+STOP_REASONS = ("complete", "max_charts")
+"""Why a build ended: every chart bounded (or at a box bound), or ``max_charts`` charts exist."""
 
 
 @dataclass(frozen=True)
@@ -70,7 +74,8 @@ class AtlasSettings:
         min_step: Smallest step ``alpha`` as a fraction of ``r``; a vertex whose expansion fails at
             every step down to it is blocked (Algorithm 1, lines 9-12, with a floor).
         start_tol: Largest ``|F(x0)|`` accepted for the start point (it is projected first).
-        progress: Show a tqdm progress bar.
+        progress: Draw a progress bar on stderr when :func:`build_atlas` gets no ``progress``
+            callback (a front-end switch; the builder itself only calls the callback).
     """
 
     radius: float = 0.1
@@ -116,6 +121,8 @@ class Atlas:
         rejections: Projections rejected by Eq. (17) or Eq. (18).
         bound_rejections: Projections that left the box bounds.
         build_seconds: Wall time of the build [s].
+        stop_reason: Why the build ended, one of :data:`STOP_REASONS`: ``"max_charts"`` when the
+            cap stopped it with charts still to expand.
     """
 
     centres: FloatArray
@@ -131,6 +138,7 @@ class Atlas:
     rejections: int
     bound_rejections: int
     build_seconds: float
+    stop_reason: str
 
     @property
     def n_charts(self) -> int:
@@ -595,18 +603,23 @@ class _Builder:
 
     # -- expanding -----------------------------------------------------------------------------
 
-    def run(self, bar: tqdm) -> None:
-        """Expand charts until every one is bounded or ``max_charts`` is reached."""
-        r2 = self.r**2
-        while self.queue and self.count < self.settings.max_charts:
+    def run(self, progress: ProgressCallback | None) -> None:
+        """Expand charts until every one is bounded or ``max_charts`` is reached.
+
+        ``progress`` hears of every new chart (``done`` charts of at most ``max_charts``).
+        """
+        r2, cap = self.r**2, self.settings.max_charts
+        if progress is not None:
+            progress(_PROGRESS_STAGE, self.count, cap)
+        while self.queue and self.count < cap:
             i = self.queue[0]
             v = self._polytope(i).expandable(r2)
             if v < 0:
                 self.queue.popleft()
                 self.queued[i] = False
                 continue
-            if self.expand(i, v):
-                bar.update(1)
+            if self.expand(i, v) and progress is not None:
+                progress(_PROGRESS_STAGE, self.count, cap)
 
     def expand(self, i: int, v: int) -> bool:
         """Try to create a chart from vertex ``v`` of chart ``i`` (Algorithm 1, lines 7-13).
@@ -729,6 +742,7 @@ class _Builder:
             rejections=self.counters.rejections,
             bound_rejections=self.counters.bound_rejections,
             build_seconds=seconds,
+            stop_reason="max_charts" if any(self.queued) else "complete",
         )
 
 
@@ -791,6 +805,7 @@ def build_atlas(
     settings: AtlasSettings | None = None,
     lower: ArrayLike | None = None,
     upper: ArrayLike | None = None,
+    progress: ProgressCallback | None = None,
 ) -> Atlas:
     """Cover the connected component of ``F(x) = 0`` through ``x0`` with charts (Section IV).
 
@@ -802,9 +817,12 @@ def build_atlas(
         settings: Continuation parameters (radius ``r``, ``epsilon``, caps); defaults if None.
         lower: Lower box bound on ``x`` (``-inf`` for none), shape (n,).
         upper: Upper box bound on ``x`` (``+inf`` for none), shape (n,).
+        progress: Called after every new chart as ``progress("atlas charts", charts,
+            max_charts)``; with None, ``settings.progress`` draws a bar on stderr.
 
     Returns:
-        The atlas; ``atlas.complete`` is False when ``max_charts`` stopped the build.
+        The atlas; when ``max_charts`` stopped the build, ``atlas.stop_reason`` is
+        ``"max_charts"`` and ``atlas.complete`` is False.
 
     Raises:
         AtlasError: Shapes of ``F``/``J`` disagree with ``n`` and ``k``, ``x0`` is off the manifold,
@@ -819,8 +837,10 @@ def build_atlas(
         raise AtlasError("x0 lies outside the box [lower, upper]; the start must lie within it")
     scale = float(np.sqrt(np.einsum("ij,ij->i", J(point.x), J(point.x))).max())
     builder = _Builder(F, J, k, (lo, hi), scale, settings)
-    with tqdm(desc="atlas", unit="chart", disable=not settings.progress) as bar:
-        builder.add_chart(point, -1)
-        bar.update(1)
-        builder.run(bar)
+    builder.add_chart(point, -1)
+    if progress is None and settings.progress:
+        with StderrProgress() as bar:
+            builder.run(bar)
+    else:
+        builder.run(progress)
     return builder.result(time.perf_counter() - start_time)

@@ -52,10 +52,12 @@ from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.errors import AtlasError
 from sahgrasp.fileio import write_json_atomic
 from sahgrasp.motions import principal_motions
+from sahgrasp.progress import ProgressCallback
 from sahgrasp.quality import INDICES, Manipulability, manipulability, null_space
 
 __all__ = [
     "DEFAULT_HAND",
+    "MAX_CHARTS",
     "Extremum",
     "PlanarGraspProblem",
     "PlanarHand",
@@ -72,6 +74,8 @@ FloatArray = NDArray[np.float64]
 
 N_VARS = 19  # 12 phalanx vectors + t_o (2) + v_o (2) + u (3)
 T_DIM = 3  # dimension of F (Section V)
+MAX_CHARTS = 20_000
+"""Default cap on the planar atlas (the paper's r = 0.125 needs about 750 charts)."""
 _INF = np.inf
 _V = slice(0, 12)
 _TO = slice(12, 14)
@@ -440,7 +444,8 @@ def build_planar_atlas(
     radius: float = 0.125,
     epsilon: float = 0.4,
     start: ArrayLike | None = None,
-    progress: bool = False,
+    progress: ProgressCallback | bool | None = None,
+    max_charts: int = MAX_CHARTS,
 ) -> Atlas:
     """Atlas of R (Eq. (11)) from ``start`` (default ``x_1``), bounded by the contact arcs.
 
@@ -450,12 +455,21 @@ def build_planar_atlas(
         epsilon: Threshold of Eqs. (17)-(18).
         start: A point of R to start from, (19,); another one than ``x_1`` covers the same
             connected component.
-        progress: Show a progress bar.
+        progress: Hears of every new chart (see :func:`~sahgrasp.atlas.build_atlas`); True
+            draws a bar on stderr.
+        max_charts: Stop there; the atlas then says ``stop_reason == "max_charts"``.
+
+    Raises:
+        AtlasError: ``radius``, ``epsilon`` or ``max_charts`` is out of range.
     """
     lower, upper = problem.bounds()
     x0 = problem.x1 if start is None else np.asarray(start, dtype=np.float64)
-    settings = AtlasSettings(radius=radius, epsilon=epsilon, progress=progress)
-    return build_atlas(problem.residual, problem.jacobian, x0, problem.k, settings, lower, upper)
+    bar = progress is True
+    settings = AtlasSettings(radius=radius, epsilon=epsilon, max_charts=max_charts, progress=bar)
+    callback = None if isinstance(progress, bool) else progress
+    return build_atlas(
+        problem.residual, problem.jacobian, x0, problem.k, settings, lower, upper, callback
+    )
 
 
 def _extremum(atlas: Atlas, values: FloatArray, best: bool) -> Extremum:
@@ -468,7 +482,8 @@ def optimize_planar(
     radius: float = 0.125,
     epsilon: float = 0.4,
     start: ArrayLike | None = None,
-    progress: bool = False,
+    progress: ProgressCallback | bool | None = None,
+    max_charts: int = MAX_CHARTS,
 ) -> PlanarResult:
     """Algorithm 1: atlas of R, then the three manipulability indices at every chart centre.
 
@@ -477,10 +492,12 @@ def optimize_planar(
         radius: Chart radius ``r`` (the paper: 0.125).
         epsilon: Threshold of Eqs. (17)-(18) (the paper: 0.4).
         start: Start point on R, default ``x_1``.
-        progress: Show a progress bar.
+        progress: Hears of every new chart (see :func:`~sahgrasp.atlas.build_atlas`); True
+            draws a bar on stderr.
+        max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
     """
     problem = problem or make_planar_problem()
-    atlas = build_planar_atlas(problem, radius, epsilon, start, progress)
+    atlas = build_planar_atlas(problem, radius, epsilon, start, progress, max_charts)
     begin = time.perf_counter()
     quality = problem.manipulability(atlas.centres)
     best = {name: _extremum(atlas, quality.index(name), best=True) for name in INDICES}
@@ -571,6 +588,8 @@ def run_planar(
     index: str = "volume",
     json_out: str | None = None,
     plot_out: str | None = None,
+    max_charts: int = MAX_CHARTS,
+    progress: ProgressCallback | None = None,
 ) -> dict[str, Any]:
     """The planar experiment of Section V, summarised for the ``sahgrasp atlas planar`` command.
 
@@ -581,18 +600,22 @@ def run_planar(
         index: The index whose best and worst grasps head the summary (see ``INDICES``).
         json_out: Write the summary there as JSON.
         plot_out: Write the Fig. 9 plot there as PNG.
+        max_charts: Cap on the atlas size.
+        progress: Hears of every new chart (see :func:`~sahgrasp.atlas.build_atlas`).
 
     Returns:
-        JSON-able summary: ``charts``, ``t``, ``k``, ``atlas_seconds``, ``quality_seconds``,
-        ``best`` and ``worst`` (chart, value, configuration) of ``index``, and per index the same
-        plus the number of singular charts.
+        JSON-able summary: ``charts``, ``t``, ``k``, ``max_charts``, ``complete`` and
+        ``stop_reason`` (``"max_charts"`` when the cap stopped the atlas), ``atlas_seconds``,
+        ``quality_seconds``, ``best`` and ``worst`` (chart, value, configuration) of ``index``,
+        and per index the same plus the number of singular charts.
 
     Raises:
-        AtlasError: ``index`` is not one of ``INDICES`` or ``k`` is not 1, 2 or 3.
+        AtlasError: ``index`` is not one of ``INDICES``, ``k`` is not 1, 2 or 3, or ``r``,
+            ``eps`` or ``max_charts`` is out of range.
     """
     if index not in INDICES:
         raise AtlasError(f"unknown index {index!r}; valid: {', '.join(INDICES)}")
-    result = optimize_planar(make_planar_problem(k), r, eps)
+    result = optimize_planar(make_planar_problem(k), r, eps, None, progress, max_charts)
     problem = result.problem
     summary: dict[str, Any] = {
         "charts": result.charts,
@@ -600,7 +623,9 @@ def run_planar(
         "k": result.k,
         "radius": r,
         "epsilon": eps,
+        "max_charts": max_charts,
         "complete": result.atlas.complete,
+        "stop_reason": result.atlas.stop_reason,
         "atlas_seconds": result.atlas_seconds,
         "quality_seconds": result.quality_seconds,
         "index": index,

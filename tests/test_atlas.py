@@ -138,8 +138,29 @@ def test_max_charts_leaves_an_open_frontier() -> None:
     settings = AtlasSettings(radius=0.1, max_charts=50)
     atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
     assert atlas.n_charts == 50
-    assert not atlas.complete
+    assert not atlas.complete and atlas.stop_reason == "max_charts"
     assert atlas.open.any()
+
+
+def test_a_finished_atlas_says_complete() -> None:
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+    assert atlas.complete and atlas.stop_reason == "complete"
+
+
+def test_progress_hears_of_every_chart() -> None:
+    heard: list[tuple[str, int, int | None]] = []
+    settings = AtlasSettings(radius=0.2, max_charts=30)
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings,
+                        progress=lambda *report: heard.append(report))  # fmt: skip
+    assert [done for _, done, _ in heard] == list(range(1, atlas.n_charts + 1))
+    assert {(stage, total) for stage, _, total in heard} == {("atlas charts", 30)}
+
+
+def test_progress_setting_draws_a_bar_on_stderr(capsys: pytest.CaptureFixture[str]) -> None:
+    settings = AtlasSettings(radius=0.5, progress=True)
+    build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
+    captured = capsys.readouterr()
+    assert captured.out == "" and "atlas charts" in captured.err
 
 
 def test_start_point_is_projected_onto_the_manifold() -> None:

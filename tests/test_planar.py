@@ -111,5 +111,23 @@ def test_run_planar_writes_json_and_plot(tmp_path: Path) -> None:
     assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
     best = summary["best"]["configuration"]
     assert len(best["joint_angles_rad"]) == 6 and len(best["x"]) == 19
+    assert (summary["stop_reason"], summary["complete"]) == ("complete", True)
     with pytest.raises(AtlasError, match="valid"):
         run_planar(index="dexterity")
+
+
+def test_a_tiny_radius_stops_at_max_charts_and_says_so() -> None:
+    heard: list[int] = []
+    summary = run_planar(r=1e-4, max_charts=50, progress=lambda _s, done, _t: heard.append(done))
+    assert summary["charts"] == 50 and summary["max_charts"] == 50
+    assert (summary["stop_reason"], summary["complete"]) == ("max_charts", False)
+    assert heard[-1] == 50
+
+
+@pytest.mark.parametrize(
+    ("options", "match"),
+    [({"r": 0.0}, "radius"), ({"eps": 0.0}, "epsilon"), ({"max_charts": 0}, "max_charts")],
+)
+def test_run_planar_refuses_bad_settings(options: dict[str, float], match: str) -> None:
+    with pytest.raises(AtlasError, match=match):
+        run_planar(**options)  # type: ignore[arg-type]

@@ -10,17 +10,21 @@ time of that build (steadier on a shared machine).
 
 from __future__ import annotations
 
+import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from math import gamma, pi
 from typing import Any
 
 import numpy as np
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.bench.report import progress_reporter
+from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.fileio import write_json_atomic
 from sahgrasp.optimization import run_experiment
 from sahgrasp.planar import build_planar_atlas, make_planar_problem
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "run"]
 
@@ -156,29 +160,64 @@ def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
     }
 
 
-def run(out_json: str | None = None, repeats: int = 5) -> dict[str, Any]:
-    """Run every case and return (and optionally write) the JSON summary.
+def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
+    """Case name -> the function measuring it, in the order they run."""
+    cases: dict[str, Callable[[], dict[str, Any]]] = {
+        "S2": lambda: _sphere_row("S2", 3, 0.1, repeats),
+        "S3": lambda: _sphere_row("S3", 4, 0.1, 1),
+        "planar": lambda: _planar_row(repeats),
+    }
+    for name, k, radius, again in SAH_CASES:
+        cases[f"sah_{name}_k{k}_r{radius:g}"] = functools.partial(
+            _sah_row, name, k, radius, repeats if again else 1
+        )
+    return cases
+
+
+def run(
+    out_json: str | None = None,
+    repeats: int = 5,
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
+    cases: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """Run the cases and return (and optionally write) the JSON summary.
 
     Args:
         out_json: Write the summary there.
         repeats: Builds per case for S^2, the planar hand and the SAH cases marked for repeats
             (S^3 and the bottle with k = 3 are built once).
+        quiet: No progress bar on stderr.
+        progress: Hears of every finished case (stage ``"bench atlas: cases"``) instead of the
+            bar.
+        cases: Names of the cases to run (``S2``, ``S3``, ``planar``, ``sah_can_k2_r0.1``, ...);
+            all if None.
+
+    Raises:
+        InvalidSettingsError: ``repeats`` < 1, or an unknown case name.
     """
-    sah = {
-        f"sah_{name}_k{k}_r{radius:g}": _sah_row(name, k, radius, repeats if again else 1)
-        for name, k, radius, again in SAH_CASES
-    }
+    if repeats < 1:
+        raise InvalidSettingsError(f"repeats must be >= 1, got {repeats}")
+    measures = _cases(repeats)
+    unknown = sorted(set(cases or ()) - set(measures))
+    if unknown:
+        raise InvalidSettingsError(f"unknown case(s) {unknown}; valid: {', '.join(measures)}")
+    if cases is not None:
+        measures = {name: measures[name] for name in measures if name in cases}
+    rows: dict[str, dict[str, Any]] = {}
+    with progress_reporter(progress, quiet) as report:
+        for name, measure in measures.items():
+            if report is not None:
+                report("bench atlas: cases", len(rows), len(measures))
+            rows[name] = measure()
+        if report is not None:
+            report("bench atlas: cases", len(rows), len(measures))
     summary = {
         "benchmark": "atlas",
         "time_factor": _TIME_FACTOR,
         "count_tolerance": _COUNT_TOLERANCE,
         "sah_speedup_target": _SAH_SPEEDUP,
-        "cases": {
-            "S2": _sphere_row("S2", 3, 0.1, repeats),
-            "S3": _sphere_row("S3", 4, 0.1, 1),
-            "planar": _planar_row(repeats),
-            **sah,
-        },
+        "cases": rows,
     }
     if out_json is not None:
         write_json_atomic(out_json, summary)

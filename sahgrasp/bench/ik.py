@@ -13,6 +13,7 @@ budget.
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -20,9 +21,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
+from sahgrasp.bench.peers import PEERS, available_peers
+from sahgrasp.bench.report import progress_reporter
 from sahgrasp.contacts import load_targets
+from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import (
     PAPER_TABLE1_LAMBDAS,
@@ -32,6 +35,7 @@ from sahgrasp.ik import (
     random_problems,
 )
 from sahgrasp.ik.solver import run_algorithm1, solve_ik
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["run", "summarize"]
 
@@ -84,8 +88,6 @@ def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
         auto = IKSettings(seed=seed)
         solvers["auto/paper-table1"] = lambda t: solve_ik(hand, t, auto, table1)
     if peers:
-        from sahgrasp.bench.peers import PEERS
-
         auto = IKSettings(seed=seed)
         for name in peers:
             solvers[f"peer:{name}/sequence"] = lambda t, fn=PEERS[name]: run_algorithm1(
@@ -102,12 +104,16 @@ def run(
     peers: Sequence[str] = ("scipy", "pink"),
     peer_problems: int | None = 200,
     plot: str | None = None,
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark; returns the JSON document (and writes the figure to ``plot``).
 
     Every configuration solves problem ``i`` right after the others, so that a change in machine
     load affects them alike; peers, slower, see only the first ``peer_problems`` problems, and the
-    ``auto/sequence`` statistics on that subset are reported beside them.
+    ``auto/sequence`` statistics on that subset are reported beside them. A peer whose package is
+    not installed is skipped with one line on stderr naming the ``bench`` extra; the document's
+    ``skipped_peers`` says why.
 
     Args:
         hand: Hand name or description path.
@@ -117,7 +123,21 @@ def run(
         peers: Peer solvers to run (``scipy``, ``pink``).
         peer_problems: Peers run on the first this-many problems (None = all).
         plot: PNG path for the Fig. 9 reproduction.
+        quiet: No progress bar on stderr.
+        progress: Hears of every problem solved (stage ``"bench ik: problems"``) instead of the
+            bar.
+
+    Raises:
+        InvalidSettingsError: An unknown peer name, or ``problems`` or ``peer_problems`` < 1.
     """
+    if problems < 1 or (peer_problems is not None and peer_problems < 1):
+        raise InvalidSettingsError(
+            f"problems and peer_problems must be >= 1 (peer_problems may be None for all); got "
+            f"{problems} and {peer_problems}"
+        )
+    peers, skipped = available_peers(peers)
+    for name, reason in skipped.items():
+        print(f"bench ik: skipping peer {name}: {reason}", file=sys.stderr)
     model = load_hand(hand)
     problem_set = (
         list(load_targets(targets).problems) if targets else random_problems(model, problems, seed)
@@ -126,10 +146,13 @@ def run(
     solvers = _solvers(model, seed, peers)
     subset = len(problem_set) if peer_problems is None else peer_problems
     results: dict[str, list[IKResult]] = {label: [] for label in solvers}
-    for i, target in enumerate(tqdm(problem_set, desc="bench ik", unit="problem")):
-        for label, solve in solvers.items():
-            if i < subset or not label.startswith("peer:"):
-                results[label].append(solve(target))
+    with progress_reporter(progress, quiet) as report:
+        for i, target in enumerate(problem_set):
+            for label, solve in solvers.items():
+                if i < subset or not label.startswith("peer:"):
+                    results[label].append(solve(target))
+            if report is not None:
+                report("bench ik: problems", i + 1, len(problem_set))
     max_inits = IKSettings().max_inits
     runs = {label: summarize(rs, max_inits) for label, rs in results.items()}
     if peers:
@@ -142,6 +165,7 @@ def run(
         "seed": seed,
         "problems": len(problem_set),
         "peer_problems": min(subset, len(problem_set)),
+        "skipped_peers": skipped,
         "runs": runs,
         "created_unix_s": time.time(),
     }

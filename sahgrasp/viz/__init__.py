@@ -25,7 +25,7 @@ from sahgrasp.viz.colors import (
     hex_color,
     quality_colors,
 )
-from sahgrasp.viz.grasp_view import show_grasp
+from sahgrasp.viz.grasp_view import frame_grasp, grasp_points, show_grasp
 from sahgrasp.viz.hand_view import HandView, visual_model
 from sahgrasp.viz.markers import show_contacts, show_mesh, show_object
 from sahgrasp.viz.paper_examples import (
@@ -42,7 +42,7 @@ from sahgrasp.viz.paper_examples import (
 )
 from sahgrasp.viz.present import add_html_argument, present
 from sahgrasp.viz.recording import RecordingWindow, scene_commands
-from sahgrasp.viz.viewer import CAMERA_FOV_DEG, Viewer, translation
+from sahgrasp.viz.viewer import CAMERA_FOV_DEG, Viewer, ViewerError, translation
 
 __all__ = [
     "ATLAS_SIZE_M",
@@ -60,10 +60,13 @@ __all__ = [
     "HandView",
     "RecordingWindow",
     "Viewer",
+    "ViewerError",
     "add_html_argument",
     "add_ik_arguments",
     "display_points",
     "format_report",
+    "frame_grasp",
+    "grasp_points",
     "hex_color",
     "ik_settings",
     "present",

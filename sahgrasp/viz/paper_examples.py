@@ -29,7 +29,8 @@ from sahgrasp.objects import (
     paper_grasp,
     transform_points,
 )
-from sahgrasp.viz.grasp_view import show_grasp
+from sahgrasp.tables import format_table
+from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.present import add_html_argument, present
 from sahgrasp.viz.viewer import Viewer
 
@@ -52,8 +53,8 @@ EXAMPLE_NAMES = GRASP_NAMES
 EXAMPLE_GAP_M = 0.06
 """Gap along x between the extents of neighbouring grasps in a row [m]."""
 
-ROW_ASPECT = 2.0
-"""Width/height ratio of the window a row of grasps is framed for."""
+ROW_ASPECT = 1.5
+"""Smallest width/height ratio of the window a row of grasps fits in (1280x800 is 1.6)."""
 
 
 @dataclass(frozen=True)
@@ -91,35 +92,29 @@ def solve_example(hand: Hand, name: str, settings: IKSettings | None = None) -> 
     return GraspExample(name, load_object(name), target, result, PAPER_IK_REPORT[name])
 
 
-_COLUMNS = (
-    ("object", 10),
-    ("solved", 14),
-    ("inits (paper)", 13),
-    ("iterations (paper)", 18),
-    ("time [ms]", 9),
-    ("max error [mm]", 14),
-)
+_HEADERS = ("object", "solved", "inits (paper)", "iterations (paper)", "time [ms]",
+            "max error [mm]")  # fmt: skip
 
 
 def format_report(examples: Iterable[GraspExample]) -> str:
     """A table of the results beside the paper's numbers (Section 4.1); one row per example.
 
     The paper gives no per-example time (5 ms on average per initial configuration, Section 4.2)
-    and solves to ``d_min = 1.5 mm``; ``solved`` gives the solver's reason when it failed.
+    and solves to ``d_min = 1.5 mm``; ``solved`` gives the solver's reason when it failed. Columns
+    are as wide as their content.
     """
-    lines = ["  ".join(f"{title:>{width}}" for title, width in _COLUMNS)]
-    for ex in examples:
-        r = ex.result
-        cells = (
+    rows = [
+        (
             ex.name,
-            "yes" if r.success else f"no ({r.reason})",
-            f"{r.inits_used} ({ex.paper.initial_configurations})",
-            f"{r.iterations} ({ex.paper.jacobian_iterations})",
-            f"{r.time_s * 1e3:.1f}",
-            f"{r.max_error_m * 1e3:.3f}",
+            "yes" if ex.result.success else f"no ({ex.result.reason})",
+            f"{ex.result.inits_used} ({ex.paper.initial_configurations})",
+            f"{ex.result.iterations} ({ex.paper.jacobian_iterations})",
+            f"{ex.result.time_s * 1e3:.1f}",
+            f"{ex.result.max_error_m * 1e3:.3f}",
         )
-        lines.append("  ".join(f"{c:>{w}}" for c, (_, w) in zip(cells, _COLUMNS, strict=True)))
-    return "\n".join(lines)
+        for ex in examples
+    ]
+    return format_table(_HEADERS, rows)
 
 
 def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) -> None:
@@ -131,7 +126,7 @@ def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) 
     extents, cursor = [], 0.0
     for ex in examples:
         T = _facing_placement(ex)
-        extent = transform_points(T, _extent_m(hand, ex))
+        extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
         T[0, 3] += shift
         extent[:, 0] += shift
@@ -166,13 +161,6 @@ def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
     T[:3, :3] = pin.Quaternion.FromTwoVectors(back, _BEHIND).toRotationMatrix()
     T[:3, 3] = -T[:3, :3] @ example.contact_centre_m
     return T
-
-
-def _extent_m(hand: Hand, example: GraspExample) -> NDArray[np.float64]:
-    """Points spanning the drawn grasp: object mesh vertices and hand link origins [m]."""
-    obj = example.obj
-    links = [M.translation for M in hand.frame_placements(example.result.q).values()]
-    return np.concatenate([transform_points(obj.T_world_object, obj.mesh().vertices_m), links])
 
 
 def add_ik_arguments(parser: argparse.ArgumentParser) -> None:

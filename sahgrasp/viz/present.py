@@ -26,14 +26,21 @@ def add_html_argument(parser: argparse.ArgumentParser, default: str | None = Non
     )
 
 
-def present(build: Callable[[Viewer], None], html: str | None, title: str = "sahgrasp") -> None:
+def present(
+    build: Callable[[Viewer], None],
+    html: str | None,
+    title: str = "sahgrasp",
+    host: str = "127.0.0.1",
+) -> None:
     """Build a scene and show it.
 
     Args:
         build: Draws the scene into the viewer it is given.
         html: Write the scene to this HTML file (offline, no server). If None, start meshcat's
-            server, open the browser, and stop the server when the user presses Enter.
+            server, open the browser, and stop the server when the user presses Enter (or the
+            script ends, or gets SIGTERM or SIGHUP).
         title: Title of the HTML page.
+        host: Interface the live server listens on (this machine only by default).
     """
     if html is not None:
         with Viewer(title=title) as viewer:
@@ -41,7 +48,7 @@ def present(build: Callable[[Viewer], None], html: str | None, title: str = "sah
             out = viewer.save_html(Path(html))
         print(f"wrote {out} (open it in a web browser)")
         return
-    with Viewer(live=True) as viewer:
+    with Viewer(live=True, host=host) as viewer:
         build(viewer)
         viewer.open()
         try:
