@@ -407,6 +407,16 @@ def test_bench_json_to_stdout(tmp_path: Path) -> None:
     assert document["calls"] == 3 and set(document["hands"]) == {"sah", "allegro"}
 
 
+def test_bench_prints_its_table_and_writes_json_only_when_asked(tmp_path: Path) -> None:
+    done = sahgrasp("bench", "kinematics", "--calls", "3", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("bench kinematics: 3 calls") and "{" not in done.stdout
+    assert list(tmp_path.iterdir()) == []
+    done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "k.json", cwd=tmp_path)
+    assert done.returncode == 0 and "bench kinematics" in done.stdout
+    assert json.loads((tmp_path / "k.json").read_text())["calls"] == 3
+
+
 def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
     done = sahgrasp("atlas", "planar", "--r", "0.3", "--plot", "p.png", "--json", "-", cwd=tmp_path)
     assert done.returncode == 0, done.stderr

@@ -1,4 +1,7 @@
-"""``sahgrasp bench NAME``: run a benchmark and write its JSON."""
+"""``sahgrasp bench NAME``: run a benchmark, print its summary table and write its JSON.
+
+With ``--json -`` the JSON document alone goes to stdout (progress stays on stderr).
+"""
 
 from __future__ import annotations
 
@@ -24,6 +27,10 @@ _NOT_OPTIONS = ("command", "bench", "json", "run")
 """Namespace entries that are not keyword arguments of the benchmark's ``run``."""
 
 
+def _add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress bars on stderr")
+
+
 def _kinematics(benches: Any) -> None:
     k = add_command(benches, "kinematics", "contact queries vs raw Pinocchio calls")
     k.add_argument("--calls", type=positive_int, default=20_000, help="timed calls per query")
@@ -47,12 +54,17 @@ def _ik(benches: Any) -> None:
         "--peer-problems", type=positive_int, default=200, help="problems the peers solve"
     )
     ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure, PNG")
+    _add_quiet(ik)
     add_json_argument(ik, "the results")
 
 
 def _atlas(benches: Any) -> None:
     atlas = add_command(benches, "atlas", "atlas on spheres and the planar hand vs CuikSuite")
     atlas.add_argument("--repeats", type=positive_int, default=5, help="builds per timed case")
+    atlas.add_argument(
+        "--cases", nargs="+", default=None, metavar="CASE", help="run only these cases (all)"
+    )
+    _add_quiet(atlas)
     add_json_argument(atlas, "the timings")
 
 
@@ -75,7 +87,7 @@ def _sequence(benches: Any) -> None:
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
-    p = add_command(sub, "bench", "run a benchmark, print or write its JSON")
+    p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
     for add in (_kinematics, _ik, _atlas, _sequence):
         add(benches)
@@ -92,5 +104,10 @@ def run(args: argparse.Namespace) -> int:
         if plot is not None:
             options["plot"] = plot
         data = module.run(**options)
-    emit_json(data, args.json)
+    if args.json != "-":
+        from sahgrasp.bench.report import summary_table
+
+        print(summary_table(data))
+    if args.json is not None:
+        emit_json(data, args.json)
     return 0
