@@ -1,0 +1,288 @@
+"""``sahgrasp bench grasps``: the IK on contact sets a grasp planner draws on the catalog objects.
+
+For each object, :func:`sahgrasp.objects.grasp_sampler.sample_object_grasps` draws four-finger
+contact sets (seeded per object from the benchmark seed and the object's name) and the IK solves
+each with its default settings. Every claimed solution is then re-checked independently of the
+solver: the plain URDF hand (a fresh Pinocchio model without the solver's virtual contact joints,
+mimic joints set from :meth:`Hand.joint_values`) is placed by forward kinematics, and coal
+measures how deep each link's collision shape enters each convex collision piece of the object.
+A solution penetrates the object when a link other than the four contact fingertips is deeper
+than :data:`PENETRATION_TOLERANCE_M`.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import zlib
+from collections import Counter
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
+from contextlib import contextmanager
+from typing import Any
+
+import coal
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+from tqdm import tqdm
+
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.fileio import write_json_atomic
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_many
+from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
+from sahgrasp.objects.frames import transform_points
+from sahgrasp.objects.grasp_sampler import SAH_REACH, HandReach, sample_object_grasps
+
+__all__ = [
+    "BENCH_SEED",
+    "PENETRATION_TOLERANCE_M",
+    "ObjectPenetration",
+    "format_table",
+    "run",
+]
+
+BENCH_SEED = 7_305_411
+"""Default seed of the benchmark's contact sets (used nowhere else in the project)."""
+PENETRATION_TOLERANCE_M = 2e-4
+"""A link deeper than this in the object [m] makes a claimed solution penetrate."""
+_CHUNK = 10
+"""Problems per progress update."""
+
+
+class ObjectPenetration:
+    """Penetration depths of the plain URDF hand's links into an object's convex pieces.
+
+    Args:
+        hand: The hand the solver used (its URDF and joint names; nothing else is reused).
+        obj: The object, placed in the world.
+    """
+
+    def __init__(self, hand: Hand, obj: GraspObject) -> None:
+        urdf = str(hand.description.urdf_path)
+        dirs = [str(p) for p in hand.description.package_dirs]
+        self.hand = hand
+        self.model = pin.buildModelFromUrdf(urdf, pin.JointModelFreeFlyer())
+        self.geometry = pin.buildGeomFromUrdf(
+            self.model, urdf, pin.GeometryType.COLLISION, None, dirs
+        )
+        self.data = self.model.createData()
+        self.geometry_data = pin.GeometryData(self.geometry)
+        objects = self.geometry.geometryObjects
+        self.links = [str(self.model.frames[g.parentFrame].name) for g in objects]
+        for g in objects:
+            g.geometry.computeLocalAABB()
+        self._link_centres = np.array([np.asarray(g.geometry.aabb_center) for g in objects])
+        self._link_radii = np.array([g.geometry.aabb_radius for g in objects])
+        self.pieces = obj.collision_shapes()
+        self._piece_transforms = [s.transform(obj.T_world_object) for s in self.pieces]
+        centres = np.array([s.placement[:3, 3] for s in self.pieces])
+        self._piece_centres = transform_points(obj.T_world_object, centres)
+        self._piece_radii = np.array([s.bounding_radius_m for s in self.pieces])
+
+    def plain_configuration(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The plain URDF model's configuration for the solver's ``q`` (same wrist, same joints)."""
+        plain = pin.neutral(self.model)
+        plain[:7] = q[:7]
+        for name, value in self.hand.joint_values(q).items():
+            plain[self.model.joints[self.model.getJointId(name)].idx_q] = value
+        return plain
+
+    def depths(self, q: NDArray[np.float64]) -> dict[str, float]:
+        """Deepest penetration [m] of each link that enters the object at the solver's ``q``.
+
+        A link's depth is its largest penetration into any one convex piece (a lower bound of
+        its depth in the union of the pieces).
+        """
+        pin.updateGeometryPlacements(
+            self.model, self.data, self.geometry, self.geometry_data, self.plain_configuration(q)
+        )
+        out: dict[str, float] = {}
+        request = coal.DistanceRequest()
+        for k, (g, oMg) in enumerate(
+            zip(self.geometry.geometryObjects, self.geometry_data.oMg, strict=True)
+        ):
+            centre = oMg.act(self._link_centres[k])
+            gaps = np.linalg.norm(self._piece_centres - centre, axis=1)
+            near = np.flatnonzero(gaps < self._piece_radii + self._link_radii[k])
+            placed = coal.Transform3s(oMg.rotation, oMg.translation)
+            for i in near:
+                distance = coal.distance(
+                    g.geometry, placed, self.pieces[i].geometry, self._piece_transforms[i],
+                    request, coal.DistanceResult(),
+                )  # fmt: skip
+                if distance < 0.0:
+                    out[self.links[k]] = max(out.get(self.links[k], 0.0), -distance)
+        return out
+
+
+def _object_seed(seed: int, name: str) -> int:
+    """The contact-set seed of object ``name``: independent of which other objects run."""
+    return int(np.random.SeedSequence([seed, zlib.crc32(name.encode())]).generate_state(1)[0])
+
+
+@contextmanager
+def _executor(workers: int) -> Iterator[Executor | None]:
+    if workers <= 1:
+        yield None
+        return
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        yield pool
+
+
+def _solve(hand: Hand, targets: list[GraspTarget], workers: int, bar: tqdm[Any]) -> list[IKResult]:
+    results: list[IKResult] = []
+    with _executor(workers) as pool:
+        for start in range(0, len(targets), _CHUNK):
+            chunk = targets[start : start + _CHUNK]
+            results += solve_many(hand, chunk, IKSettings(), executor=pool)
+            bar.update(len(chunk))
+    return results
+
+
+def _penetration_summary(
+    hand: Hand, obj: GraspObject, results: Sequence[IKResult]
+) -> dict[str, Any]:
+    """Re-check every claimed solution against the object (module docstring)."""
+    check = ObjectPenetration(hand, obj)
+    tips = {f.tip_link for f in hand.description.fingers}
+    worst_links: Counter[str] = Counter()
+    link_depths, tip_depths = [], []
+    for r in results:
+        if not r.success:
+            continue
+        depths = check.depths(r.q)
+        others = {k: v for k, v in depths.items() if k not in tips}
+        link_depths.append(max(others.values(), default=0.0))
+        tip_depths.append(max((v for k, v in depths.items() if k in tips), default=0.0))
+        if link_depths[-1] > PENETRATION_TOLERANCE_M:
+            worst_links[max(others, key=others.__getitem__)] += 1
+    penetrating = int(np.sum(np.array(link_depths) > PENETRATION_TOLERANCE_M))
+    return {
+        "claimed": len(link_depths),
+        "penetrating": penetrating,
+        "penetrating_rate": penetrating / len(link_depths) if link_depths else 0.0,
+        "max_link_depth_mm": 1e3 * max(link_depths, default=0.0),
+        "max_fingertip_depth_mm": 1e3 * max(tip_depths, default=0.0),
+        "deepest_links": dict(worst_links.most_common()),
+    }
+
+
+def _summary(results: Sequence[IKResult]) -> dict[str, Any]:
+    times_ms = np.array([r.time_s for r in results]) * 1e3
+    starts = np.array([r.inits_used for r in results])
+    solved = np.array([r.success for r in results])
+    return {
+        "problems": len(results),
+        "solved": int(solved.sum()),
+        "success_rate": float(solved.mean()),
+        "first_start_success_rate": float(np.mean(solved & (starts == 1))),
+        "mean_starts": float(starts.mean()),
+        "mean_starts_solved": float(starts[solved].mean()) if solved.any() else None,
+        "median_time_ms": float(np.median(times_ms)),
+        "mean_time_ms": float(times_ms.mean()),
+        "p95_time_ms": float(np.percentile(times_ms, 95)),
+        "mean_iterations": float(np.mean([r.iterations for r in results])),
+        "reasons": dict(Counter(r.reason for r in results)),
+    }
+
+
+def _bench_object(
+    hand: Hand,
+    obj: GraspObject,
+    count: int,
+    seed: int,
+    reach: HandReach,
+    workers: int,
+    progress: bool,
+) -> dict[str, Any]:
+    start = time.perf_counter()
+    object_seed = _object_seed(seed, obj.name)
+    targets = sample_object_grasps(obj, count, object_seed, reach)
+    sampling_s = time.perf_counter() - start
+    with tqdm(total=count, desc=f"bench grasps {obj.name}", unit="problem", disable=not progress,
+              file=sys.stderr) as bar:  # fmt: skip
+        results = _solve(hand, targets, workers, bar)
+    row = {"object": obj.name, "contact_set_seed": object_seed, "sampling_s": sampling_s}
+    row.update(_summary(results))
+    row["penetration"] = _penetration_summary(hand, obj, results)
+    return row
+
+
+def run(
+    problems_per_object: int = 200,
+    seed: int = BENCH_SEED,
+    workers: int = 1,
+    json_out: str | None = None,
+    progress: bool = True,
+    objects: Sequence[str] = OBJECT_NAMES,
+    extra_objects: Sequence[GraspObject] = (),
+    print_table: bool = True,
+) -> dict[str, Any]:
+    """Run the benchmark; return its JSON document (written atomically to ``json_out`` if given).
+
+    Args:
+        problems_per_object: Contact sets drawn and solved per object.
+        seed: Benchmark seed; each object's contact sets use a seed derived from it and the name.
+        workers: Processes solving the IK (times are per problem, measured inside the solver).
+        json_out: Path of the JSON document, or None.
+        progress: Show a progress bar per object on stderr.
+        objects: Catalog objects (:data:`sahgrasp.objects.OBJECT_NAMES`).
+        extra_objects: More objects, e.g. meshes loaded from files, placed in the world.
+        print_table: Print :func:`format_table` of the result on stdout.
+
+    Raises:
+        InvalidSettingsError: ``problems_per_object`` or ``workers`` below 1.
+        InvalidTargetError: An unknown catalog object name (the message lists the valid ones).
+    """
+    if problems_per_object < 1 or workers < 1:
+        raise InvalidSettingsError(
+            f"problems_per_object and workers must be >= 1, got {problems_per_object}, {workers}"
+        )
+    hand = load_hand("sah")
+    default_sequence(hand)  # loaded before any problem is timed
+    bench_objects = [load_object(name) for name in objects] + list(extra_objects)
+    rows = [
+        _bench_object(hand, obj, problems_per_object, seed, SAH_REACH, workers, progress)
+        for obj in bench_objects
+    ]
+    document: dict[str, Any] = {
+        "benchmark": "grasps",
+        "hand": hand.description.name,
+        "seed": seed,
+        "problems_per_object": problems_per_object,
+        "workers": workers,
+        "penetration_tolerance_mm": PENETRATION_TOLERANCE_M * 1e3,
+        "reach": {
+            "finger_spacing_mm": [1e3 * v for v in SAH_REACH.finger_spacing_m],
+            "span_mm": [1e3 * v for v in SAH_REACH.span_m],
+        },
+        "objects": rows,
+        "created_unix_s": time.time(),
+    }
+    if json_out is not None:
+        write_json_atomic(json_out, document)
+    if print_table:
+        print(format_table(document))
+    return document
+
+
+def format_table(document: dict[str, Any]) -> str:
+    """A Markdown table of :func:`run`'s document, one row per object."""
+    lines = [
+        "| object | solved | 1st start | mean starts | median / mean / p95 ms "
+        "| claimed penetrating | max link depth mm |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in document["objects"]:
+        pen = row["penetration"]
+        lines.append(
+            f"| {row['object']} | {100 * row['success_rate']:.1f}% ({row['solved']}/"
+            f"{row['problems']}) | {100 * row['first_start_success_rate']:.1f}% | "
+            f"{row['mean_starts']:.2f} | {row['median_time_ms']:.1f} / {row['mean_time_ms']:.1f} / "
+            f"{row['p95_time_ms']:.1f} | {100 * pen['penetrating_rate']:.1f}% "
+            f"({pen['penetrating']}/{pen['claimed']}) | {pen['max_link_depth_mm']:.1f} |"
+        )
+    return "\n".join(lines)
