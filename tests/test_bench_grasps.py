@@ -57,9 +57,7 @@ def test_plain_urdf_fingertips_match_the_solvers_sphere_centres(sah: Hand, can_s
     np.testing.assert_allclose(tips, sah.contact_state(can_solution).centres, atol=1e-12)
 
 
-def test_the_paper_can_grasp_does_not_penetrate_and_a_can_in_the_palm_does(
-    sah: Hand, can_solution
-):
+def test_the_paper_can_grasp_does_not_penetrate_and_a_can_in_the_palm_does(sah: Hand, can_solution):
     depths = ObjectPenetration(sah, load_object("can")).depths(can_solution)
     tips = {f.tip_link for f in sah.description.fingers}
     assert all(d <= PENETRATION_TOLERANCE_M for link, d in depths.items() if link not in tips)
