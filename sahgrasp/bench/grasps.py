@@ -34,7 +34,7 @@ from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_many
 from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
 from sahgrasp.objects.frames import transform_points
-from sahgrasp.objects.grasp_sampler import SAH_REACH, HandReach, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
 
 __all__ = [
     "BENCH_SEED",
@@ -143,7 +143,7 @@ def _solve(hand: Hand, targets: list[GraspTarget], workers: int, bar: tqdm[Any])
 
 
 def _penetration_summary(
-    hand: Hand, obj: GraspObject, results: Sequence[IKResult]
+    hand: Hand, obj: GraspObject, results: Sequence[IKResult], bar: tqdm[Any]
 ) -> dict[str, Any]:
     """Re-check every claimed solution against the object (module docstring)."""
     check = ObjectPenetration(hand, obj)
@@ -151,6 +151,7 @@ def _penetration_summary(
     worst_links: Counter[str] = Counter()
     link_depths, tip_depths = [], []
     for r in results:
+        bar.update()
         if not r.success:
             continue
         depths = check.depths(r.q)
@@ -194,20 +195,24 @@ def _bench_object(
     obj: GraspObject,
     count: int,
     seed: int,
-    reach: HandReach,
     workers: int,
     progress: bool,
 ) -> dict[str, Any]:
-    start = time.perf_counter()
     object_seed = _object_seed(seed, obj.name)
-    targets = sample_object_grasps(obj, count, object_seed, reach)
-    sampling_s = time.perf_counter() - start
-    with tqdm(total=count, desc=f"bench grasps {obj.name}", unit="problem", disable=not progress,
-              file=sys.stderr) as bar:  # fmt: skip
+    with tqdm(total=count, unit="set", disable=not progress, file=sys.stderr) as bar:
+        bar.set_description(f"bench grasps {obj.name}: sample")
+        start = time.perf_counter()
+        targets = sample_object_grasps(obj, count, object_seed, SAH_REACH, on_set=bar.update)
+        sampling_s = time.perf_counter() - start
+        bar.reset()
+        bar.set_description(f"bench grasps {obj.name}: solve")
         results = _solve(hand, targets, workers, bar)
+        bar.reset()
+        bar.set_description(f"bench grasps {obj.name}: check")
+        penetration = _penetration_summary(hand, obj, results, bar)
     row = {"object": obj.name, "contact_set_seed": object_seed, "sampling_s": sampling_s}
     row.update(_summary(results))
-    row["penetration"] = _penetration_summary(hand, obj, results)
+    row["penetration"] = penetration
     return row
 
 
@@ -245,7 +250,7 @@ def run(
     default_sequence(hand)  # loaded before any problem is timed
     bench_objects = [load_object(name) for name in objects] + list(extra_objects)
     rows = [
-        _bench_object(hand, obj, problems_per_object, seed, SAH_REACH, workers, progress)
+        _bench_object(hand, obj, problems_per_object, seed, workers, progress)
         for obj in bench_objects
     ]
     document: dict[str, Any] = {

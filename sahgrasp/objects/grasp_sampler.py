@@ -281,6 +281,7 @@ def sample_contact_sets(
     reach: HandReach = SAH_REACH,
     settings: SamplerSettings | None = None,
     name: str = "grasp",
+    on_set: Callable[[], object] | None = None,
 ) -> list[GraspTarget]:
     """Draw ``count`` four-finger contact sets on ``mesh`` (see the module docstring).
 
@@ -294,6 +295,7 @@ def sample_contact_sets(
         reach: The hand's spacing, span and fingertip radius.
         settings: Opposition and fit tolerances; defaults if None.
         name: Problem names are ``f"{name}-{i}"``.
+        on_set: Called after each set is found (progress reporting).
 
     Raises:
         GraspSamplingError: A malformed mesh, ``count < 0``, or fewer than ``count`` sets found
@@ -317,6 +319,8 @@ def sample_contact_sets(
             continue
         contacts = (ContactTarget(f, p, n) for f, (p, n) in zip(FINGERS, outcome, strict=True))
         sets.append(GraspTarget(f"{name}-{len(sets)}", contacts))
+        if on_set is not None:
+            on_set()
     if len(sets) < count:
         raise GraspSamplingError(
             f"{name}: found {len(sets)} of {count} contact sets in "
@@ -332,13 +336,15 @@ def sample_object_grasps(
     seed: int,
     reach: HandReach = SAH_REACH,
     settings: SamplerSettings | None = None,
+    on_set: Callable[[], object] | None = None,
 ) -> list[GraspTarget]:
-    """Draw ``count`` contact sets on a catalog object's display mesh, placed in the world.
+    """Draw ``count`` contact sets on an object's display mesh, placed in the world.
 
-    The display mesh is within 0.05 mm of the exact surfaces; the contacts lie on the mesh.
+    Arguments as :func:`sample_contact_sets`. The catalog's display meshes are within 0.05 mm of
+    the exact surfaces; the contacts lie on the mesh.
     """
     surface = SurfaceMesh(*_world_mesh(obj))
-    return sample_contact_sets(surface, count, seed, reach, settings, obj.name)
+    return sample_contact_sets(surface, count, seed, reach, settings, obj.name, on_set)
 
 
 def _world_mesh(obj: GraspObject) -> tuple[FloatArray, NDArray[np.int64]]:
