@@ -16,7 +16,8 @@ SUMMARY_FIELDS = {
     "mean_time_ms", "p95_time_ms", "mean_iterations", "reasons", "penetration",
 }  # fmt: skip
 PENETRATION_FIELDS = {
-    "claimed", "penetrating", "penetrating_rate", "max_link_depth_mm",
+    "claimed", "penetrating", "penetrating_rate", "usable_rate", "median_penetrating_depth_mm",
+    "max_link_depth_mm",
     "max_fingertip_depth_mm", "deepest_links",
 }  # fmt: skip
 

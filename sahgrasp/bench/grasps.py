@@ -160,11 +160,13 @@ def _penetration_summary(
         tip_depths.append(max((v for k, v in depths.items() if k in tips), default=0.0))
         if link_depths[-1] > PENETRATION_TOLERANCE_M:
             worst_links[max(others, key=others.__getitem__)] += 1
-    penetrating = int(np.sum(np.array(link_depths) > PENETRATION_TOLERANCE_M))
+    deep = np.array(link_depths)[np.array(link_depths) > PENETRATION_TOLERANCE_M]
     return {
         "claimed": len(link_depths),
-        "penetrating": penetrating,
-        "penetrating_rate": penetrating / len(link_depths) if link_depths else 0.0,
+        "penetrating": len(deep),
+        "penetrating_rate": len(deep) / len(link_depths) if link_depths else 0.0,
+        "usable_rate": (len(link_depths) - len(deep)) / len(results),
+        "median_penetrating_depth_mm": 1e3 * float(np.median(deep)) if len(deep) else 0.0,
         "max_link_depth_mm": 1e3 * max(link_depths, default=0.0),
         "max_fingertip_depth_mm": 1e3 * max(tip_depths, default=0.0),
         "deepest_links": dict(worst_links.most_common()),
@@ -278,8 +280,8 @@ def format_table(document: dict[str, Any]) -> str:
     """A Markdown table of :func:`run`'s document, one row per object."""
     lines = [
         "| object | solved | 1st start | mean starts | median / mean / p95 ms "
-        "| claimed penetrating | max link depth mm |",
-        "|---|---|---|---|---|---|---|",
+        "| claimed penetrating | depth median / max mm | solved, not penetrating |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for row in document["objects"]:
         pen = row["penetration"]
@@ -288,6 +290,7 @@ def format_table(document: dict[str, Any]) -> str:
             f"{row['problems']}) | {100 * row['first_start_success_rate']:.1f}% | "
             f"{row['mean_starts']:.2f} | {row['median_time_ms']:.1f} / {row['mean_time_ms']:.1f} / "
             f"{row['p95_time_ms']:.1f} | {100 * pen['penetrating_rate']:.1f}% "
-            f"({pen['penetrating']}/{pen['claimed']}) | {pen['max_link_depth_mm']:.1f} |"
+            f"({pen['penetrating']}/{pen['claimed']}) | {pen['median_penetrating_depth_mm']:.1f} / "
+            f"{pen['max_link_depth_mm']:.1f} | {100 * pen['usable_rate']:.1f}% |"
         )
     return "\n".join(lines)
