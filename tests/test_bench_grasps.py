@@ -5,6 +5,7 @@ import pinocchio as pin
 import pytest
 
 from sahgrasp.bench.grasps import PENETRATION_TOLERANCE_M, ObjectPenetration, format_table, run
+from sahgrasp.contacts import load_targets
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
@@ -23,9 +24,17 @@ PENETRATION_FIELDS = {
 
 
 def test_bench_on_three_problems_returns_and_writes_the_documented_fields(tmp_path, capsys):
-    out = tmp_path / "grasps.json"
-    document = run(problems_per_object=3, objects=("can",), json_out=str(out), progress=False)
+    out, targets = tmp_path / "grasps.json", tmp_path / "targets.json"
+    document = run(
+        problems_per_object=3,
+        objects=("can",),
+        json_out=str(out),
+        progress=False,
+        targets_out=str(targets),
+    )
     assert json.loads(out.read_text()) == json.loads(json.dumps(document))
+    problems = load_targets(targets).problems
+    assert [p.name for p in problems] == ["can-0", "can-1", "can-2"]
     assert document["benchmark"] == "grasps" and document["problems_per_object"] == 3
     (row,) = document["objects"]
     assert set(row) == SUMMARY_FIELDS

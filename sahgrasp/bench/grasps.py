@@ -27,7 +27,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from sahgrasp.contacts import GraspTarget
+from sahgrasp.contacts import GraspTarget, save_targets
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.fileio import write_json_atomic
 from sahgrasp.hand import Hand, load_hand
@@ -199,7 +199,7 @@ def _bench_object(
     seed: int,
     workers: int,
     progress: bool,
-) -> dict[str, Any]:
+) -> tuple[dict[str, Any], list[GraspTarget]]:
     object_seed = _object_seed(seed, obj.name)
     with tqdm(total=count, unit="set", disable=not progress, file=sys.stderr) as bar:
         bar.set_description(f"bench grasps {obj.name}: sample")
@@ -215,7 +215,7 @@ def _bench_object(
     row = {"object": obj.name, "contact_set_seed": object_seed, "sampling_s": sampling_s}
     row.update(_summary(results))
     row["penetration"] = penetration
-    return row
+    return row, targets
 
 
 def run(
@@ -227,6 +227,7 @@ def run(
     objects: Sequence[str] = OBJECT_NAMES,
     extra_objects: Sequence[GraspObject] = (),
     print_table: bool = True,
+    targets_out: str | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (written atomically to ``json_out`` if given).
 
@@ -239,6 +240,8 @@ def run(
         objects: Catalog objects (:data:`sahgrasp.objects.OBJECT_NAMES`).
         extra_objects: More objects, e.g. meshes loaded from files, placed in the world.
         print_table: Print :func:`format_table` of the result on stdout.
+        targets_out: Path of a targets file holding every contact set, e.g. for
+            ``sahgrasp bench ik --targets`` (written atomically), or None.
 
     Raises:
         InvalidSettingsError: ``problems_per_object`` or ``workers`` below 1.
@@ -251,10 +254,11 @@ def run(
     hand = load_hand("sah")
     default_sequence(hand)  # loaded before any problem is timed
     bench_objects = [load_object(name) for name in objects] + list(extra_objects)
-    rows = [
-        _bench_object(hand, obj, problems_per_object, seed, workers, progress)
-        for obj in bench_objects
-    ]
+    rows, problems = [], []
+    for obj in bench_objects:
+        row, targets = _bench_object(hand, obj, problems_per_object, seed, workers, progress)
+        rows.append(row)
+        problems += targets
     document: dict[str, Any] = {
         "benchmark": "grasps",
         "hand": hand.description.name,
@@ -271,6 +275,8 @@ def run(
     }
     if json_out is not None:
         write_json_atomic(json_out, document)
+    if targets_out is not None:
+        save_targets(targets_out, hand.description.name, problems)
     if print_table:
         print(format_table(document))
     return document
