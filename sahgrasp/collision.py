@@ -3,18 +3,28 @@
 Adjacent bodies touch by design (a phalanx and its parent), so pairs whose bodies hang from the
 same joint or from a parent/child pair of joints are not checked; a hand description may exclude
 more pairs by link name (e.g. the SAH finger bases with the palm). Every other pair is checked.
+
+Queries are stateless: Pinocchio's ``GeometryData`` enables coal's GJK warm start on every
+request, which starts each query of a pair from the guess the previous query of that pair left
+behind. The witnesses and normals then depend (in the last bits, which the IK's collision repair
+amplifies) on what was queried before, so the same problem could give different joints on a
+fresh hand and on a hand that had solved others. :func:`stateless_requests` turns the warm start
+off once per ``GeometryData``; for the primitive shapes of the hand URDFs (boxes, cylinders,
+spheres) nothing else is carried between queries.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
 
+import coal
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-__all__ = ["CollisionPair", "Penetration", "SelfCollision"]
+__all__ = ["CollisionPair", "Penetration", "SelfCollision", "stateless_requests"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +56,24 @@ class Penetration:
     depth_m: float
 
 
+def stateless_requests(geometry_data: pin.GeometryData) -> pin.GeometryData:
+    """Turn off coal's GJK warm start on every request of ``geometry_data`` and return it.
+
+    Each query then starts from coal's default guess, so its result depends only on the shapes
+    and their placements, not on earlier queries. It is a one-time change of two request fields
+    (no per-query cost); the warm start saved no measurable time on these small primitives.
+    """
+    requests = [*geometry_data.collisionRequests, *geometry_data.distanceRequests]
+    with warnings.catch_warnings():
+        # ``enable_cached_gjk_guess`` is deprecated in coal but still honoured, and Pinocchio
+        # sets it: it must be cleared too.
+        warnings.simplefilter("ignore", DeprecationWarning)
+        for request in requests:
+            request.gjk_initial_guess = coal.GJKInitialGuess.DefaultGuess
+            request.enable_cached_gjk_guess = False
+    return geometry_data
+
+
 class SelfCollision:
     """Self-collision queries on one Pinocchio model and its coal collision geometry.
 
@@ -70,10 +98,10 @@ class SelfCollision:
             for b in range(a + 1, len(objects)):
                 if self._checked(objects[a], objects[b], excluded):
                     geometry_model.addCollisionPair(pin.CollisionPair(a, b))
-        self.geometry_data = pin.GeometryData(geometry_model)
+        self.geometry_data = stateless_requests(pin.GeometryData(geometry_model))
         self.data = model.createData()
         # A second set of requests computes contact witnesses, needed only to resolve collisions.
-        self._witness_data = pin.GeometryData(geometry_model)
+        self._witness_data = stateless_requests(pin.GeometryData(geometry_model))
 
     def _link(self, obj: pin.GeometryObject) -> str:
         return str(self.model.frames[obj.parentFrame].name)

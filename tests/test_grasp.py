@@ -174,3 +174,17 @@ def test_principal_motions_ordering_and_orthonormality() -> None:
     assert motions.retained_variance(3) == pytest.approx(variances[0] / variances.sum())
     with pytest.raises(AtlasError, match="s = t - k"):
         motions.constraints(4)
+
+
+def test_the_free_finger_is_no_part_of_f(sah: Hand) -> None:
+    """The can leaves the ring finger free: its joints are not in x and do not move F."""
+    system = first_grasp_system(sah, can_patches())
+    ring = {sah.coordinate_index(n) for n in sah.coordinate_names if n.startswith("ring_")}
+    assert not ring & set(system.coordinates.tolist())
+    assert "ring" not in [c.finger for c in system.contacts]
+    folded = system.q_first.copy()
+    folded[7:][sorted(ring)] = sah.lower[sorted(ring)]
+    other = GraspSystem(sah, system.patches, folded, free_object=True)
+    x = perturbed(system, seed=3)
+    assert np.array_equal(other.x_first, system.x_first)
+    assert np.array_equal(other.F(x), system.F(x)) and np.array_equal(other.J(x), system.J(x))

@@ -1,5 +1,6 @@
 import math
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -18,12 +19,12 @@ from sahgrasp.ik import (
     solve_many,
 )
 from sahgrasp.ik.initial import expansion_matrix
+from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object
 
 
-def _independent_check(hand: Hand, target: GraspTarget, result_dict: dict, d_min: float) -> None:
-    """Set the returned wrist and joints on the plain URDF and check the grasp there."""
-    urdf = str(hand.description.urdf_path)
-    model = pin.buildModelFromUrdf(urdf, mimic=False)
+def _plain_hand(hand: Hand, result_dict: dict) -> tuple[pin.Model, pin.Data, np.ndarray, pin.SE3]:
+    """The plain URDF model (no virtual joints, no free flyer) at the returned joints and wrist."""
+    model = pin.buildModelFromUrdf(str(hand.description.urdf_path), mimic=False)
     data = model.createData()
     q = pin.neutral(model)
     for name, value in result_dict["joints"].items():
@@ -36,17 +37,52 @@ def _independent_check(hand: Hand, target: GraspTarget, result_dict: dict, d_min
             scale * result_dict["joints"][leader] + offset
         )
     wrist = result_dict["wrist"]
-    T_world_palm = pin.XYZQUATToSE3(np.array(wrist["xyz"] + wrist["quat"]))
     pin.framesForwardKinematics(model, data, q)
-    for spec in hand.description.fingers:
+    return model, data, q, pin.XYZQUATToSE3(np.array(wrist["xyz"] + wrist["quat"]))
+
+
+def _independent_check(hand: Hand, target: GraspTarget, result_dict: dict, d_min: float) -> None:
+    """Set the returned wrist and joints on the plain URDF and check the grasp there."""
+    model, data, q, T_world_palm = _plain_hand(hand, result_dict)
+    for finger in target.fingers:
+        spec = hand.description.fingers[hand.fingers.index(finger)]
         centre = T_world_palm * data.oMf[model.getFrameId(spec.tip_link)].translation
-        contact = target.contact(spec.name)
+        contact = target.contact(finger)
         assert np.linalg.norm(centre - contact.centre(hand.radius_m)) < d_min
         # The contact point is where the sphere touches the object: centre - R * normal.
         assert np.linalg.norm(centre - hand.radius_m * contact.normal - contact.point) < d_min
+    urdf = str(hand.description.urdf_path)
     geometry = pin.buildGeomFromUrdf(model, urdf, pin.GeometryType.COLLISION)
     plain = SelfCollision(model, geometry, hand.description.excluded_collisions)
     assert not plain.in_collision(q)
+
+
+def _object_distances(
+    hand: Hand, result_dict: dict, pieces: list[tuple[coal.ShapeBase, coal.Transform3s]]
+) -> dict[str, float]:
+    """Signed distance [m] of every link of the plain URDF hand at the result to the object."""
+    model, data, q, T_world_palm = _plain_hand(hand, result_dict)
+    urdf = str(hand.description.urdf_path)
+    geometry = pin.buildGeomFromUrdf(model, urdf, pin.GeometryType.COLLISION)
+    geometry_data = pin.GeometryData(geometry)
+    pin.updateGeometryPlacements(model, data, geometry, geometry_data, q)
+    out: dict[str, float] = {}
+    for obj, placement in zip(geometry.geometryObjects, geometry_data.oMg, strict=True):
+        M = T_world_palm * placement
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        link = model.frames[obj.parentFrame].name
+        for shape, at_piece in pieces:
+            d = coal.distance(shape, at_piece, obj.geometry, at_link,
+                              coal.DistanceRequest(), coal.DistanceResult())  # fmt: skip
+            out[link] = min(out.get(link, math.inf), d)
+    return out
+
+
+def _assert_outside(hand: Hand, distances: dict[str, float], contacts: tuple[str, ...]) -> None:
+    """No link inside the object; the contact fingertip spheres not deeper than d_min."""
+    tips = {f.tip_link for f in hand.description.fingers if f.name in contacts}
+    for link, distance in distances.items():
+        assert distance >= (-1.5e-3 if link in tips else -1e-9), (link, distance)
 
 
 @pytest.mark.parametrize("method", ["auto", "paper"])
@@ -94,6 +130,34 @@ def test_invalid_targets_raise(sah: Hand) -> None:
         solve_ik(sah, GraspTarget("x", pinky))
     with pytest.raises(InvalidSettingsError, match="method"):
         solve_ik(sah, problem, method="magic")
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("max_inits", 0, "max_inits must be an integer between 1 and 1000"),
+        ("max_inits", 1001, "max_inits must be an integer between 1 and 1000"),
+        ("max_inits", 10**9, "between 1 and 1000"),
+        ("max_inits", 2.5, "max_inits must be an integer"),
+        ("max_inits", "12", "max_inits must be an integer"),
+        ("seed", -1, "seed must be an integer >= 0"),
+        ("seed", True, "seed must be an integer"),
+        ("max_iterations", 0, "max_iterations must be an integer >= 1"),
+        ("init", "grid", r"init must be one of \['sequence', 'random'\]"),
+        ("method", "magic", r"method must be one of \['auto', 'paper'\]"),
+        ("d_min_m", float("nan"), "d_min_m must be a finite number > 0"),
+        ("alpha", float("inf"), "alpha must be a finite number > 0"),
+        ("refine_m", "1e-5", "refine_m must be a finite number > 0"),
+    ],
+)
+def test_bad_settings_raise_typed_errors(field: str, value: object, message: str) -> None:
+    with pytest.raises(InvalidSettingsError, match=message):
+        IKSettings(**{field: value})
+
+
+def test_settings_bounds_are_inclusive() -> None:
+    assert IKSettings(max_inits=1000, seed=0).max_inits == 1000
+    assert IKSettings(max_inits=1, seed=2**63).max_inits == 1
 
 
 def test_same_seed_same_result_any_workers(sah: Hand) -> None:
@@ -160,3 +224,78 @@ def test_paper_alpha_and_results_format(sah: Hand) -> None:
 
 def test_load_hand_fixture_is_the_sah() -> None:
     assert load_hand("sah").dof()["total"] == 27
+
+
+# ----- the object as an obstacle --------------------------------------------------------------
+def _pinch(width_m: float, spacing_m: float) -> GraspTarget:
+    """Thumb on the +x face of a box ``width_m`` thick, the other fingers on the -x face."""
+    contacts = [ContactTarget("thumb", [width_m / 2, 0, 0], [1, 0, 0])]
+    for finger, y in zip(("index", "middle", "ring"), (-spacing_m, 0.0, spacing_m), strict=True):
+        contacts.append(ContactTarget(finger, [-width_m / 2, y, 0.0], [-1, 0, 0]))
+    return GraspTarget(f"pinch-{width_m}", contacts)
+
+
+def _box(size_m: tuple[float, float, float]) -> tuple[GraspObject, list]:
+    """A box centred at the world origin, and its coal shape for the independent check."""
+    obj = GraspObject("box", (BoxSolid("box", size_m),), (1, 0, 0, 1))
+    return obj, [(coal.Box(*size_m), coal.Transform3s(np.eye(3), np.zeros(3)))]
+
+
+def test_box_grasp_with_the_object_leaves_it_alone(sah: Hand) -> None:
+    target = _pinch(0.05, 0.03)
+    box, pieces = _box((0.05, 0.12, 0.05))
+    plain = solve_ik(sah, target)
+    assert plain.success and plain.object_clearance_m is None and plain.closest_link is None
+    assert "object_clearance_mm" not in plain.to_dict(sah)
+    # Without the object the thumb's distal phalanx goes into the box: the constraint matters.
+    assert min(_object_distances(sah, plain.to_dict(sah), pieces).values()) < -0.5e-3
+    result = solve_ik(sah, target, obstacle=box)
+    assert result.success and result.reason == "converged"
+    entry = result.to_dict(sah)
+    _independent_check(sah, target, entry, 1.5e-3)
+    distances = _object_distances(sah, entry, pieces)
+    _assert_outside(sah, distances, sah.fingers)
+    assert result.object_clearance_m is not None and result.object_clearance_m >= 0.0
+    others = {k: v for k, v in distances.items() if k not in {f"{f}_tip" for f in sah.fingers}}
+    assert result.object_clearance_m == pytest.approx(min(others.values()), abs=1e-6)
+    assert result.closest_link == min(others, key=others.__getitem__)
+    assert entry["object_clearance_mm"] == pytest.approx(result.object_clearance_m * 1e3)
+
+
+def test_three_finger_can_grasp_keeps_the_free_finger_out(sah: Hand) -> None:
+    can, target = load_object("can"), can_patches().target()
+    pieces = [(s.geometry, s.transform(can.T_world_object)) for s in can.collision_shapes()]
+    plain = solve_ik(sah, target, free_fingers=("ring",))
+    assert plain.success
+    assert _object_distances(sah, plain.to_dict(sah), pieces)["ring_distal"] < -0.01
+    result = solve_ik(sah, target, free_fingers=("ring",), obstacle=can)
+    assert result.success
+    entry = result.to_dict(sah)
+    _independent_check(sah, target, entry, 1.5e-3)
+    # The free ring finger has no contact: its fingertip may not enter the can either.
+    _assert_outside(sah, _object_distances(sah, entry, pieces), ("thumb", "index", "middle"))
+
+
+@pytest.mark.parametrize("method", ["auto", "paper"])
+def test_only_solutions_through_the_object_fail_with_object_collision(
+    sah: Hand, method: str
+) -> None:
+    """A pinch across the middle of a 40 cm plate: the hand cannot reach around its edges."""
+    target = _pinch(0.03, 0.03)
+    plate, pieces = _box((0.03, 0.4, 0.4))
+    plain = solve_ik(sah, target, method="auto")
+    assert plain.success
+    assert min(_object_distances(sah, plain.to_dict(sah), pieces).values()) < -0.01
+    result = solve_ik(sah, target, obstacle=plate, method=method, max_inits=4)
+    assert not result.success
+    assert result.reason == "object_collision"
+    assert "object_collision" in result.attempts
+    assert result.object_clearance_m is not None and result.object_clearance_m < 0.0
+    distances = _object_distances(sah, result.to_dict(sah), pieces)
+    assert distances[result.closest_link] == pytest.approx(result.object_clearance_m, abs=1e-6)
+
+
+def test_obstacle_must_be_a_grasp_object(sah: Hand) -> None:
+    problem = random_problems(sah, 1, seed=5)[0]
+    with pytest.raises(InvalidTargetError, match="obstacle must be a GraspObject"):
+        solve_ik(sah, problem, obstacle=coal.Box(0.1, 0.1, 0.1))

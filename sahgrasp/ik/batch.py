@@ -2,8 +2,10 @@
 
 Workers receive the picklable :class:`HandDescription` and its digest and rebuild the hand once
 per worker thread (Pinocchio's GeometryModel does not pickle); :func:`worker_hand` also serves the
-offline sequence search. Each problem's random initial configurations are
-seeded from ``(seed, problem index)``, so a result never depends on which worker solved it.
+offline sequence search. A problem's random initial configurations are seeded from the settings'
+seed and the problem's content (:func:`sahgrasp.ik.starts.problem_seed`), and the collision
+queries carry no state between problems, so a result depends neither on which worker solved it
+nor on the problems solved before it.
 """
 
 from __future__ import annotations
@@ -11,7 +13,6 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -74,13 +75,10 @@ def _solve_one(
     target: GraspTarget,
     settings: IKSettings,
     sequence: PoseSequence | None,
-    index: int,
 ) -> IKResult:
     hand = worker_hand(description, digest)
-    problem_seed = np.random.SeedSequence([settings.seed, index]).generate_state(1)[0]
-    seeded = replace(settings, seed=int(problem_seed))
     try:
-        return solve_ik(hand, target, seeded, sequence)
+        return solve_ik(hand, target, settings, sequence)
     except InvalidTargetError:
         return invalid_result(hand, target.name)
 
@@ -99,7 +97,7 @@ def solve_many(
     """
     settings = settings or IKSettings()
     digest = hand.description.digest()
-    jobs = [(hand.description, digest, t, settings, sequence, i) for i, t in enumerate(targets)]
+    jobs = [(hand.description, digest, t, settings, sequence) for t in targets]
     if executor is None and workers <= 1:
         _HANDS.hands.setdefault(digest, hand)
         return [_solve_one(*job) for job in jobs]

@@ -18,10 +18,11 @@ ones) and the acceptance test (Eq. (9) for every finger, joints within limits, n
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 import pinocchio as pin
@@ -31,6 +32,12 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
+from sahgrasp.ik.obstacle import Obstacle
+from sahgrasp.ik.starts import initial_lambdas
+
+if TYPE_CHECKING:
+    from sahgrasp.collision import Penetration
+    from sahgrasp.objects import GraspObject
 
 __all__ = [
     "REASONS",
@@ -39,13 +46,26 @@ __all__ = [
     "ContactProblem",
     "IKResult",
     "IKSettings",
+    "Init",
+    "Method",
+    "Reason",
     "run_algorithm1",
     "solve_ik",
     "stack_rows",
 ]
 
-REASONS = ("converged", "max_inits", "no_progress", "collision", "invalid_input")
+Method = Literal["auto", "paper"]
+"""Inner solver of Algorithm 1."""
+Init = Literal["sequence", "random"]
+"""Where the initial configurations come from."""
+Reason = Literal[
+    "converged", "max_inits", "no_progress", "collision", "object_collision", "invalid_input"
+]
+"""Why a solve ended: ``converged`` on success, otherwise why no start was accepted."""
+REASONS: tuple[Reason, ...] = get_args(Reason)
 """Values of :attr:`IKResult.reason`."""
+MAX_INITS_LIMIT = 1000
+"""Largest accepted ``IKSettings.max_inits``."""
 
 
 @dataclass(frozen=True)
@@ -55,7 +75,7 @@ class IKSettings:
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
         init: ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas, Fig. 9).
-        max_inits: ``i_max``, initial configurations tried.
+        max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
         d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
         s_min_m: Eq. (10) threshold of "no progress" [m].
@@ -65,12 +85,13 @@ class IKSettings:
         repair_iterations: Auto method: steps allowed to push a converged but self-colliding
             configuration out of collision along the solution set.
         collision_margin_m: Clearance those steps aim for [m].
-        seed: Seed of the random initial configurations.
+        seed: Seed (>= 0) of the random initial configurations; each problem draws its own
+            from this seed and its content (:func:`sahgrasp.ik.starts.problem_seed`).
         record_history: Keep every iterate of the returned attempt (for animation).
     """
 
-    method: str = "auto"
-    init: str = "sequence"
+    method: Method = "auto"
+    init: Init = "sequence"
     max_inits: int = 12
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
@@ -84,16 +105,32 @@ class IKSettings:
     record_history: bool = False
 
     def __post_init__(self) -> None:
-        if self.method not in ("auto", "paper"):
-            raise InvalidSettingsError(f"method must be 'auto' or 'paper', got {self.method!r}")
-        if self.init not in ("sequence", "random"):
-            raise InvalidSettingsError(f"init must be 'sequence' or 'random', got {self.init!r}")
-        for name in ("max_inits", "max_iterations", "stall_iterations", "repair_iterations"):
-            if int(getattr(self, name)) < 1:
-                raise InvalidSettingsError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name, valid in (("method", get_args(Method)), ("init", get_args(Init))):
+            if getattr(self, name) not in valid:
+                raise InvalidSettingsError(
+                    f"{name} must be one of {list(valid)}, got {getattr(self, name)!r}"
+                )
+        _check_int("max_inits", self.max_inits, 1, MAX_INITS_LIMIT)
+        for name in ("max_iterations", "stall_iterations", "repair_iterations"):
+            _check_int(name, getattr(self, name), 1)
+        _check_int("seed", self.seed, 0)
         for name in ("d_min_m", "s_min_m", "alpha", "refine_m", "collision_margin_m"):
-            if not float(getattr(self, name)) > 0.0:
-                raise InvalidSettingsError(f"{name} must be > 0, got {getattr(self, name)}")
+            value = getattr(self, name)
+            if not _is_real(value) or not (math.isfinite(value) and value > 0.0):
+                raise InvalidSettingsError(f"{name} must be a finite number > 0, got {value!r}")
+
+
+def _is_real(value: object) -> bool:
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
+def _check_int(name: str, value: object, low: int, high: int | None = None) -> None:
+    """Raise :class:`InvalidSettingsError` unless ``value`` is an integer in ``[low, high]``."""
+    ok = isinstance(value, int | np.integer) and not isinstance(value, bool)
+    if ok and low <= int(value) and (high is None or int(value) <= high):  # type: ignore[call-overload]
+        return
+    bounds = f">= {low}" if high is None else f"between {low} and {high}"
+    raise InvalidSettingsError(f"{name} must be an integer {bounds}, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -102,7 +139,8 @@ class IKResult:
 
     Attributes:
         name: Problem name.
-        success: Every contact within ``d_min``, limits respected, no self-collision.
+        success: Every contact within ``d_min``, limits respected, no self-collision and, with
+            an obstacle, no link inside it (contact fingertips: not deeper than ``d_min``).
         reason: One of :data:`REASONS`.
         q: Configuration (wrist + independent coordinates), see :class:`Hand`.
         position_errors_m: ``|p_i - p_i*|`` per finger [m].
@@ -115,11 +153,15 @@ class IKResult:
         attempts: How each initial configuration ended.
         attempt_seconds: Wall time [s] from the start to the end of each attempt.
         history: Iterates of the returned attempt when recorded, initial configuration first.
+        object_clearance_m: With an obstacle, the smallest signed distance [m] from a link to it
+            at ``q`` (negative: inside; contact fingertips within ``d_min`` left out); None
+            without.
+        closest_link: With an obstacle, the link at ``object_clearance_m``; None without.
     """
 
     name: str
     success: bool
-    reason: str
+    reason: Reason
     q: NDArray[np.float64]
     position_errors_m: NDArray[np.float64]
     centre_errors_m: NDArray[np.float64]
@@ -131,6 +173,8 @@ class IKResult:
     attempts: tuple[str, ...] = ()
     attempt_seconds: tuple[float, ...] = ()
     history: tuple[NDArray[np.float64], ...] | None = field(default=None, repr=False)
+    object_clearance_m: float | None = None
+    closest_link: str | None = None
 
     @property
     def max_error_m(self) -> float:
@@ -143,8 +187,8 @@ class IKResult:
         return pin.XYZQUATToSE3(self.q[:7])
 
     def to_dict(self, hand: Hand) -> dict[str, Any]:
-        """The results-file entry of conventions.md."""
-        return {
+        """The results-file entry (docs/formats.md); the object clearance only with an obstacle."""
+        entry = {
             "name": self.name,
             "success": self.success,
             "reason": self.reason,
@@ -158,6 +202,10 @@ class IKResult:
             "joints": hand.joint_values(self.q),
             "contact_params": {f: list(v) for f, v in hand.contact_parameters(self.q).items()},
         }
+        if self.object_clearance_m is not None:
+            entry["object_clearance_mm"] = self.object_clearance_m * 1e3
+            entry["closest_link"] = self.closest_link
+        return entry
 
 
 @dataclass
@@ -180,9 +228,18 @@ class ContactProblem:
         target: One contact per finger, except the ``free_fingers``.
         free_fingers: Fingers deliberately left without a contact (e.g. the ring finger of a
             three-finger grasp); any other missing finger is an error.
+        obstacle: An object no link may enter (the constrained fingers' tips touch it).
+        allowance_m: How deep a contact fingertip sphere may enter the obstacle [m].
     """
 
-    def __init__(self, hand: Hand, target: GraspTarget, free_fingers: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        hand: Hand,
+        target: GraspTarget,
+        free_fingers: tuple[str, ...] = (),
+        obstacle: GraspObject | None = None,
+        allowance_m: float = 1.5e-3,
+    ) -> None:
         unknown = [f for f in free_fingers if f not in hand.fingers]
         if unknown:
             raise InvalidTargetError(
@@ -199,6 +256,27 @@ class ContactProblem:
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
+        self.obstacle = (
+            None if obstacle is None else Obstacle(hand, obstacle, self.fingers, allowance_m)
+        )
+
+    def collision(self, q: NDArray[np.float64]) -> Literal["collision", "object_collision"] | None:
+        """Why ``q`` is rejected, None if it is not.
+
+        A configuration inside the obstacle is ``object_collision`` even if it also collides with
+        itself: the collision repair often trades one for the other, and the object is the reason
+        the problem has no solution.
+        """
+        if self.obstacle is not None and self.obstacle.penetrated(q):
+            return "object_collision"
+        return "collision" if self.hand.in_collision(q) else None
+
+    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+        """Pairs of hand bodies, and links and the obstacle, closer than ``margin_m`` [m]."""
+        found = self.hand.collision.penetrations(q, margin_m)
+        if self.obstacle is not None:
+            found += self.obstacle.penetrations(q, margin_m)
+        return found
 
     def errors(self, state: ContactState) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Per constrained finger, position and centre errors [m]."""
@@ -298,7 +376,7 @@ def _lm_attempt(
     q, _ = hang_from_thumb(hand, coords, problem.target)
     history = [q.copy()] if s.record_history else None
     attempt = _lm_loop(hand, problem, q, s, s.max_iterations, history)
-    if attempt.outcome != "converged" or not hand.in_collision(attempt.q):
+    if attempt.outcome != "converged" or problem.collision(attempt.q) is None:
         return attempt
     q, used = _separate(hand, problem, attempt.q, s, history)
     budget = max(s.max_iterations - attempt.iterations - used, 1)
@@ -408,12 +486,13 @@ def _separate(
     """Push colliding bodies apart along coal's normals while holding the contacts.
 
     The solution set is redundant (27 DoF, 20 contact constraints for the SAH), so a converged but
-    self-colliding configuration can usually slide along it out of collision: each step solves the
+    colliding configuration can usually slide along it out of collision: each step solves the
     contact rows together with one row per penetrating pair asking the second body to move along
-    the separating normal by the penetration depth plus a margin.
+    the separating normal by the penetration depth plus a margin. A link in the obstacle is such a
+    pair whose first body is the object (fixed).
     """
     for k in range(s.repair_iterations):
-        penetrations = hand.collision.penetrations(q, s.collision_margin_m)
+        penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
         jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
@@ -431,7 +510,7 @@ def _separate(
 
 
 def _separation_rows(
-    hand: Hand, penetrations: list[Any]
+    hand: Hand, penetrations: list[Penetration]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
     rows = np.empty((len(penetrations), hand.nv))
@@ -445,20 +524,14 @@ def _separation_rows(
 
 
 def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Jacobian of a point fixed to ``joint``'s body (joint Jacobians must be up to date)."""
+    """Jacobian of a point fixed to ``joint``'s body (joint Jacobians must be up to date).
+
+    Joint 0 is the world: its Jacobian is zero (an obstacle does not move).
+    """
     J = pin.getJointJacobian(hand.model, hand.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
     lever = point - hand.data.oMi[joint].translation
     # v_p = v_o + omega x (p - o)
     return np.asarray(J[:3] + np.cross(J[3:].T, lever).T)
-
-
-def _initial_lambdas(settings: IKSettings, sequence: Sequence) -> list[tuple[float, float]]:
-    if settings.init == "random":
-        rng = np.random.default_rng(settings.seed)
-        pairs = rng.uniform(0.0, 1.0, (settings.max_inits, 2))
-        return [(float(a), float(b)) for a, b in pairs]
-    lambdas = list(sequence.lambdas)
-    return [lambdas[i % len(lambdas)] for i in range(settings.max_inits)]
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
@@ -471,6 +544,7 @@ def solve_ik(
     settings: IKSettings | None = None,
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
+    obstacle: GraspObject | None = None,
     **overrides: Any,
 ) -> IKResult:
     """Find wrist pose and joints that put every fingertip on its contact (Algorithm 1).
@@ -481,19 +555,23 @@ def solve_ik(
         settings: Solver parameters (defaults: :class:`IKSettings`).
         sequence: Initial-pose sequence (default: the hand's shipped or Table-1 sequence).
         free_fingers: Fingers left without a contact (a three-finger grasp leaves one free).
+        obstacle: The object being grasped, placed in the world: a solution must not put any
+            link into it, except each contact fingertip sphere up to ``d_min`` (docs/ik.md).
+            Its collision pieces are built once per (hand, object) and kept for the next solves.
         **overrides: Fields of :class:`IKSettings` to change, e.g. ``method="paper"``.
 
     Returns:
-        The result; an unreachable target gives ``success=False`` with a reason, not an error.
+        The result; an unreachable target gives ``success=False`` with a reason, not an error
+        (``object_collision`` when the contacts were reached only through the obstacle).
 
     Raises:
         InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
-            refused when the target is built).
+            refused when the target is built); an obstacle that is not a GraspObject.
         SequenceFileError: ``sequence`` was made for another hand.
     """
     s = replace(settings or IKSettings(), **overrides)
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers)
+    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle)
 
 
 def run_algorithm1(
@@ -503,17 +581,21 @@ def run_algorithm1(
     settings: IKSettings,
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
+    obstacle: GraspObject | None = None,
 ) -> IKResult:
     """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here)."""
-    problem = ContactProblem(hand, target, free_fingers)
+    problem = ContactProblem(hand, target, free_fingers, obstacle, settings.d_min_m)
     sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
     start = time.perf_counter()
     attempts: list[Attempt] = []
-    for lambdas in _initial_lambdas(settings, sequence):
+    starts = initial_lambdas(
+        settings.init, settings.max_inits, settings.seed, sequence, problem.target
+    )
+    for lambdas in starts:
         attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), settings)
-        if attempt.outcome == "converged" and hand.in_collision(attempt.q):  # Step 8
-            attempt.outcome = "collision"
+        if attempt.outcome == "converged":  # Step 8, and the obstacle
+            attempt.outcome = problem.collision(attempt.q) or attempt.outcome
         attempt.seconds = time.perf_counter() - start
         attempts.append(attempt)
         if attempt.outcome == "converged":
@@ -522,17 +604,26 @@ def run_algorithm1(
     return _result(hand, problem, best, attempts, False)
 
 
+_FAILURE_REASONS: dict[str, Reason] = {
+    "max_iterations": "max_inits",
+    "no_progress": "no_progress",
+    "collision": "collision",
+    "object_collision": "object_collision",
+}
+"""The failure reason of a solve whose best start ended with this :attr:`Attempt.outcome`."""
+
+
 def _result(
     hand: Hand, problem: ContactProblem, chosen: Attempt, attempts: list[Attempt], success: bool
 ) -> IKResult:
     pos, cen = problem.errors(hand.contact_state(chosen.q))
+    reason: Reason
     if success:
         reason, collision_free = "converged", True
     else:
         collision_free = not hand.in_collision(chosen.q)
-        reason = {"max_iterations": "max_inits", "converged": "max_inits"}.get(
-            chosen.outcome, chosen.outcome
-        )
+        reason = _FAILURE_REASONS[chosen.outcome]
+    clearance = problem.obstacle.clearance(chosen.q) if problem.obstacle is not None else None
     return IKResult(
         name=problem.target.name,
         success=success,
@@ -548,4 +639,6 @@ def _result(
         attempts=tuple(a.outcome for a in attempts),
         attempt_seconds=tuple(a.seconds for a in attempts),
         history=tuple(chosen.history) if chosen.history is not None else None,
+        object_clearance_m=clearance.distance_m if clearance is not None else None,
+        closest_link=clearance.link if clearance is not None else None,
     )

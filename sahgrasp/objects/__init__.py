@@ -4,7 +4,9 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 :mod:`~sahgrasp.objects.profiles` (planar profiles), :mod:`~sahgrasp.objects.surfaces`
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
-collision shapes. Lengths in metres, angles in radians.
+collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
+:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
+Lengths in metres, angles in radians.
 """
 
 from sahgrasp.objects.body import GraspObject
@@ -18,8 +20,10 @@ from sahgrasp.objects.catalog import (
     load_object,
     paper_grasp,
 )
+from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
 from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
 from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
+from sahgrasp.objects.mesh_file import MeshFileError, MeshSolid, load_mesh
 from sahgrasp.objects.meshing import Mesh, tessellate
 from sahgrasp.objects.patches import ContactRegion, CurvePatch, FixedContact, GraspPatches, Patch
 from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline, sample_profile
@@ -33,11 +37,13 @@ from sahgrasp.objects.surfaces import (
 )
 
 __all__ = [
+    "CONTACT_ALLOWANCE_M",
     "GRASP_NAMES",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
     "Arc",
     "BoxSolid",
+    "Clearance",
     "CollisionShape",
     "ContactRegion",
     "CurvePatch",
@@ -46,8 +52,11 @@ __all__ = [
     "FixedContact",
     "GraspObject",
     "GraspPatches",
+    "HandObjectClearance",
     "IKReport",
     "Mesh",
+    "MeshFileError",
+    "MeshSolid",
     "Patch",
     "RectangleSurface",
     "RevolvedSolid",
@@ -60,6 +69,7 @@ __all__ = [
     "bottle_patches",
     "can_patches",
     "convex_hull",
+    "load_mesh",
     "load_object",
     "paper_grasp",
     "placement",

@@ -3,7 +3,8 @@
 The planar three-finger hand (Figs. 8-9, ``sahgrasp.planar.optimize_planar``) and the SAH holding a
 can (Fig. 10a) or an oil bottle (Fig. 10b, ``sahgrasp.optimization.run_experiment``). Each run is
 reported beside the paper's figures and drawn as the paper's figures draw it: the atlas's chart
-centres coloured by the quality index, the best grasp and the worst one.
+centres coloured by the quality index, the best grasp and the worst one. The SAH runs also report
+and draw (purple) the chart centres where the hand collides with itself or with the object.
 ``examples/optimize_{planar,can,bottle}.py`` wrap :func:`run_planar_example` and
 :func:`run_optimize_example`.
 """
@@ -23,7 +24,7 @@ from sahgrasp.objects import load_object
 from sahgrasp.optimization import GraspOptimizationResult, run_experiment
 from sahgrasp.planar import PlanarHand, PlanarResult, make_planar_problem, optimize_planar
 from sahgrasp.quality import INDICES, SINGULAR_THRESHOLDS
-from sahgrasp.viz.atlas_view import ChartGrasp, show_atlas_grasps, show_atlas_scene
+from sahgrasp.viz.atlas_view import AtlasPlot, ChartGrasp, show_atlas_grasps, show_atlas_scene
 from sahgrasp.viz.planar_view import show_planar_grasp, upright
 from sahgrasp.viz.present import add_html_argument, present
 from sahgrasp.viz.viewer import Viewer, translation
@@ -33,6 +34,7 @@ __all__ = [
     "AtlasFigures",
     "AtlasReport",
     "add_atlas_arguments",
+    "collision_notes",
     "format_atlas_report",
     "planar_drawing",
     "run_optimize_example",
@@ -95,6 +97,7 @@ class AtlasFigures:
         worst: Chart of the worst grasp.
         atlas_seconds: Atlas time [s].
         quality_seconds: Quality-index time [s].
+        notes: Further report lines (e.g. the collision counts).
     """
 
     name: str
@@ -106,6 +109,7 @@ class AtlasFigures:
     worst: int
     atlas_seconds: float
     quality_seconds: float
+    notes: tuple[str, ...] = ()
 
 
 def add_atlas_arguments(parser: argparse.ArgumentParser, r: float, epsilon: float) -> None:
@@ -147,30 +151,50 @@ def format_atlas_report(figures: AtlasFigures) -> str:
     ]
     for which, chart in (("best", figures.best), ("worst", figures.worst)):
         lines.append(f"{which} grasp: chart {chart}, {figures.index} = {figures.values[chart]:.4g}")
-    return "\n".join(lines)
+    return "\n".join([*lines, *figures.notes])
 
 
 # ----- the SAH experiments --------------------------------------------------------------------
+def collision_notes(result: GraspOptimizationResult) -> tuple[str, ...]:
+    """Report lines: colliding charts, and the best grasp over all charts if it collides."""
+    n = result.atlas.n_charts
+    notes = [
+        f"colliding charts: {int((~result.valid).sum())} of {n} "
+        f"({int(result.self_collision.sum())} self, "
+        f"{int(result.object_collision.sum())} hand-object); {int(result.valid.sum())} valid"
+    ]
+    if result.best_overall != result.best:
+        value = result.all_values[result.best_overall]
+        notes.append(
+            f"best grasp over all charts (colliding): chart {result.best_overall}, "
+            f"{result.index} = {value:.4g}"
+        )
+    return tuple(notes)
+
+
 def _sah_figures(name: str, result: GraspOptimizationResult) -> AtlasFigures:
     return AtlasFigures(
         name, result.index, result.atlas, result.system.t, result.values, result.best,
-        result.worst, result.atlas_seconds, result.quality_seconds,
+        result.worst, result.atlas_seconds, result.quality_seconds, collision_notes(result),
     )  # fmt: skip
 
 
-def show_optimization(viewer: Viewer, result: GraspOptimizationResult) -> None:
-    """Draw an SAH optimisation: the atlas coloured by its index, best and worst grasps."""
+def show_optimization(viewer: Viewer, result: GraspOptimizationResult) -> AtlasPlot:
+    """Draw an SAH optimisation: the atlas coloured by its index, best and worst grasps.
+
+    Colliding chart centres are purple; the grasps show the free fingers as placed.
+    """
     system = result.system
     name = system.patches.name
 
     def grasp(chart: int) -> ChartGrasp:
-        x = result.atlas.centres[chart]
-        obj = load_object(name, system.object_pose(x))  # palm at the origin: palm frame = world
-        return ChartGrasp(chart, system.configuration(x), obj)
+        T = system.object_pose(result.atlas.centres[chart])  # palm at the origin: palm = world
+        obj = load_object(name, T) if result.obj is None else result.obj.placed(T)
+        return ChartGrasp(chart, result.configurations[chart], obj)
 
-    show_atlas_grasps(
+    return show_atlas_grasps(
         viewer, system.hand, result.atlas.centres, result.values,
-        SINGULAR_THRESHOLDS[result.index], grasp(result.best), grasp(result.worst),
+        SINGULAR_THRESHOLDS[result.index], grasp(result.best), grasp(result.worst), ~result.valid,
     )  # fmt: skip
 
 
@@ -189,7 +213,11 @@ def run_optimize_example(name: str, argv: Sequence[str] | None = None) -> int:
         max_charts=args.max_charts, progress=True,
     )  # fmt: skip
     print(format_atlas_report(_sah_figures(name, result)))
-    present(lambda viewer: show_optimization(viewer, result), args.html, f"sahgrasp {name}")
+
+    def build(viewer: Viewer) -> None:
+        show_optimization(viewer, result)
+
+    present(build, args.html, f"sahgrasp {name}")
     return 0
 
 

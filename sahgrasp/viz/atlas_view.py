@@ -1,11 +1,11 @@
 """An atlas in a scene: chart centres coloured by a quality index, with the best and worst grasps.
 
 As the atlas paper's Figs. 9-10: green for a large index, red for a small one, black for a singular
-grasp (index below its threshold); chart centres that are no candidate grasp (NaN index, e.g. the
-hand collides with itself) are grey. The centres are plain arrays: 2-D or 3-D points are drawn as
-they are, higher-dimensional ones (configurations ``x``) on their three principal axes; either way
-scaled to ``size_m``. The best and the worst grasps are drawn beside the atlas, right and left,
-each linked to its chart by a line.
+grasp (index below its threshold); chart centres that are no candidate grasp (NaN index) are grey,
+and those marked as colliding (the hand with itself or with the object) purple. The centres are
+plain arrays: 2-D or 3-D points are drawn as they are, higher-dimensional ones (configurations
+``x``) on their three principal axes; either way scaled to ``size_m``. The best and the worst
+grasps are drawn beside the atlas, right and left, each linked to its chart by a line.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from sahgrasp.viz.viewer import Viewer, translation
 
 __all__ = [
     "ATLAS_SIZE_M",
+    "COLLIDING_RGB",
     "AtlasPlot",
     "ChartGrasp",
     "DrawExtreme",
@@ -36,6 +37,9 @@ __all__ = [
 
 ATLAS_SIZE_M = 0.25
 """Largest extent of a drawn atlas [m] (hand-sized, to sit beside the grasps)."""
+
+COLLIDING_RGB = (0.55, 0.25, 0.75)
+"""Colour of the chart centres whose grasp collides (purple)."""
 
 _INVALID_RGB = (0.6, 0.6, 0.6)
 _LINK_RGB = (0.3, 0.3, 0.3)
@@ -56,11 +60,13 @@ class AtlasPlot:
         positions_m: Display position of each chart centre in the atlas's frame, (N, 3) [m].
         best: Chart of the best grasp.
         worst: Chart of the worst grasp.
+        colors_rgb: Colour of each chart centre, (N, 3), components in [0, 1].
     """
 
     positions_m: NDArray[np.float64]
     best: int
     worst: int
+    colors_rgb: NDArray[np.float64]
 
 
 def display_points(points: ArrayLike, size_m: float = ATLAS_SIZE_M) -> NDArray[np.float64]:
@@ -102,6 +108,7 @@ def show_atlas(
     singular_below: float,
     best: int | None = None,
     worst: int | None = None,
+    colliding: ArrayLike | None = None,
 ) -> AtlasPlot:
     """Draw chart centres coloured by quality; mark the best and worst charts with spheres.
 
@@ -113,20 +120,26 @@ def show_atlas(
         singular_below: Index value below which a grasp is singular (drawn black).
         best: Chart of the best grasp (default: the largest finite value).
         worst: Chart of the worst grasp (default: the smallest finite value).
+        colliding: Per chart, (N,) booleans: drawn purple whatever their value (default none).
 
     Raises:
         ValueError: Shapes disagree, or no value is finite.
     """
     v = np.asarray(values, dtype=np.float64)
     positions = display_points(points)
-    if v.shape != (len(positions),):
-        raise ValueError(f"{len(positions)} chart centres but values of shape {v.shape}")
+    hit = np.zeros(len(v), dtype=bool) if colliding is None else np.asarray(colliding, dtype=bool)
+    if v.shape != (len(positions),) or hit.shape != v.shape:
+        raise ValueError(
+            f"{len(positions)} chart centres but values of shape {v.shape} and colliding "
+            f"flags of shape {hit.shape}"
+        )
     default_best, default_worst = _extremes(v)
     best = default_best if best is None else best
     worst = default_worst if worst is None else worst
     finite = np.isfinite(v)
     colors = np.tile(_INVALID_RGB, (len(v), 1))
     colors[finite] = quality_colors(v[finite], singular_below)
+    colors[hit] = COLLIDING_RGB
     cloud = mg.PointCloud(
         positions.T.astype(np.float32), colors.T.astype(np.float32), size=_POINT_SIZE_M
     )
@@ -137,7 +150,7 @@ def show_atlas(
             mg.Sphere(1.5 * _POINT_SIZE_M), mg.MeshPhongMaterial(color=hex_color(colors[chart]))
         )
         node.set_transform(translation(positions[chart]))
-    return AtlasPlot(positions, best, worst)
+    return AtlasPlot(positions, best, worst, colors)
 
 
 def show_atlas_scene(
@@ -148,6 +161,7 @@ def show_atlas_scene(
     draw_extreme: DrawExtreme,
     best: int | None = None,
     worst: int | None = None,
+    colliding: ArrayLike | None = None,
 ) -> AtlasPlot:
     """The atlas at the origin (``atlas``), its best grasp right (``best``), worst left (``worst``).
 
@@ -159,8 +173,9 @@ def show_atlas_scene(
         draw_extreme: Draws a chart's grasp (see :data:`DrawExtreme`).
         best: Chart of the best grasp (default: largest finite value).
         worst: Chart of the worst grasp (default: smallest finite value).
+        colliding: Per chart, whether the grasp collides (drawn purple).
     """
-    plot = show_atlas(viewer, "atlas", points, values, singular_below, best, worst)
+    plot = show_atlas(viewer, "atlas", points, values, singular_below, best, worst, colliding)
     extents = [plot.positions_m]
     for name, chart, side in (("best", plot.best, 1.0), ("worst", plot.worst, -1.0)):
         T = translation((side * 1.6 * ATLAS_SIZE_M, 0.0, 0.0))
@@ -198,6 +213,7 @@ def show_atlas_grasps(
     singular_below: float,
     best: ChartGrasp,
     worst: ChartGrasp,
+    colliding: ArrayLike | None = None,
 ) -> AtlasPlot:
     """An atlas of a hand's grasps with its best and worst grasps (atlas paper Fig. 10).
 
@@ -211,6 +227,7 @@ def show_atlas_grasps(
         singular_below: Singularity threshold of the index.
         best: The best grasp.
         worst: The worst grasp.
+        colliding: Per chart, whether the grasp collides (drawn purple).
     """
     grasps = {"best": best, "worst": worst}
 
@@ -221,4 +238,6 @@ def show_atlas_grasps(
         links = [M.translation for M in hand.frame_placements(grasp.q).values()]
         return transform_points(T, links)
 
-    return show_atlas_scene(viewer, points, values, singular_below, draw, best.chart, worst.chart)
+    return show_atlas_scene(
+        viewer, points, values, singular_below, draw, best.chart, worst.chart, colliding
+    )

@@ -1,0 +1,81 @@
+"""The object a grasp must not pass through, as the IK sees it (issue: IK with the object).
+
+Every hand link must stay outside the object, except the fingertip sphere of each finger that has
+a contact: it touches the object at its contact by design, and Eq. (9) accepts its contact point
+up to ``d_min`` from the target, so that sphere alone may penetrate by up to ``d_min``. The
+signed distances come from :class:`sahgrasp.objects.clearance.HandObjectClearance` (coal GJK/EPA
+between each link shape and the object's convex pieces); its penetration records have the object
+as body ``a`` (joint 0, fixed), so the IK's separation rows push the links out along the normals.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sahgrasp.collision import Penetration
+from sahgrasp.errors import InvalidTargetError
+from sahgrasp.hand import Hand
+
+# The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
+# solves with an obstacle need it.
+if TYPE_CHECKING:
+    from sahgrasp.objects import GraspObject
+    from sahgrasp.objects.clearance import Clearance, HandObjectClearance
+
+__all__ = ["Obstacle"]
+
+
+@functools.lru_cache(maxsize=8)
+def _checker(hand: Hand, obj: GraspObject) -> HandObjectClearance:
+    """One clearance checker per (hand, object) pair, by identity.
+
+    Building one computes the object's convex pieces: 0.1 s for the can, seconds for the finest
+    catalog meshes, too much to repeat for every problem.
+    """
+    from sahgrasp.objects.clearance import HandObjectClearance
+
+    return HandObjectClearance(hand, obj)
+
+
+class Obstacle:
+    """An object at its placement, the fingers in contact with it and their allowance.
+
+    Args:
+        hand: The hand.
+        obj: The object (a :class:`sahgrasp.objects.GraspObject`, placed in the world).
+        contacts: Fingers whose fingertip spheres touch the object at their contacts.
+        allowance_m: How deep those spheres may enter the object [m] (the IK's ``d_min``).
+
+    Raises:
+        InvalidTargetError: ``obj`` is not a GraspObject.
+    """
+
+    def __init__(
+        self, hand: Hand, obj: GraspObject, contacts: tuple[str, ...], allowance_m: float
+    ) -> None:
+        from sahgrasp.objects import GraspObject
+
+        if not isinstance(obj, GraspObject):
+            raise InvalidTargetError(
+                f"obstacle must be a GraspObject (sahgrasp.objects: load_object(name) or a loaded "
+                f"mesh), got {type(obj).__name__}"
+            )
+        self.checker = _checker(hand, obj)
+        self.contacts = contacts
+        self.allowance_m = allowance_m
+
+    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+        """Links closer to the object than ``margin_m`` [m] (contact tips: deeper than allowed)."""
+        return self.checker.penetrations(q, margin_m, self.contacts, self.allowance_m)
+
+    def penetrated(self, q: NDArray[np.float64]) -> bool:
+        """True if a link is inside the object (contact tips: deeper than the allowance)."""
+        return bool(self.penetrations(q, 0.0))
+
+    def clearance(self, q: NDArray[np.float64]) -> Clearance:
+        """Smallest signed distance [m] of a link to the object and that link."""
+        return self.checker.clearance(q, self.contacts, self.allowance_m)

@@ -1,0 +1,447 @@
+"""Hand-object clearance: signed distances between a hand's collision shapes and an object.
+
+The object is a union of convex coal pieces (:mod:`sahgrasp.objects.collision`); every hand link
+shape (box, cylinder, sphere of the URDF) is convex too, so coal's GJK/EPA gives each (link, piece)
+pair an exact signed distance: the gap outside, minus the penetration depth inside. A triangle
+mesh (``coal.BVHModel``) would give no negative distance for a link wholly inside a closed surface.
+The signed distance of a link to the object is the smallest over the pieces: its sign is exact
+(negative if and only if the link overlaps the object), and inside its magnitude is the depth to
+the nearest face of an overlapped piece, which may be an internal face between two pieces, so it
+can underestimate the depth into the union.
+
+Contact fingertips. The fingertip sphere of a finger that has a contact (the geometry of that
+finger's ``tip_link``, e.g. ``ring_tip`` of the SAH) touches the object by design, and the IK
+accepts its contact point up to ``d_min`` from the surface: that sphere alone may penetrate the
+object by up to ``allowance_m``. Only the tip link's geometry is excepted; the distal phalanx on
+the same joint is checked as every other link.
+
+The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
+not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import coal
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from sahgrasp.collision import Penetration
+from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
+from sahgrasp.hand import Hand
+from sahgrasp.objects.body import GraspObject
+from sahgrasp.objects.frames import FloatArray, as_placement
+
+__all__ = [
+    "CONTACT_ALLOWANCE_M",
+    "FREE_FINGER_MARGIN_M",
+    "Clearance",
+    "FreeFingerPlacement",
+    "HandObjectClearance",
+]
+
+CONTACT_ALLOWANCE_M = 1.5e-3
+"""Default penetration allowed to a contact fingertip sphere: the IK's ``d_min`` [m]."""
+
+FREE_FINGER_MARGIN_M = 2e-3
+"""Default clearance [m] a free finger keeps from the object and from the other links."""
+
+_GRID_STEPS = 6
+"""Values per joint of a free finger tried by :meth:`HandObjectClearance.place_free_fingers`."""
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """Signed distances from the hand's links to the object at one configuration.
+
+    Attributes:
+        distance_m: Smallest signed distance [m] over the links, contact tips within their
+            allowance left out (negative: a link is inside the object).
+        link: The link at ``distance_m``.
+        links_m: Signed distance [m] of every link to the object, contact tips included.
+    """
+
+    distance_m: float
+    link: str
+    links_m: Mapping[str, float]
+
+    def clear(self, tolerance_m: float = 0.0) -> bool:
+        """True if no link (allowed contact tips excepted) is deeper than ``tolerance_m`` [m]."""
+        return self.distance_m >= -tolerance_m
+
+
+@dataclass(frozen=True)
+class FreeFingerPlacement:
+    """Where :meth:`HandObjectClearance.place_free_fingers` put the fingers without a contact.
+
+    Attributes:
+        q: The configuration with the free fingers placed (every other coordinate unchanged).
+        distance_m: Smallest signed distance [m] of the free fingers' links to the object and to
+            the other links they are checked against.
+        clear: Whether ``distance_m`` reaches the margin asked for.
+    """
+
+    q: NDArray[np.float64]
+    distance_m: float
+    clear: bool
+
+
+@dataclass(frozen=True)
+class _FreeFinger:
+    """A finger's own joint coordinates, the geometries they move, and its self-collision pairs."""
+
+    coordinates: NDArray[np.intp]  # indices in q[7:]
+    grid: NDArray[np.float64]  # candidate values of those coordinates, (N, len(coordinates))
+    geometries: tuple[int, ...]
+    pairs: NDArray[np.intp]  # hand geometry pairs (P, 2) the hand checks for self-collision
+
+
+@dataclass(frozen=True)
+class _Pair:
+    """One (hand geometry, object piece) signed distance with coal's witnesses (world frame)."""
+
+    geometry: int
+    distance_m: float
+    point_object: FloatArray
+    point_hand: FloatArray
+    normal: FloatArray  # from the object towards the hand link
+
+
+class HandObjectClearance:
+    """Signed distances between a hand's collision geometry and an object's convex pieces.
+
+    Independent of any solver: it owns its Pinocchio data and coal geometry data, so queries do
+    not disturb ``hand.data``.
+
+    Args:
+        hand: The hand (its model and coal collision geometry are used, not modified).
+        obj: The object; its pieces are placed at ``obj.T_world_object`` unless a query gives
+            another placement.
+    """
+
+    def __init__(self, hand: Hand, obj: GraspObject) -> None:
+        self.hand = hand
+        self.object = obj
+        self._model = hand.model
+        self._data = hand.model.createData()
+        self._geometry_model = hand.collision.geometry_model
+        self._geometry_data = pin.GeometryData(self._geometry_model)
+        geometries = self._geometry_model.geometryObjects
+        self._links = tuple(str(hand.model.frames[g.parentFrame].name) for g in geometries)
+        self._joints = tuple(int(g.parentJoint) for g in geometries)
+        self._shapes = obj.collision_shapes()
+        self._piece_centres = np.array([s.placement[:3, 3] for s in self._shapes])
+        self._piece_radii = np.array([s.bounding_radius_m for s in self._shapes])
+        centres, radii = [], []
+        for g in geometries:
+            g.geometry.computeLocalAABB()
+            centres.append(np.asarray(g.geometry.aabb_center, dtype=np.float64))
+            radii.append(float(g.geometry.aabb_radius))
+        self._link_centres = np.array(centres)
+        self._link_radii = np.array(radii)
+        self._tips = {f.name: f.tip_link for f in hand.description.fingers}
+        self._request = coal.DistanceRequest()
+        self._request.enable_signed_distance = True
+        self._free: dict[str, _FreeFinger] = {}
+        self._transforms_key = b""
+
+    @property
+    def links(self) -> tuple[str, ...]:
+        """Links with collision geometry, one per hand geometry (a link may repeat)."""
+        return self._links
+
+    # ----- queries --------------------------------------------------------------------------
+    def penetrations(
+        self,
+        q: NDArray[np.float64],
+        margin_m: float = 0.0,
+        contacts: Iterable[str] = (),
+        allowance_m: float = CONTACT_ALLOWANCE_M,
+        T_world_object: FloatArray | None = None,
+    ) -> list[Penetration]:
+        """Every (link shape, object piece) pair closer than required at ``q``.
+
+        A link shape must stay ``margin_m`` [m] away from the object. The fingertip sphere of a
+        finger in ``contacts`` is exempt from the margin and may penetrate up to ``allowance_m``
+        [m]: it is reported only below ``-allowance_m``. ``joint_a`` is 0 (the object, fixed),
+        ``point_a`` on the object, ``normal`` from the object towards the link, and ``depth_m``
+        how far the link must move along ``normal`` to reach its required distance.
+
+        Raises:
+            InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
+            InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
+        """
+        thresholds = self._thresholds(contacts, margin_m, allowance_m)
+        pairs = self._pairs(q, T_world_object, thresholds, nearest_only=False)
+        return [
+            Penetration(
+                0,
+                self._joints[p.geometry],
+                p.point_object,
+                p.point_hand,
+                p.normal,
+                float(thresholds[p.geometry] - p.distance_m),
+            )
+            for p in pairs
+            if p.distance_m < thresholds[p.geometry]
+        ]
+
+    def clearance(
+        self,
+        q: NDArray[np.float64],
+        contacts: Iterable[str] = (),
+        allowance_m: float = CONTACT_ALLOWANCE_M,
+        T_world_object: FloatArray | None = None,
+    ) -> Clearance:
+        """Signed distance of every link to the object and the smallest one at ``q``.
+
+        The fingertip sphere of a finger in ``contacts`` enters the smallest distance only when
+        it is deeper than ``allowance_m`` [m] inside the object.
+
+        Raises:
+            InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
+            InvalidSettingsError: ``allowance_m`` is negative or not finite.
+        """
+        thresholds = self._thresholds(contacts, 0.0, allowance_m)
+        pairs = self._pairs(q, T_world_object, np.full(len(self._links), np.inf), True)
+        links: dict[str, float] = {}
+        distance, closest = math.inf, ""
+        for p in pairs:
+            link = self._links[p.geometry]
+            links[link] = min(links.get(link, math.inf), p.distance_m)
+            excepted = thresholds[p.geometry] < 0.0 and p.distance_m >= thresholds[p.geometry]
+            if not excepted and p.distance_m < distance:
+                distance, closest = p.distance_m, link
+        return Clearance(float(distance), closest, links)
+
+    def place_free_fingers(
+        self,
+        q: NDArray[np.float64],
+        fingers: Iterable[str],
+        margin_m: float = FREE_FINGER_MARGIN_M,
+        T_world_object: FloatArray | None = None,
+    ) -> FreeFingerPlacement:
+        """Move each finger without a contact to the nearest configuration that touches nothing.
+
+        A free finger is no part of the grasp constraints, so only its own joints move: over a
+        grid of its joint range (the fully opened and fully closed ends included) and its
+        current values, the candidate nearest to its current joint values (Euclidean, in
+        radians) whose links keep ``margin_m`` [m] from the object and from every other link
+        the hand's self-collision checks them against. Fingers are placed in turn, each seeing
+        the ones before. When no candidate is clear, the finger takes the clearest one and the
+        result says ``clear=False``.
+
+        Raises:
+            InvalidTargetError: A name in ``fingers`` is not a finger of the hand.
+            InvalidSettingsError: ``margin_m`` is negative or not finite.
+        """
+        self._thresholds((), margin_m, 0.0)
+        q = self.hand.check_q(q).copy()
+        distance = math.inf
+        for finger in fingers:
+            q, finger_distance = self._place_finger(q, self._free_finger(finger), margin_m,
+                                                    T_world_object)  # fmt: skip
+            distance = min(distance, finger_distance)
+        return FreeFingerPlacement(q, distance, distance >= margin_m)
+
+    # ----- internals ------------------------------------------------------------------------
+    def _place_finger(
+        self,
+        q: NDArray[np.float64],
+        finger: _FreeFinger,
+        margin_m: float,
+        T_world_object: FloatArray | None,
+    ) -> tuple[NDArray[np.float64], float]:
+        current = q[7:][finger.coordinates]
+        grid = np.vstack([current, finger.grid])
+        order = np.argsort(np.linalg.norm(grid - current, axis=1), kind="stable")
+        candidates = []
+        for values in grid[order]:
+            candidate = q.copy()
+            candidate[7:][finger.coordinates] = values
+            # A candidate fails at its first pair closer than the margin: cheap rejections.
+            distance = self._finger_distance(candidate, finger, T_world_object, margin_m, True)
+            if distance >= margin_m:
+                return candidate, distance
+            candidates.append(candidate)
+        exact = [self._finger_distance(c, finger, T_world_object, margin_m) for c in candidates]
+        best = int(np.argmax(exact))
+        return candidates[best], exact[best]
+
+    def _finger_distance(
+        self,
+        q: NDArray[np.float64],
+        finger: _FreeFinger,
+        T_world_object: FloatArray | None,
+        limit_m: float,
+        fail_fast: bool = False,
+    ) -> float:
+        """Smallest signed distance [m] of a finger's links to the object and to other links.
+
+        Exact below ``limit_m``; at or above it, some value at least ``limit_m`` (the pairs whose
+        bounding spheres are that far apart are skipped). With ``fail_fast``, the first distance
+        found below ``limit_m`` is returned, not the smallest.
+        """
+        stop = limit_m if fail_fast else -math.inf
+        limits = np.full(len(self._links), limit_m)
+        pairs = self._pairs(q, T_world_object, limits, True, finger.geometries, stop)
+        distance = min((p.distance_m for p in pairs), default=math.inf)
+        if distance < stop:
+            return distance
+        placements = self._geometry_data.oMg
+        objects = self._geometry_model.geometryObjects
+        centres = np.array([M.act(c) for M, c in zip(placements, self._link_centres, strict=True)])
+        a, b = finger.pairs.T
+        bounds = np.linalg.norm(centres[a] - centres[b], axis=1)
+        bounds -= self._link_radii[a] + self._link_radii[b]
+        for k in np.argsort(bounds):
+            if bounds[k] >= min(distance, limit_m):
+                break
+            a, b = (int(i) for i in finger.pairs[k])
+            Ma, Mb = placements[a], placements[b]
+            signed = coal.distance(
+                objects[a].geometry, coal.Transform3s(Ma.rotation, Ma.translation),
+                objects[b].geometry, coal.Transform3s(Mb.rotation, Mb.translation),
+                self._request, coal.DistanceResult(),
+            )  # fmt: skip
+            distance = min(distance, float(signed))
+            if distance < stop:
+                break
+        return distance
+
+    def _free_finger(self, name: str) -> _FreeFinger:
+        if name not in self._tips:
+            raise InvalidTargetError(
+                f"unknown free finger {name!r} for hand {self.hand.description.name}; "
+                f"valid: {list(self._tips)}"
+            )
+        if name not in self._free:
+            self._free[name] = self._build_free_finger(name)
+        return self._free[name]
+
+    def _build_free_finger(self, name: str) -> _FreeFinger:
+        hand, model = self.hand, self._model
+        virtual = set(hand.virtual_joint_names)
+        coordinates = np.array(
+            [i for i in hand.finger_coordinates[name] if hand.coordinate_names[i] not in virtual],
+            dtype=np.intp,
+        )
+        joints = {int(model.getJointId(hand.coordinate_names[i])) for i in coordinates}
+        geometries = tuple(
+            g for g, joint in enumerate(self._joints) if joints & set(model.supports[joint])
+        )
+        pairs = np.array(
+            [
+                (p.first, p.second)
+                for p in self._geometry_model.collisionPairs
+                if p.first in geometries or p.second in geometries
+            ],
+            dtype=np.intp,
+        ).reshape(-1, 2)
+        axes = [np.linspace(hand.lower[i], hand.upper[i], _GRID_STEPS) for i in coordinates]
+        grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(coordinates))
+        return _FreeFinger(coordinates, grid, geometries, pairs)
+
+    def _thresholds(
+        self, contacts: Iterable[str], margin_m: float, allowance_m: float
+    ) -> NDArray[np.float64]:
+        """Smallest accepted signed distance [m] per hand geometry."""
+        for name, value in (("margin_m", margin_m), ("allowance_m", allowance_m)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise InvalidSettingsError(f"{name} must be a finite length >= 0 m, got {value}")
+        tips = set()
+        for finger in contacts:
+            if finger not in self._tips:
+                raise InvalidTargetError(
+                    f"unknown contact finger {finger!r} for hand {self.hand.description.name}; "
+                    f"valid: {list(self._tips)}"
+                )
+            tips.add(self._tips[finger])
+        return np.array([-allowance_m if link in tips else margin_m for link in self._links])
+
+    def _place(self, q: NDArray[np.float64], T_world_object: FloatArray | None) -> FloatArray:
+        """Place the hand geometries at ``q``; return the object placement to use."""
+        pin.updateGeometryPlacements(
+            self._model, self._data, self._geometry_model, self._geometry_data, self.hand.check_q(q)
+        )
+        if T_world_object is None:
+            return self.object.T_world_object
+        return as_placement(T_world_object)
+
+    def _pairs(
+        self,
+        q: NDArray[np.float64],
+        T_world_object: FloatArray | None,
+        thresholds: NDArray[np.float64],
+        nearest_only: bool,
+        geometries: Sequence[int] | None = None,
+        stop_below_m: float = -math.inf,
+    ) -> list[_Pair]:
+        """Signed distances of hand geometries (default all) to the object pieces that may matter.
+
+        ``nearest_only``: one pair per geometry, its nearest piece. Otherwise every pair whose
+        bounding spheres come closer than the geometry's threshold. The search ends at the first
+        pair closer than ``stop_below_m``.
+        """
+        T = self._place(q, T_world_object)
+        chosen = range(len(self._links)) if geometries is None else geometries
+        placements = self._geometry_data.oMg
+        piece_centres = self._piece_centres @ T[:3, :3].T + T[:3, 3]
+        transforms = self._piece_transforms(T)
+        out: list[_Pair] = []
+        for g in chosen:
+            M = placements[g]
+            gaps = np.linalg.norm(piece_centres - M.act(self._link_centres[g]), axis=1)
+            bounds = gaps - self._link_radii[g] - self._piece_radii
+            geometry = self._geometry_model.geometryObjects[g].geometry
+            at_link = coal.Transform3s(M.rotation, M.translation)
+            best: _Pair | None = None
+            for i in np.argsort(bounds):
+                limit = best.distance_m if best is not None else thresholds[g]
+                if bounds[i] >= limit:
+                    break
+                if transforms[i] is None:
+                    transforms[i] = self._shapes[i].transform(T)
+                pair = self._distance(g, geometry, at_link, int(i), transforms[i])
+                if pair.distance_m < stop_below_m:
+                    return [*out, pair]
+                if nearest_only:
+                    best = pair if best is None or pair.distance_m < best.distance_m else best
+                else:
+                    out.append(pair)
+            if best is not None:
+                out.append(best)
+        return out
+
+    def _piece_transforms(self, T: FloatArray) -> list[coal.Transform3s | None]:
+        """The pieces' coal transforms at object placement ``T``, built on first use."""
+        key = T.tobytes()
+        if self._transforms_key != key:
+            self._transforms_key = key
+            self._transforms: list[coal.Transform3s | None] = [None] * len(self._shapes)
+        return self._transforms
+
+    def _distance(
+        self,
+        g: int,
+        geometry: coal.ShapeBase,
+        at_link: coal.Transform3s,
+        piece: int,
+        at_piece: coal.Transform3s,
+    ) -> _Pair:
+        result = coal.DistanceResult()
+        distance = coal.distance(
+            self._shapes[piece].geometry, at_piece, geometry, at_link, self._request, result
+        )
+        normal = np.asarray(result.normal, dtype=np.float64)
+        return _Pair(
+            g,
+            float(distance),
+            np.asarray(result.getNearestPoint1(), dtype=np.float64),
+            np.asarray(result.getNearestPoint2(), dtype=np.float64),
+            normal / max(float(np.linalg.norm(normal)), 1e-12),
+        )

@@ -1,0 +1,224 @@
+"""Hand-object clearance (sahgrasp.objects.clearance), checked against coal directly."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
+from sahgrasp.hand import Hand
+from sahgrasp.ik import solve_ik
+from sahgrasp.objects import (
+    GRASP_NAMES,
+    BoxSolid,
+    GraspObject,
+    can_patches,
+    load_object,
+    placement,
+)
+from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.optimization import EXPERIMENTS, run_experiment
+from sahgrasp.viz.paper_examples import solve_example
+
+CUBE_M = 0.004
+
+
+def _cube_at(centre_m: np.ndarray, rotation: np.ndarray | None = None) -> GraspObject:
+    return GraspObject(
+        "cube", (BoxSolid("cube", (CUBE_M,) * 3),), (1, 0, 0, 1), placement(rotation, centre_m)
+    )
+
+
+def _mid_hand(hand: Hand) -> np.ndarray:
+    return hand.configuration(pin.SE3.Identity())  # every joint mid-range
+
+
+def _geometry_world(hand: Hand, q: np.ndarray) -> tuple[list[str], list[pin.SE3]]:
+    gm = hand.collision.geometry_model
+    gd = pin.GeometryData(gm)
+    pin.updateGeometryPlacements(hand.model, hand.model.createData(), gm, gd, q)
+    links = [hand.model.frames[g.parentFrame].name for g in gm.geometryObjects]
+    return links, [gd.oMg[i].copy() for i in range(len(links))]
+
+
+def _link_centre(hand: Hand, q: np.ndarray, link: str) -> np.ndarray:
+    links, placements = _geometry_world(hand, q)
+    return placements[links.index(link)].translation
+
+
+def test_box_through_a_phalanx_is_named(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    cube = _cube_at(_link_centre(sah, q, "index_middle"))
+    checker = HandObjectClearance(sah, cube)
+    result = checker.clearance(q)
+    assert result.link == "index_middle"
+    assert result.distance_m < -CUBE_M / 2
+    assert not result.clear()
+    penetrations = checker.penetrations(q, 0.0)
+    assert {p.joint_b for p in penetrations} == {int(sah.model.getJointId("index_j3"))}
+    assert all(p.joint_a == 0 for p in penetrations)
+    assert penetrations[0].depth_m == pytest.approx(-result.distance_m)
+
+
+def test_far_hand_distance_matches_coal(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    far = np.array([0.3, -0.2, 0.5])
+    checker = HandObjectClearance(sah, _cube_at(far))
+    result = checker.clearance(q)
+    links, placements = _geometry_world(sah, q)
+    box, at_box = coal.Box(CUBE_M, CUBE_M, CUBE_M), coal.Transform3s(np.eye(3), far)
+    expected = {}
+    geometries = sah.collision.geometry_model.geometryObjects
+    for link, geom, M in zip(links, geometries, placements, strict=True):
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        d = coal.distance(
+            box, at_box, geom.geometry, at_link, coal.DistanceRequest(), coal.DistanceResult()
+        )
+        expected[link] = min(expected.get(link, np.inf), d)
+    closest = min(expected, key=expected.__getitem__)
+    assert result.link == closest
+    assert result.distance_m == pytest.approx(expected[closest], abs=1e-9)
+    assert result.distance_m > 0.3
+    assert result.links_m == pytest.approx(expected, abs=1e-9)
+    assert checker.penetrations(q, margin_m=0.01) == []
+
+
+def _tip_probe(hand: Hand, q: np.ndarray, overlap_m: float) -> GraspObject:
+    """A cube beyond the index fingertip whose face enters its sphere by ``overlap_m``."""
+    tip = hand.frame_placements(q)["index_tip"]
+    outward = tip.rotation @ np.array([0.0, 1.0, 0.0])  # the SAH fingertip axis
+    centre = tip.translation + outward * (hand.radius_m - overlap_m + CUBE_M / 2)
+    return _cube_at(centre, tip.rotation)  # a face normal to the fingertip axis
+
+
+def test_contact_tip_within_allowance_is_not_reported(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    checker = HandObjectClearance(sah, _tip_probe(sah, q, 1.0e-3))
+    assert checker.penetrations(q, 0.0, contacts=("index",)) == []
+    touching = checker.clearance(q, contacts=("index",))
+    assert touching.clear()
+    assert touching.link != "index_tip"
+    assert touching.links_m["index_tip"] == pytest.approx(-1.0e-3, abs=1e-6)
+    # Without the contact, the same tip is a penetration.
+    (free,) = checker.penetrations(q, 0.0)
+    assert free.depth_m == pytest.approx(1.0e-3, abs=1e-6)
+    assert checker.clearance(q).link == "index_tip"
+
+
+def test_contact_tip_beyond_allowance_is_reported(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    checker = HandObjectClearance(sah, _tip_probe(sah, q, 2.5e-3))
+    (deep,) = checker.penetrations(q, 1e-3, contacts=("index",), allowance_m=1.5e-3)
+    assert deep.depth_m == pytest.approx(1.0e-3, abs=1e-6)  # the margin does not apply to it
+    assert checker.clearance(q, contacts=("index",)).distance_m == pytest.approx(-2.5e-3, 1e-3)
+    # Moving the tip along the normal by the depth brings it back to the allowance.
+    assert np.linalg.norm(deep.normal) == pytest.approx(1.0)
+    assert deep.normal @ (deep.point_b - deep.point_a) < 0.0  # witnesses cross inside
+
+
+def test_object_placement_override(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    centre = _link_centre(sah, q, "palm")
+    checker = HandObjectClearance(sah, _cube_at(np.zeros(3)))
+    assert checker.clearance(q, T_world_object=placement(None, centre)).link == "palm"
+
+
+def test_bad_input_is_typed(sah: Hand) -> None:
+    checker = HandObjectClearance(sah, _cube_at(np.ones(3)))
+    q = _mid_hand(sah)
+    with pytest.raises(InvalidTargetError, match="pinky"):
+        checker.penetrations(q, contacts=("pinky",))
+    with pytest.raises(InvalidSettingsError, match="allowance_m"):
+        checker.clearance(q, allowance_m=-1.0)
+    with pytest.raises(InvalidSettingsError, match="margin_m"):
+        checker.penetrations(q, margin_m=float("nan"))
+    with pytest.raises(InvalidConfigurationError):
+        checker.clearance(q[:5])
+
+
+@pytest.fixture(scope="module")
+def can_grasp(sah: Hand) -> tuple[np.ndarray, GraspObject]:
+    """The IK's three-finger grasp of the atlas paper's can: its free ring finger is in the can."""
+    result = solve_ik(sah, can_patches().target(), free_fingers=("ring",))
+    assert result.success
+    return result.q, load_object("can")
+
+
+def test_free_finger_is_placed_clear(sah: Hand, can_grasp: tuple[np.ndarray, GraspObject]) -> None:
+    q, can = can_grasp
+    checker = HandObjectClearance(sah, can)
+    contacts = ("thumb", "index", "middle")
+    assert checker.clearance(q, contacts).links_m["ring_distal"] < -0.01
+    placed = checker.place_free_fingers(q, ["ring"], margin_m=2e-3)
+    assert placed.clear and placed.distance_m >= 2e-3
+    ring = [sah.coordinate_index(f"ring_j{j}") for j in (1, 2, 3)]
+    moved = np.flatnonzero(placed.q[7:] != q[7:])
+    assert set(moved) <= set(ring) and moved.size
+    assert np.array_equal(placed.q[:7], q[:7])
+    after = checker.clearance(placed.q, contacts)
+    assert (
+        min(after.links_m[f"ring_{link}"] for link in ("proximal", "middle", "distal", "tip"))
+        >= 2e-3
+    )
+    assert not sah.in_collision(placed.q)
+    # A finger that already is clear stays where it is.
+    assert np.array_equal(checker.place_free_fingers(placed.q, ["ring"]).q, placed.q)
+
+
+def test_free_finger_inside_a_big_box_is_not_clear(sah: Hand) -> None:
+    q = _mid_hand(sah)
+    box = GraspObject("box", (BoxSolid("box", (0.5, 0.5, 0.5)),), (1, 0, 0, 1))
+    placed = HandObjectClearance(sah, box).place_free_fingers(q, ["ring"])
+    assert not placed.clear and placed.distance_m < -0.05
+    with pytest.raises(InvalidTargetError, match="pinky"):
+        HandObjectClearance(sah, box).place_free_fingers(q, ["pinky"])
+
+
+# ----- every shipped grasp, checked with coal alone -------------------------------------------
+TOLERANCE_M = 0.2e-3
+
+
+def _coal_depths(
+    hand: Hand, q: np.ndarray, obj: GraspObject, T_world_object: np.ndarray, contacts: set[str]
+) -> dict[str, float]:
+    """Depth [m] of every link inside ``obj`` but the contact fingertips, by brute-force coal."""
+    links, placements = _geometry_world(hand, q)
+    geometries = hand.collision.geometry_model.geometryObjects
+    tips = {f.tip_link for f in hand.description.fingers if f.name in contacts}
+    pieces = [(s.geometry, s.transform(T_world_object)) for s in obj.collision_shapes()]
+    depths = {}
+    for link, geometry, M in zip(links, geometries, placements, strict=True):
+        if link in tips:
+            continue
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        request = coal.DistanceRequest()
+        nearest = min(
+            coal.distance(piece, at, geometry.geometry, at_link, request, coal.DistanceResult())
+            for piece, at in pieces
+        )
+        depths[link] = max(depths.get(link, 0.0), -nearest)
+    return depths
+
+
+@pytest.mark.parametrize("name", GRASP_NAMES)
+def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
+    example = solve_example(sah, name)  # what `sahgrasp demo` and examples/grasp_*.py solve
+    assert example.result.success
+    depths = _coal_depths(
+        sah, example.result.q, example.obj, example.obj.T_world_object, set(sah.fingers)
+    )
+    assert max(depths.values()) <= TOLERANCE_M, sorted(depths.items(), key=lambda kv: -kv[1])[:3]
+
+
+@pytest.mark.parametrize("name", sorted(EXPERIMENTS))
+def test_experiment_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
+    result = run_experiment(name)  # as examples/optimize_<name>.py runs it
+    system, obj = result.system, EXPERIMENTS[name].object()
+    contacts = {c.finger for c in system.contacts}
+    assert result.valid[result.best] and result.valid[result.worst]
+    for chart in np.flatnonzero(result.valid):
+        T = system.object_pose(result.atlas.centres[chart]).homogeneous
+        depths = _coal_depths(sah, result.configurations[chart], obj, T, contacts)
+        assert max(depths.values()) <= TOLERANCE_M, (chart, max(depths, key=depths.__getitem__))

@@ -1,0 +1,126 @@
+"""Objects from mesh files (sahgrasp.objects.mesh_file): the shipped meshes, repairs, bad files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from sahgrasp.errors import SahGraspError
+from sahgrasp.objects import MeshFileError, load_mesh
+
+MESHES = Path(__file__).resolve().parents[1] / "examples" / "meshes"
+
+
+@pytest.fixture(scope="module", params=["mug.stl", "bottle.obj"])
+def shipped(request: pytest.FixtureRequest) -> Path:
+    return MESHES / str(request.param)
+
+
+def _box_file(tmp_path: Path, name: str, mesh: trimesh.Trimesh | None = None) -> Path:
+    path = tmp_path / name
+    (trimesh.creation.box((0.05, 0.04, 0.03)) if mesh is None else mesh).export(path)
+    return path
+
+
+def test_shipped_meshes_are_small_and_closed(shipped: Path) -> None:
+    assert shipped.stat().st_size < 200_000
+    obj = load_mesh(shipped)
+    solid = obj.solids[0]
+    assert solid.trimesh.is_watertight and solid.trimesh.volume > 0
+    assert len(obj.collision_shapes()) == len(solid.faces)
+    assert obj.mesh().faces.shape == solid.faces.shape
+
+
+def test_signed_distance_matches_the_mesh(shipped: Path) -> None:
+    """Outside: the distance to the triangles; inside: negative (checked with trimesh)."""
+    obj = load_mesh(shipped)
+    surface = obj.solids[0].trimesh
+    rng = np.random.default_rng(0)
+    points = rng.uniform(surface.bounds[0] - 0.01, surface.bounds[1] + 0.01, (300, 3))
+    expected = -trimesh.proximity.signed_distance(surface, points)  # trimesh: positive inside
+    ours = obj.signed_distance(points)
+    outside = expected > 0
+    assert outside.sum() > 50 and (~outside).sum() > 10
+    assert np.abs(ours[outside] - expected[outside]).max() < 0.2e-3
+    assert (ours[~outside] < 0).all()
+
+
+def test_surface_samples_lie_on_the_surface_with_outward_normals(shipped: Path) -> None:
+    solid = load_mesh(shipped).solids[0]
+    points, normals = solid.sample_surface(200, seed=1)
+    assert np.abs(trimesh.proximity.signed_distance(solid.trimesh, points)).max() < 1e-9
+    assert np.allclose(np.linalg.norm(normals, axis=1), 1.0)
+    outside = trimesh.proximity.signed_distance(solid.trimesh, points + 1e-3 * normals)
+    assert (outside < 0).mean() > 0.95  # off an edge the normal of one face can point inside
+    nearest, at = solid.nearest_surface(points + 2e-4 * normals)
+    back = np.all(np.isclose(nearest, points, atol=1e-6), axis=1) & np.all(at == normals, axis=1)
+    assert back.mean() > 0.95  # near an edge or the rim another face can be as near
+
+
+def test_hull_is_one_piece_and_units_are_checked(tmp_path: Path) -> None:
+    path = _box_file(tmp_path, "box.ply")
+    assert len(load_mesh(path, collision="hull").collision_shapes()) == 1
+    millimetres = trimesh.creation.box((50.0, 40.0, 30.0))
+    path = _box_file(tmp_path, "box_mm.stl", millimetres)
+    with pytest.raises(MeshFileError, match="scale=1e-3"):
+        load_mesh(path)
+    box = load_mesh(path, scale=1e-3, T_world_object=np.diag([1.0, 1.0, 1.0, 1.0]))
+    assert np.ptp(box.mesh().vertices_m, axis=0) == pytest.approx([0.05, 0.04, 0.03])
+    with pytest.raises(MeshFileError, match="collision geometry"):
+        load_mesh(path, scale=1e-3, collision="bvh")
+    with pytest.raises(MeshFileError, match="scale"):
+        load_mesh(path, scale=-1.0)
+
+
+def test_repairs_are_made_and_reported(tmp_path: Path) -> None:
+    box = trimesh.creation.box((0.05, 0.04, 0.03))
+    faces = np.vstack([box.faces[:-1][:, ::-1], box.faces[:1]])  # inside-out, a hole, a duplicate
+    degenerate = np.array([[0, 0, 1]])
+    broken = trimesh.Trimesh(box.vertices, np.vstack([faces, degenerate]), process=False)
+    obj = load_mesh(_box_file(tmp_path, "broken.obj", broken))
+    repairs = " ".join(obj.solids[0].repairs)
+    for what in ("degenerate or duplicate", "filled holes", "outward"):
+        assert what in repairs
+    assert obj.solids[0].trimesh.volume == pytest.approx(0.05 * 0.04 * 0.03)
+
+
+def _bad_files(tmp_path: Path) -> dict[str, tuple[Path, str]]:
+    tube = trimesh.creation.cylinder(0.03, 0.1, sections=24)
+    tube = trimesh.Trimesh(tube.vertices, tube.faces[np.abs(tube.face_normals[:, 2]) < 0.5])
+    (tmp_path / "empty.stl").write_bytes(b"")
+    (tmp_path / "garbage.obj").write_text("this is not a mesh\n")
+    (tmp_path / "nan.obj").write_text("v nan 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 4\n")
+    (tmp_path / "points.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n0 0 0\n1 0 0\n0 1 0\n"
+    )
+    (tmp_path / "box.step").write_text("ISO-10303-21;")
+    flat = trimesh.Trimesh([[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0]], [[0, 1, 2], [0, 2, 1]])
+    return {
+        "missing": (tmp_path / "missing.stl", "not found"),
+        "suffix": (tmp_path / "box.step", "unsupported"),
+        "empty": (tmp_path / "empty.stl", "no triangles|not a readable"),
+        "garbage": (tmp_path / "garbage.obj", "no triangles|not a readable"),
+        "nan": (tmp_path / "nan.obj", "NaN"),
+        "points": (tmp_path / "points.ply", "no triangles|not a readable"),
+        "open": (_box_file(tmp_path, "tube.stl", tube), "not closed"),
+        "flat": (_box_file(tmp_path, "flat.stl", flat), "not closed|no volume|flat"),
+    }
+
+
+@pytest.mark.parametrize(
+    "case", ["missing", "suffix", "empty", "garbage", "nan", "points", "open", "flat"]
+)
+def test_bad_files_get_a_typed_error(tmp_path: Path, case: str) -> None:
+    path, message = _bad_files(tmp_path)[case]
+    with pytest.raises(MeshFileError, match=message) as info:
+        load_mesh(path)
+    assert isinstance(info.value, SahGraspError)
+
+
+def test_too_many_triangles_is_refused(shipped: Path) -> None:
+    with pytest.raises(MeshFileError, match=r"max_faces = 100 .*decimate"):
+        load_mesh(shipped, max_faces=100)
