@@ -16,9 +16,9 @@ import sys
 import time
 import zlib
 from collections import Counter
-from collections.abc import Iterator, Sequence
-from concurrent.futures import Executor, ProcessPoolExecutor
-from contextlib import contextmanager
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import Any
 
 import coal
@@ -30,15 +30,17 @@ from tqdm import tqdm
 from sahgrasp.contacts import GraspTarget, save_targets
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.fileio import write_json_atomic
-from sahgrasp.hand import Hand, load_hand
-from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_many
+from sahgrasp.hand import Hand, HandDescription, load_hand
+from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_ik, worker_hand
 from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
 from sahgrasp.objects.frames import transform_points
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.mesh_file import load_mesh
 
 __all__ = [
     "BENCH_SEED",
     "PENETRATION_TOLERANCE_M",
+    "RUNS",
     "ObjectPenetration",
     "format_table",
     "run",
@@ -123,21 +125,53 @@ def _object_seed(seed: int, name: str) -> int:
     return int(np.random.SeedSequence([seed, zlib.crc32(name.encode())]).generate_state(1)[0])
 
 
-@contextmanager
-def _executor(workers: int) -> Iterator[Executor | None]:
+RUNS = ("without_object", "with_object")
+"""The IK runs per contact set: contacts only, and with ``obstacle=`` the object."""
+
+
+def _solve_chunk(
+    description: HandDescription,
+    digest: str,
+    targets: list[GraspTarget],
+    obj: GraspObject | None,
+) -> list[tuple[IKResult, ...]]:
+    """Solve each target without the object, then (if ``obj``) with it, one after the other.
+
+    Solving each problem in both runs back to back lets a change of machine load affect both
+    alike. The object is the same instance for every problem, so that the solver builds its
+    collision pieces once (outside its timer).
+    """
+    hand = worker_hand(description, digest)
+    if obj is not None:
+        obj = _WORKER_OBJECTS.setdefault(obj.name, obj)
+    settings = IKSettings()
+    return [
+        (solve_ik(hand, t, settings),)
+        + (() if obj is None else (solve_ik(hand, t, settings, obstacle=obj),))
+        for t in targets
+    ]
+
+
+_WORKER_OBJECTS: dict[str, GraspObject] = {}
+"""The object of the current pool, by name, kept in each worker process."""
+
+
+def _solve(
+    hand: Hand, targets: list[GraspTarget], obj: GraspObject | None, workers: int, bar: tqdm[Any]
+) -> list[tuple[IKResult, ...]]:
+    description, digest = hand.description, hand.description.digest()
+    chunks = [targets[i : i + _CHUNK] for i in range(0, len(targets), _CHUNK)]
+    results: list[tuple[IKResult, ...]] = []
     if workers <= 1:
-        yield None
-        return
+        worker_hand(description, digest)
+        for chunk in chunks:
+            results += _solve_chunk(description, digest, chunk, obj)
+            bar.update(len(chunk))
+        return results
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        yield pool
-
-
-def _solve(hand: Hand, targets: list[GraspTarget], workers: int, bar: tqdm[Any]) -> list[IKResult]:
-    results: list[IKResult] = []
-    with _executor(workers) as pool:
-        for start in range(0, len(targets), _CHUNK):
-            chunk = targets[start : start + _CHUNK]
-            results += solve_many(hand, chunk, IKSettings(), executor=pool)
+        futures = [pool.submit(_solve_chunk, description, digest, c, obj) for c in chunks]
+        for future, chunk in zip(futures, chunks, strict=True):
+            results += future.result()
             bar.update(len(chunk))
     return results
 
@@ -199,6 +233,7 @@ def _bench_object(
     seed: int,
     workers: int,
     progress: bool,
+    with_object: bool,
 ) -> tuple[dict[str, Any], list[GraspTarget]]:
     object_seed = _object_seed(seed, obj.name)
     with tqdm(total=count, unit="set", disable=not progress, file=sys.stderr) as bar:
@@ -208,13 +243,24 @@ def _bench_object(
         sampling_s = time.perf_counter() - start
         bar.reset()
         bar.set_description(f"bench grasps {obj.name}: solve")
-        results = _solve(hand, targets, workers, bar)
-        bar.reset()
+        solved = _solve(hand, targets, obj if with_object else None, workers, bar)
+        results = list(zip(*solved, strict=True))
+        bar.reset(total=count * len(results))
         bar.set_description(f"bench grasps {obj.name}: check")
-        penetration = _penetration_summary(hand, obj, results, bar)
-    row = {"object": obj.name, "contact_set_seed": object_seed, "sampling_s": sampling_s}
-    row.update(_summary(results))
-    row["penetration"] = penetration
+        runs = {}
+        for label, run_results in zip(RUNS, results, strict=False):
+            runs[label] = _summary(run_results)
+            runs[label]["penetration"] = _penetration_summary(hand, obj, run_results, bar)
+    row: dict[str, Any] = {
+        "object": obj.name,
+        "contact_set_seed": object_seed,
+        "sampling_s": sampling_s,
+        "runs": runs,
+    }
+    if with_object:
+        for stat in ("mean", "median"):
+            key = f"{stat}_time_ms"
+            row[f"time_ratio_{stat}"] = runs[RUNS[1]][key] / runs[RUNS[0]][key]
     return row, targets
 
 
@@ -225,7 +271,9 @@ def run(
     json_out: str | None = None,
     progress: bool = True,
     objects: Sequence[str] = OBJECT_NAMES,
+    meshes: Sequence[str] = (),
     extra_objects: Sequence[GraspObject] = (),
+    with_object: bool = True,
     print_table: bool = True,
     targets_out: str | None = None,
 ) -> dict[str, Any]:
@@ -238,7 +286,10 @@ def run(
         json_out: Path of the JSON document, or None.
         progress: Show a progress bar per object on stderr.
         objects: Catalog objects (:data:`sahgrasp.objects.OBJECT_NAMES`).
-        extra_objects: More objects, e.g. meshes loaded from files, placed in the world.
+        meshes: Mesh files (STL, OBJ, PLY) loaded with :func:`load_mesh` as more objects, named
+            ``mesh:<file name>``.
+        extra_objects: More objects, placed in the world.
+        with_object: Solve each contact set a second time with ``obstacle=`` the object.
         print_table: Print :func:`format_table` of the result on stdout.
         targets_out: Path of a targets file holding every contact set, e.g. for
             ``sahgrasp bench ik --targets`` (written atomically), or None.
@@ -246,6 +297,7 @@ def run(
     Raises:
         InvalidSettingsError: ``problems_per_object`` or ``workers`` below 1.
         InvalidTargetError: An unknown catalog object name (the message lists the valid ones).
+        MeshFileError: A mesh file is missing or malformed.
     """
     if problems_per_object < 1 or workers < 1:
         raise InvalidSettingsError(
@@ -253,10 +305,14 @@ def run(
         )
     hand = load_hand("sah")
     default_sequence(hand)  # loaded before any problem is timed
-    bench_objects = [load_object(name) for name in objects] + list(extra_objects)
+    bench_objects = [load_object(name) for name in objects]
+    bench_objects += [load_mesh(path, name=f"mesh:{Path(path).name}") for path in meshes]
+    bench_objects += extra_objects
     rows, problems = [], []
     for obj in bench_objects:
-        row, targets = _bench_object(hand, obj, problems_per_object, seed, workers, progress)
+        row, targets = _bench_object(
+            hand, obj, problems_per_object, seed, workers, progress, with_object
+        )
         rows.append(row)
         problems += targets
     document: dict[str, Any] = {
@@ -283,20 +339,29 @@ def run(
 
 
 def format_table(document: dict[str, Any]) -> str:
-    """A Markdown table of :func:`run`'s document, one row per object."""
+    """A Markdown table of :func:`run`'s document, one row per object and IK run."""
     lines = [
-        "| object | solved | 1st start | mean starts | median / mean / p95 ms "
-        "| claimed penetrating | depth median / max mm | solved, not penetrating |",
-        "|---|---|---|---|---|---|---|---|",
+        "| object | IK | solved | 1st start | mean starts | median / mean / p95 ms "
+        "| time with / without object (median, mean) | claimed penetrating "
+        "| depth median / max mm | solved, not penetrating |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in document["objects"]:
-        pen = row["penetration"]
-        lines.append(
-            f"| {row['object']} | {100 * row['success_rate']:.1f}% ({row['solved']}/"
-            f"{row['problems']}) | {100 * row['first_start_success_rate']:.1f}% | "
-            f"{row['mean_starts']:.2f} | {row['median_time_ms']:.1f} / {row['mean_time_ms']:.1f} / "
-            f"{row['p95_time_ms']:.1f} | {100 * pen['penetrating_rate']:.1f}% "
-            f"({pen['penetrating']}/{pen['claimed']}) | {pen['median_penetrating_depth_mm']:.1f} / "
-            f"{pen['max_link_depth_mm']:.1f} | {100 * pen['usable_rate']:.1f}% |"
-        )
+        for label, stats in row["runs"].items():
+            pen = stats["penetration"]
+            ratio = (
+                f"{row['time_ratio_median']:.2f}x, {row['time_ratio_mean']:.2f}x"
+                if label == RUNS[1]
+                else ""
+            )
+            lines.append(
+                f"| {row['object']} | {label.replace('_', ' ')} | "
+                f"{100 * stats['success_rate']:.1f}% ({stats['solved']}/{stats['problems']}) | "
+                f"{100 * stats['first_start_success_rate']:.1f}% | {stats['mean_starts']:.2f} | "
+                f"{stats['median_time_ms']:.1f} / {stats['mean_time_ms']:.1f} / "
+                f"{stats['p95_time_ms']:.1f} | {ratio} | {100 * pen['penetrating_rate']:.1f}% "
+                f"({pen['penetrating']}/{pen['claimed']}) | "
+                f"{pen['median_penetrating_depth_mm']:.1f} / {pen['max_link_depth_mm']:.1f} | "
+                f"{100 * pen['usable_rate']:.1f}% |"
+            )
     return "\n".join(lines)
