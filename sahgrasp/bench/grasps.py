@@ -51,7 +51,7 @@ BENCH_SEED = 7_305_411
 PENETRATION_TOLERANCE_M = 2e-4
 """A link deeper than this in the object [m] makes a claimed solution penetrate."""
 _CHUNK = 10
-"""Problems per progress update."""
+"""Problems per task sent to a worker process (in-process, the progress moves per problem)."""
 
 
 class ObjectPenetration:
@@ -160,7 +160,8 @@ def _solve(
     hand: Hand, targets: list[GraspTarget], obj: GraspObject | None, workers: int, bar: tqdm[Any]
 ) -> list[tuple[IKResult, ...]]:
     description, digest = hand.description, hand.description.digest()
-    chunks = [targets[i : i + _CHUNK] for i in range(0, len(targets), _CHUNK)]
+    size = _CHUNK if workers > 1 else 1
+    chunks = [targets[i : i + size] for i in range(0, len(targets), size)]
     results: list[tuple[IKResult, ...]] = []
     if workers <= 1:
         worker_hand(description, digest)
