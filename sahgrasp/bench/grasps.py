@@ -51,7 +51,7 @@ BENCH_SEED = 7_305_411
 PENETRATION_TOLERANCE_M = 2e-4
 """A link deeper than this in the object [m] makes a claimed solution penetrate."""
 _CHUNK = 10
-"""Problems per task sent to a worker process (in-process, the progress moves per problem)."""
+"""Problems per task sent to a worker process."""
 
 
 class ObjectPenetration:
@@ -130,20 +130,14 @@ RUNS = ("without_object", "with_object")
 
 
 def _solve_chunk(
-    description: HandDescription,
-    digest: str,
-    targets: list[GraspTarget],
-    obj: GraspObject | None,
+    hand: Hand, targets: list[GraspTarget], obj: GraspObject | None
 ) -> list[tuple[IKResult, ...]]:
     """Solve each target without the object, then (if ``obj``) with it, one after the other.
 
     Solving each problem in both runs back to back lets a change of machine load affect both
-    alike. The object is the same instance for every problem, so that the solver builds its
-    collision pieces once (outside its timer).
+    alike. The solver builds the object's collision pieces once per object instance, outside its
+    timer.
     """
-    hand = worker_hand(description, digest)
-    if obj is not None:
-        obj = _WORKER_OBJECTS.setdefault(obj.name, obj)
     settings = IKSettings()
     return [
         (solve_ik(hand, t, settings),)
@@ -152,25 +146,35 @@ def _solve_chunk(
     ]
 
 
-_WORKER_OBJECTS: dict[str, GraspObject] = {}
-"""The object of the current pool, by name, kept in each worker process."""
+_POOL_OBJECTS: dict[str, GraspObject] = {}
+"""In a worker process: the object its pool serves (a pool serves one object), by name."""
+
+
+def _pool_task(
+    description: HandDescription,
+    digest: str,
+    targets: list[GraspTarget],
+    obj: GraspObject | None,
+) -> list[tuple[IKResult, ...]]:
+    """:func:`_solve_chunk` in a worker, on one unpickled instance of the object per process."""
+    if obj is not None:
+        obj = _POOL_OBJECTS.setdefault(obj.name, obj)
+    return _solve_chunk(worker_hand(description, digest), targets, obj)
 
 
 def _solve(
     hand: Hand, targets: list[GraspTarget], obj: GraspObject | None, workers: int, bar: tqdm[Any]
 ) -> list[tuple[IKResult, ...]]:
-    description, digest = hand.description, hand.description.digest()
-    size = _CHUNK if workers > 1 else 1
-    chunks = [targets[i : i + size] for i in range(0, len(targets), size)]
     results: list[tuple[IKResult, ...]] = []
     if workers <= 1:
-        worker_hand(description, digest)
-        for chunk in chunks:
-            results += _solve_chunk(description, digest, chunk, obj)
-            bar.update(len(chunk))
+        for target in targets:
+            results += _solve_chunk(hand, [target], obj)
+            bar.update()
         return results
+    description, digest = hand.description, hand.description.digest()
+    chunks = [targets[i : i + _CHUNK] for i in range(0, len(targets), _CHUNK)]
     with ProcessPoolExecutor(max_workers=workers) as pool:
-        futures = [pool.submit(_solve_chunk, description, digest, c, obj) for c in chunks]
+        futures = [pool.submit(_pool_task, description, digest, c, obj) for c in chunks]
         for future, chunk in zip(futures, chunks, strict=True):
             results += future.result()
             bar.update(len(chunk))
