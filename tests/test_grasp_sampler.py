@@ -171,6 +171,8 @@ def test_bad_reach_and_settings_are_typed_errors():
         SamplerSettings(opposition_deg=120.0)
     with pytest.raises(GraspSamplingError, match="trimesh"):
         sample_contact_sets("a mesh", 1, seed=109)
+    with pytest.raises(GraspSamplingError, match="count"):
+        sample_contact_sets(trimesh.creation.box((0.05, 0.05, 0.05)), -1, seed=109)
 
 
 def _plate_grasp(span_m: float, spacing_m: float) -> GraspTarget:

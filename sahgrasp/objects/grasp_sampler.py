@@ -302,15 +302,15 @@ def sample_contact_sets(
             in ``count * settings.max_attempts_per_set`` draws (the message counts the reasons
             draws were rejected).
     """
-    if int(count) < 0:
-        raise GraspSamplingError(f"count must be >= 0, got {count}")
+    if isinstance(count, bool) or not isinstance(count, int | np.integer) or count < 0:
+        raise GraspSamplingError(f"count must be an integer >= 0, got {count!r}")
     surface = as_surface(mesh)
     settings = settings or SamplerSettings()
     rng = np.random.default_rng(seed)
     draw = _ContactSetDraw(surface, reach, settings)
     sets: list[GraspTarget] = []
     rejected: Counter[str] = Counter()
-    for _ in range(int(count) * settings.max_attempts_per_set):
+    for _ in range(count * settings.max_attempts_per_set):
         if len(sets) == count:
             break
         outcome = draw(rng)
