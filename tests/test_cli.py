@@ -417,6 +417,14 @@ def test_bench_prints_its_table_and_writes_json_only_when_asked(tmp_path: Path) 
     assert json.loads((tmp_path / "k.json").read_text())["calls"] == 3
 
 
+def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
+    args = ("bench", "grasps", "--problems-per-object", "1", "--objects", "can", "--quiet")
+    done = sahgrasp(*args, "--without-object", "--json", "g.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "| can | without object |" in done.stdout and "with object |" not in done.stdout
+    assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
+
+
 def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
     done = sahgrasp("atlas", "planar", "--r", "0.3", "--plot", "p.png", "--json", "-", cwd=tmp_path)
     assert done.returncode == 0, done.stderr

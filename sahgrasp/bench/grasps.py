@@ -274,12 +274,11 @@ def run(
     seed: int = BENCH_SEED,
     workers: int = 1,
     json_out: str | None = None,
-    progress: bool = True,
+    quiet: bool = False,
     objects: Sequence[str] = OBJECT_NAMES,
     meshes: Sequence[str] = (),
     extra_objects: Sequence[GraspObject] = (),
     with_object: bool = True,
-    print_table: bool = True,
     targets_out: str | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (written atomically to ``json_out`` if given).
@@ -289,13 +288,12 @@ def run(
         seed: Benchmark seed; each object's contact sets use a seed derived from it and the name.
         workers: Processes solving the IK (times are per problem, measured inside the solver).
         json_out: Path of the JSON document, or None.
-        progress: Show a progress bar per object on stderr.
+        quiet: No progress bar (one per object, on stderr).
         objects: Catalog objects (:data:`sahgrasp.objects.OBJECT_NAMES`).
         meshes: Mesh files (STL, OBJ, PLY) loaded with :func:`load_mesh` as more objects, named
             ``mesh:<file name>``.
         extra_objects: More objects, placed in the world.
         with_object: Solve each contact set a second time with ``obstacle=`` the object.
-        print_table: Print :func:`format_table` of the result on stdout.
         targets_out: Path of a targets file holding every contact set, e.g. for
             ``sahgrasp bench ik --targets`` (written atomically), or None.
 
@@ -316,7 +314,7 @@ def run(
     rows, problems = [], []
     for obj in bench_objects:
         row, targets = _bench_object(
-            hand, obj, problems_per_object, seed, workers, progress, with_object
+            hand, obj, problems_per_object, seed, workers, not quiet, with_object
         )
         rows.append(row)
         problems += targets
@@ -338,8 +336,6 @@ def run(
         write_json_atomic(json_out, document)
     if targets_out is not None:
         save_targets(targets_out, hand.description.name, problems)
-    if print_table:
-        print(format_table(document))
     return document
 
 

@@ -90,11 +90,18 @@ def _sequence_table(doc: Document) -> str:
     ))  # fmt: skip
 
 
+def _grasps_table(doc: Document) -> str:
+    from sahgrasp.bench.grasps import format_table as grasps_table
+
+    return f"bench grasps: {doc['hand']}, seed {doc['seed']}\n{grasps_table(doc)}"
+
+
 _TABLES: dict[str, Callable[[Document], str]] = {
     "ik": _ik_table,
     "atlas": _atlas_table,
     "kinematics": _kinematics_table,
     "sequence": _sequence_table,
+    "grasps": _grasps_table,
 }
 
 

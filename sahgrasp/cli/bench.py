@@ -85,11 +85,40 @@ def _sequence(benches: Any) -> None:
     add_json_argument(seq, "the timings")
 
 
+def _grasps(benches: Any) -> None:
+    grasps = add_command(
+        benches, "grasps", "contact sets sampled on objects, solved without and with the object"
+    )
+    grasps.add_argument(
+        "--problems-per-object", type=positive_int, default=200, help="contact sets per object"
+    )
+    grasps.add_argument(
+        "--seed", type=nonnegative_int, default=7305411, help="seed of the contact sets (>= 0)"
+    )
+    grasps.add_argument("--workers", type=positive_int, default=1, help="IK processes")
+    grasps.add_argument(
+        "--objects", nargs="*", default=None, metavar="NAME", help="catalog objects (all)"
+    )
+    grasps.add_argument(
+        "--mesh", dest="meshes", action="append", default=[], metavar="PATH",
+        help="a mesh file (STL, OBJ, PLY) as one more object; repeat for more",
+    )  # fmt: skip
+    grasps.add_argument(
+        "--without-object", dest="with_object", action="store_false",
+        help="solve without the object only (no second, collision-aware run)",
+    )  # fmt: skip
+    grasps.add_argument(
+        "--targets-out", default=None, metavar="OUT", help="write the contact sets as targets"
+    )
+    _add_quiet(grasps)
+    add_json_argument(grasps, "the results")
+
+
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
-    for add in (_kinematics, _ik, _atlas, _sequence):
+    for add in (_kinematics, _ik, _atlas, _sequence, _grasps):
         add(benches)
     p.set_defaults(run=run)
 
@@ -97,7 +126,12 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp bench``."""
     options = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
-    check_outputs([args.json, options.get("plot")], inputs=[options.get("targets")])
+    if options.get("objects") is None:
+        options.pop("objects", None)
+    check_outputs(
+        [args.json, options.get("plot"), options.get("targets_out")],
+        inputs=[options.get("targets"), *options.get("meshes", ())],
+    )
     check_json_inputs(options.get("hand"))
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")
     with output_file(options.get("plot")) as plot:
