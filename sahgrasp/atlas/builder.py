@@ -32,6 +32,31 @@ class _Counters:
     bound_rejections: int = 0
 
 
+@dataclass(slots=True)
+class _Chart:
+    """What the builder keeps of one chart besides its centre and basis (rows of its arrays).
+
+    Attributes:
+        sign: ``sign(det([J; Phi^T]))`` at the centre, to spot branch crossings.
+        parent: The chart it was expanded from (-1 for the first).
+        nbrs: Earlier charts neighbouring it (each edge is stored once, at its later chart).
+        planes: Half-space normals ``a`` (``a . w <= b``) awaiting the polytope.
+        offsets: Their offsets ``b``.
+        poly: Its polytope, built from ``planes`` when the chart first reaches the queue's head.
+        boundary: Cut by a box bound or holding a blocked vertex.
+        queued: In the queue of charts to expand.
+    """
+
+    sign: float
+    parent: int
+    nbrs: IndexArray
+    planes: list[list[float]]
+    offsets: list[float]
+    poly: Polytope | None = None
+    boundary: bool = False
+    queued: bool = False
+
+
 class _Builder:
     """Mutable state of one atlas build.
 
@@ -58,18 +83,11 @@ class _Builder:
         n = self.lower.size
         self.X = np.empty((1024, n))
         self.PHI = np.empty((1024, n, k))
-        self.polys: list[Polytope | None] = []
-        self.planes: list[list[list[float]]] = []  # planes a . w <= b awaiting the polytope
-        self.offsets: list[list[float]] = []
-        self.signs: list[float] = []
-        self.parents: list[int] = []
-        self.boundary: list[bool] = []
-        self.nbrs: list[IndexArray] = []  # earlier charts neighbouring each chart
+        self.charts: list[_Chart] = []  # chart i: centre X[i], basis PHI[i], the rest here
         self.singular: list[FloatArray] = []
         self.count = 0
         self.index = NeighbourIndex()
         self.queue: deque[int] = deque()
-        self.queued: list[bool] = []
         self.counters = _Counters()
 
     # -- adding a chart ------------------------------------------------------------------------
@@ -101,14 +119,7 @@ class _Builder:
         Bc = 0.5 * np.einsum("ij,ij->i", Uc, Uc)
         far = self.tol * self.r < B  # a neighbour straight along the normal gives no plane
         self.X[j], self.PHI[j] = x, phi
-        self.polys.append(None)
-        self.planes.append(U[far].tolist())
-        self.offsets.append(B[far].tolist())
-        self.signs.append(point.sign)
-        self.parents.append(parent)
-        self.boundary.append(False)
-        self.queued.append(False)
-        self.nbrs.append(nbrs)
+        self.charts.append(_Chart(point.sign, parent, nbrs, U[far].tolist(), B[far].tolist()))
         self.count = j + 1
         self.index.added(self.X, self.count)
         for c, a, b in zip(nbrs.tolist(), Uc.tolist(), Bc.tolist(), strict=True):
@@ -134,12 +145,13 @@ class _Builder:
 
     def _give_plane(self, c: int, a: list[float], b: float) -> None:
         """Hand chart ``c`` the half-space ``a . w <= b`` of a new neighbour."""
-        poly = self.polys[c]
+        chart = self.charts[c]
+        poly = chart.poly
         if poly is None:
-            self.planes[c].append(a)
-            self.offsets[c].append(b)
+            chart.planes.append(a)
+            chart.offsets.append(b)
         elif (
-            (self.queued[c] or self.boundary[c])
+            (chart.queued or chart.boundary)
             and 0.5 * b < poly.reach2  # the plane lies at distance |a| / 2 = sqrt(b / 2)
             and poly.cut(a, b, self.tol)
         ):
@@ -147,18 +159,19 @@ class _Builder:
 
     def _polytope(self, i: int) -> Polytope:
         """Chart ``i``'s polytope, built from its recorded planes on first use."""
-        poly = self.polys[i]
+        chart = self.charts[i]
+        poly = chart.poly
         if poly is None:
-            poly = Polytope.from_planes(self.k, self.r, self.planes[i], self.offsets[i])
-            self.polys[i] = poly
-            self.planes[i], self.offsets[i] = [], []
+            poly = Polytope.from_planes(self.k, self.r, chart.planes, chart.offsets)
+            chart.poly, chart.planes, chart.offsets = poly, [], []
         return poly
 
     def _enqueue(self, c: int) -> None:
-        if not self.queued[c]:
-            poly = self.polys[c]
+        chart = self.charts[c]
+        if not chart.queued:
+            poly = chart.poly
             if poly is None or poly.expandable(self.r**2) >= 0:
-                self.queued[c] = True
+                chart.queued = True
                 self.queue.append(c)
 
     # -- expanding -----------------------------------------------------------------------------
@@ -176,7 +189,7 @@ class _Builder:
             v = self._polytope(i).expandable(r2)
             if v < 0:
                 self.queue.popleft()
-                self.queued[i] = False
+                self.charts[i].queued = False
                 continue
             if self.expand(i, v) and progress is not None:
                 progress(_PROGRESS_STAGE, self.count, cap)
@@ -200,13 +213,13 @@ class _Builder:
             elif x_j is not None:
                 point = self._accept(i, x_j)
                 if point is not None:
-                    if crossing_sign(self.PHI[i], point.phi, point.sign) != self.signs[i]:
+                    if crossing_sign(self.PHI[i], point.phi, point.sign) != self.charts[i].sign:
                         self._locate_crossing(i, direction, alpha)
                     self.add_chart(point, i)
                     return True
             alpha *= _SHRINK  # Algorithm 1, line 11
         poly.blocked[v] = True
-        self.boundary[i] = True
+        self.charts[i].boundary = True
         return False
 
     def _project(self, i: int, x_tilde: FloatArray) -> FloatArray | None:
@@ -232,7 +245,7 @@ class _Builder:
         (a unit vector's component at 1) never cuts. Returns True when ``vertex`` was cut off.
         """
         self.counters.bound_rejections += 1
-        self.boundary[i] = True
+        self.charts[i].boundary = True
         x_i, phi = self.X[i], self.PHI[i]
         above, below = x_j > self.upper, x_j < self.lower
         planes = np.concatenate((phi[above], -phi[below])).tolist()
@@ -272,7 +285,7 @@ class _Builder:
             point = regular_point(self.J, x, self.k, self.scale)
             if point is None:
                 break
-            if crossing_sign(phi_i, point.phi, point.sign) == self.signs[i]:
+            if crossing_sign(phi_i, point.phi, point.sign) == self.charts[i].sign:
                 lo = mid
             else:
                 hi = mid
@@ -286,23 +299,26 @@ class _Builder:
     def result(self, seconds: float) -> Atlas:
         """Freeze the state into an :class:`Atlas`."""
         n, N = self.X.shape[1], self.count
-        sizes = [len(nb) for nb in self.nbrs]
-        edges = np.stack((np.concatenate(self.nbrs), np.repeat(np.arange(N), sizes)), axis=1)
+        charts = self.charts
+        sizes = [len(c.nbrs) for c in charts]
+        nbrs = np.concatenate([c.nbrs for c in charts])
+        edges = np.stack((nbrs, np.repeat(np.arange(N), sizes)), axis=1)
+        still_open = np.array([c.queued for c in charts], dtype=bool)
         return Atlas(
             centres=self.X[:N].copy(),
             tangents=self.PHI[:N].copy(),
             radius=self.r,
             epsilon=self.settings.epsilon,
             edges=edges.astype(np.int64),
-            parents=np.array(self.parents, dtype=np.int64),
-            boundary=np.array(self.boundary, dtype=bool),
-            open=np.array(self.queued, dtype=bool),
+            parents=np.array([c.parent for c in charts], dtype=np.int64),
+            boundary=np.array([c.boundary for c in charts], dtype=bool),
+            open=still_open,
             singular_points=np.array(self.singular).reshape(-1, n),
             newton_failures=self.counters.newton_failures,
             rejections=self.counters.rejections,
             bound_rejections=self.counters.bound_rejections,
             build_seconds=seconds,
-            stop_reason="max_charts" if any(self.queued) else "complete",
+            stop_reason="max_charts" if still_open.any() else "complete",
         )
 
 
