@@ -46,11 +46,14 @@ class Polytope:
 
     __slots__ = ("blocked", "masks", "norm2", "reach2", "verts")
 
-    def __init__(self, verts: list[tuple[float, ...]], masks: list[int]) -> None:
+    def __init__(
+        self, verts: list[tuple[float, ...]], masks: list[int], norm2: list[float] | None = None
+    ) -> None:
+        """Vertices, their face masks and (when known) their squared norms."""
         self.verts = verts
         self.masks = masks
         self.blocked = [False] * len(verts)
-        self.norm2 = [sum(c * c for c in v) for v in verts]
+        self.norm2 = [sum(c * c for c in v) for v in verts] if norm2 is None else norm2
         self.reach2 = max(self.norm2)  # squared distance of the farthest vertex
 
     @classmethod
@@ -103,7 +106,8 @@ class Polytope:
         facet_dual = dual[faces]  # distance of v to plane h: |p_h . v - 1| / |p_h|
         tight = np.abs(verts @ facet_dual.T - 1.0) <= tol * np.linalg.norm(facet_dual, axis=1)
         masks = tight @ np.left_shift(1, np.arange(len(faces), dtype=np.int64))
-        return cls(list(map(tuple, verts.tolist())), masks.tolist())
+        norm2 = np.einsum("ij,ij->i", verts, verts).tolist()
+        return cls(list(map(tuple, verts.tolist())), masks.tolist(), norm2)
 
     @classmethod
     def _from_dual_polygon(cls, dual: list[list[float]]) -> Polytope:
