@@ -71,7 +71,7 @@ class Atlas:
         radius: Chart radius ``r`` (every chart has the same one).
         epsilon: Threshold of Eqs. (17)-(18) the atlas was built with.
         edges: Pairs ``(i, j)``, ``i < j``, of neighbouring charts (``|x_i - x_j| < 2r`` and
-            tangent spaces alike, see ``_Builder._similar``), shape (E, 2).
+            tangent spaces alike, see ``sahgrasp.atlas.builder``), shape (E, 2).
         parents: The chart each chart was expanded from (-1 for the first), shape (N,).
         boundary: Charts cut by a box bound or holding a blocked vertex, shape (N,).
         open: Charts that still had an expandable vertex when the build stopped, shape (N,).
