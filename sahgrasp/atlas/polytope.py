@@ -53,7 +53,7 @@ class Polytope:
         self.verts = verts
         self.masks = masks
         self.blocked = [False] * len(verts)
-        self.norm2 = [sum(c * c for c in v) for v in verts] if norm2 is None else norm2
+        self.norm2 = [sum(map(operator.mul, v, v)) for v in verts] if norm2 is None else norm2
         self.reach2 = max(self.norm2)  # squared distance of the farthest vertex
 
     @classmethod
@@ -171,7 +171,7 @@ class Polytope:
                     new_verts.append(v)
                     new_masks.append(shared | bit)
                     blocked.append(False)
-                    norm2.append(sum(c * c for c in v))
+                    norm2.append(sum(map(operator.mul, v, v)))
         self.verts, self.masks, self.blocked, self.norm2 = new_verts, new_masks, blocked, norm2
         self.reach2 = max(norm2)
         return True
