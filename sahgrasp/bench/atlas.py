@@ -1,8 +1,10 @@
 """Atlas benchmark: spheres S^2 and S^3, the planar hand (Fig. 8) and the SAH (Fig. 10).
 
-Baselines are CuikSuite's (C) times quoted in the issue; the targets are chart counts within 10% of
-``Vol / r^k`` and times within 3x of the baselines, and for the planar hand an atlas in <= 0.1 s
-and the three indices over all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
+The sphere references are CuikSuite's (the authors' C code, with a k-d tree neighbour index) chart
+counts and times, measured on an idle 2-core machine in the same run as this engine: the targets
+are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` (S^2 <= 0.06 s,
+S^3 <= 5 s). For the planar hand the targets are an atlas in <= 0.1 s and the three indices over
+all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
 compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
 k = 2, is 10x that rate. Each case reports its best wall time over ``repeats`` builds and the CPU
 time of that build (steadier on a shared machine).
@@ -29,11 +31,12 @@ from sahgrasp.progress import ProgressCallback
 __all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "run"]
 
 BASELINES: dict[str, dict[str, float]] = {
-    "S2": {"charts": 1181, "seconds": 0.04},
-    "S3": {"charts": 19100, "seconds": 6.4},
+    "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
+    "S3": {"charts": 18802, "fastest": 4.2, "slowest": 5.5, "seconds": 5.0},
     "planar": {"charts": 750, "seconds": 0.1, "quality_seconds": 0.1},
 }
-"""CuikSuite's chart counts and times for r = 0.1 (spheres) and the paper's planar figures."""
+"""References and target times [s], r = 0.1 (spheres): CuikSuite's charts and its fastest and
+slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's."""
 
 SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
     ("can", 2): {"t": 8, "charts": 4800, "seconds": 140.0},
@@ -53,7 +56,6 @@ SAH_CASES: tuple[tuple[str, int, float, bool], ...] = (
 
 _SAH_SPEEDUP = 10.0  # target chart rate over the paper's (SAH can, k = 2)
 _SAH_MAX_CHARTS = 20_000
-_TIME_FACTOR = 3.0  # allowed slowdown over the C baseline
 _COUNT_TOLERANCE = 0.10  # allowed relative deviation of the chart count from Vol / r^k
 
 
@@ -96,10 +98,10 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
         "cpu_seconds": cpu,
         "charts_per_second": atlas.n_charts / seconds,
         "baseline_charts": baseline["charts"],
-        "baseline_seconds": baseline["seconds"],
-        "time_ratio": seconds / baseline["seconds"],
+        "baseline_seconds": [baseline["fastest"], baseline["slowest"]],
+        "target_seconds": baseline["seconds"],
         "count_ok": abs(atlas.n_charts / expected - 1.0) <= _COUNT_TOLERANCE,
-        "time_ok": seconds <= _TIME_FACTOR * baseline["seconds"],
+        "time_ok": seconds <= baseline["seconds"],
     }
 
 
@@ -164,7 +166,7 @@ def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
     """Case name -> the function measuring it, in the order they run."""
     cases: dict[str, Callable[[], dict[str, Any]]] = {
         "S2": lambda: _sphere_row("S2", 3, 0.1, repeats),
-        "S3": lambda: _sphere_row("S3", 4, 0.1, 1),
+        "S3": lambda: _sphere_row("S3", 4, 0.1, repeats),
         "planar": lambda: _planar_row(repeats),
     }
     for name, k, radius, again in SAH_CASES:
@@ -176,7 +178,7 @@ def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
 
 def run(
     out_json: str | None = None,
-    repeats: int = 5,
+    repeats: int = 3,
     quiet: bool = False,
     progress: ProgressCallback | None = None,
     cases: Sequence[str] | None = None,
@@ -185,8 +187,8 @@ def run(
 
     Args:
         out_json: Write the summary there.
-        repeats: Builds per case for S^2, the planar hand and the SAH cases marked for repeats
-            (S^3 and the bottle with k = 3 are built once).
+        repeats: Builds per case for the spheres, the planar hand and the SAH cases marked for
+            repeats (the bottle with k = 3 is built once); each case reports its fastest.
         quiet: No progress bar on stderr.
         progress: Hears of every finished case (stage ``"bench atlas: cases"``) instead of the
             bar.
@@ -214,7 +216,6 @@ def run(
             report("bench atlas: cases", len(rows), len(measures))
     summary = {
         "benchmark": "atlas",
-        "time_factor": _TIME_FACTOR,
         "count_tolerance": _COUNT_TOLERANCE,
         "sah_speedup_target": _SAH_SPEEDUP,
         "cases": rows,
