@@ -60,7 +60,9 @@ def _ik(benches: Any) -> None:
 
 def _atlas(benches: Any) -> None:
     atlas = add_command(benches, "atlas", "atlas on spheres and the planar hand vs CuikSuite")
-    atlas.add_argument("--repeats", type=positive_int, default=5, help="builds per timed case")
+    atlas.add_argument(
+        "--repeats", type=positive_int, default=3, help="builds per timed case (best of)"
+    )
     atlas.add_argument(
         "--cases", nargs="+", default=None, metavar="CASE", help="run only these cases (all)"
     )
