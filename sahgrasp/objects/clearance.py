@@ -34,6 +34,7 @@ from sahgrasp.collision import Penetration
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.objects.body import GraspObject
+from sahgrasp.objects.collision import PieceTree
 from sahgrasp.objects.frames import FloatArray, as_placement
 
 __all__ = [
@@ -62,7 +63,8 @@ class Clearance:
         distance_m: Smallest signed distance [m] over the links, contact tips within their
             allowance left out (negative: a link is inside the object).
         link: The link at ``distance_m``.
-        links_m: Signed distance [m] of every link to the object, contact tips included.
+        links_m: Signed distance [m] of every link to the object, contact tips included; from
+            a query that asked for the closest link only, the links measured to find it.
     """
 
     distance_m: float
@@ -146,6 +148,10 @@ class HandObjectClearance:
             radii.append(float(g.geometry.aabb_radius))
         self._link_centres = np.array(centres)
         self._link_radii = np.array(radii)
+        self._link_objects = [
+            coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
+        ]
+        self._tree = PieceTree(self._shapes)
         self._tips = {f.name: f.tip_link for f in hand.description.fingers}
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
@@ -179,7 +185,9 @@ class HandObjectClearance:
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, margin_m, allowance_m)
-        pairs = self._pairs(q, T_world_object, thresholds, nearest_only=False)
+        T = self._place(q, T_world_object)
+        near = self._screen(T, thresholds, range(len(self._links)))
+        pairs = self._pairs(T, thresholds, nearest_only=False, geometries=near)
         return [
             Penetration(
                 0,
@@ -199,26 +207,44 @@ class HandObjectClearance:
         contacts: Iterable[str] = (),
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
+        all_links: bool = True,
     ) -> Clearance:
         """Signed distance of every link to the object and the smallest one at ``q``.
 
         The fingertip sphere of a finger in ``contacts`` enters the smallest distance only when
         it is deeper than ``allowance_m`` [m] inside the object.
 
+        Args:
+            q: Hand configuration.
+            contacts: Fingers whose tip spheres touch the object at their contacts.
+            allowance_m: How deep those spheres may enter the object [m].
+            T_world_object: The object's placement (default: its own).
+            all_links: False: find the smallest distance and its link only, measuring just the
+                links whose lower bound is below it (``links_m`` holds those); a far link then
+                costs one coarse query instead of an exact distance.
+
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        pairs = self._pairs(q, T_world_object, np.full(len(self._links), np.inf), True)
+        T = self._place(q, T_world_object)
+        every = range(len(self._links))
+        self._pose_links(T, every)
+        if all_links:
+            measured = {g: self._link_distance(T, g) for g in every}
+        else:
+            measured = self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
-        for p in pairs:
-            link = self._links[p.geometry]
-            links[link] = min(links.get(link, math.inf), p.distance_m)
-            excepted = thresholds[p.geometry] < 0.0 and p.distance_m >= thresholds[p.geometry]
-            if not excepted and p.distance_m < distance:
-                distance, closest = p.distance_m, link
+        for g in sorted(measured):  # in geometry order: a tie goes to the first link
+            link, d = self._links[g], measured[g]
+            if d == math.inf:  # no object: nothing to measure
+                continue
+            links[link] = min(links.get(link, math.inf), d)
+            excepted = thresholds[g] < 0.0 and d >= thresholds[g]
+            if not excepted and d < distance:
+                distance, closest = d, link
         return Clearance(float(distance), closest, links)
 
     def place_free_fingers(
@@ -291,7 +317,9 @@ class HandObjectClearance:
         """
         stop = limit_m if fail_fast else -math.inf
         limits = np.full(len(self._links), limit_m)
-        pairs = self._pairs(q, T_world_object, limits, True, finger.geometries, stop)
+        T = self._place(q, T_world_object)
+        near = self._screen(T, limits, finger.geometries)
+        pairs = self._pairs(T, limits, True, near, stop)
         distance = min((p.distance_m for p in pairs), default=math.inf)
         if distance < stop:
             return distance
@@ -375,28 +403,78 @@ class HandObjectClearance:
             return self.object.T_world_object
         return as_placement(T_world_object)
 
+    def _pose_links(self, T: FloatArray, geometries: Iterable[int]) -> None:
+        """Place the coal objects of hand ``geometries`` in the frame of the object at ``T``.
+
+        The piece tree stays in the object frame, built once, whatever the object's placement.
+        """
+        T_object_world = pin.SE3(T).inverse()
+        for g in geometries:
+            M = T_object_world * self._geometry_data.oMg[g]
+            link = self._link_objects[g]
+            link.setTransform(coal.Transform3s(M.rotation, M.translation))
+            link.computeAABB()
+
+    def _screen(
+        self, T: FloatArray, thresholds: NDArray[np.float64], geometries: Iterable[int]
+    ) -> list[int]:
+        """The ``geometries`` that may have a piece closer than their threshold [m].
+
+        Every geometry left out has none (exact, from the piece tree), so only the ones returned
+        need the pair-by-pair search of :meth:`_pairs`.
+        """
+        chosen = list(geometries)
+        self._pose_links(T, chosen)
+        tree, links = self._tree, self._link_objects
+        return [g for g in chosen if not tree.clear_of(links[g], float(thresholds[g]))]
+
+    def _link_distance(self, T: FloatArray, g: int) -> float:
+        """Smallest signed distance [m] of the posed hand geometry ``g`` to the object."""
+        distance = self._tree.nearest(self._link_objects[g])
+        if distance > 0.0:
+            return distance
+        # In contact the tree gives some pair's depth, not the deepest: search pair by pair.
+        return self._pairs(T, np.full(len(self._links), np.inf), True, [g])[0].distance_m
+
+    def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
+        """Signed distances [m] of the posed geometries that may hold the smallest one.
+
+        Geometries are taken by increasing lower bound until the bound exceeds the smallest
+        distance found; a contact tip within its allowance is excepted, so left out.
+        """
+        tree, links = self._tree, self._link_objects
+        bounds = np.array([tree.lower_bound(link) for link in links])
+        measured: dict[int, float] = {}
+        smallest = math.inf
+        for g in (int(i) for i in np.argsort(bounds, kind="stable")):
+            if bounds[g] > smallest:
+                break
+            if thresholds[g] < 0.0 and tree.clear_of(links[g], float(thresholds[g])):
+                continue
+            measured[g] = self._link_distance(T, g)
+            smallest = min(smallest, measured[g])
+        return measured
+
     def _pairs(
         self,
-        q: NDArray[np.float64],
-        T_world_object: FloatArray | None,
+        T: FloatArray,
         thresholds: NDArray[np.float64],
         nearest_only: bool,
-        geometries: Sequence[int] | None = None,
+        geometries: Sequence[int],
         stop_below_m: float = -math.inf,
     ) -> list[_Pair]:
-        """Signed distances of hand geometries (default all) to the object pieces that may matter.
+        """Signed distances of hand geometries to the object pieces that may matter.
 
-        ``nearest_only``: one pair per geometry, its nearest piece. Otherwise every pair whose
-        bounding spheres come closer than the geometry's threshold. The search ends at the first
-        pair closer than ``stop_below_m``.
+        The hand is placed (:meth:`_place`) and the object at ``T``. ``nearest_only``: one pair
+        per geometry, its nearest piece. Otherwise every pair whose bounding spheres come closer
+        than the geometry's threshold. The search ends at the first pair closer than
+        ``stop_below_m``.
         """
-        T = self._place(q, T_world_object)
-        chosen = range(len(self._links)) if geometries is None else geometries
         placements = self._geometry_data.oMg
         piece_centres = self._piece_centres @ T[:3, :3].T + T[:3, 3]
         transforms = self._piece_transforms(T)
         out: list[_Pair] = []
-        for g in chosen:
+        for g in geometries:
             M = placements[g]
             gaps = np.linalg.norm(piece_centres - M.act(self._link_centres[g]), axis=1)
             bounds = gaps - self._link_radii[g] - self._piece_radii
