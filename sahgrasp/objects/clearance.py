@@ -151,6 +151,7 @@ class HandObjectClearance:
         self._link_objects = [
             coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
         ]
+        self._posed_centres = np.zeros_like(self._link_centres)  # object frame, by _pose_links
         self._tree = PieceTree(self._shapes)
         self._tips = {f.name: f.tip_link for f in hand.description.fingers}
         self._request = coal.DistanceRequest()
@@ -229,18 +230,17 @@ class HandObjectClearance:
         """
         thresholds = self._thresholds(contacts, 0.0, allowance_m)
         T = self._place(q, T_world_object)
-        every = range(len(self._links))
-        self._pose_links(T, every)
         if all_links:
-            measured = {g: self._link_distance(T, g) for g in every}
+            every = range(len(self._links))
+            self._pose_links(T, every)
+            pairs = self._pairs(T, np.full(len(every), np.inf), True, every)
+            measured = {p.geometry: p.distance_m for p in pairs}
         else:
             measured = self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
         for g in sorted(measured):  # in geometry order: a tie goes to the first link
             link, d = self._links[g], measured[g]
-            if d == math.inf:  # no object: nothing to measure
-                continue
             links[link] = min(links.get(link, math.inf), d)
             excepted = thresholds[g] < 0.0 and d >= thresholds[g]
             if not excepted and d < distance:
@@ -411,6 +411,7 @@ class HandObjectClearance:
         T_object_world = pin.SE3(T).inverse()
         for g in geometries:
             M = T_object_world * self._geometry_data.oMg[g]
+            self._posed_centres[g] = M.act(self._link_centres[g])
             link = self._link_objects[g]
             link.setTransform(coal.Transform3s(M.rotation, M.translation))
             link.computeAABB()
@@ -428,31 +429,38 @@ class HandObjectClearance:
         tree, links = self._tree, self._link_objects
         return [g for g in chosen if not tree.clear_of(links[g], float(thresholds[g]))]
 
-    def _link_distance(self, T: FloatArray, g: int) -> float:
-        """Smallest signed distance [m] of the posed hand geometry ``g`` to the object."""
-        distance = self._tree.nearest(self._link_objects[g])
-        if distance > 0.0:
-            return distance
-        # In contact the tree gives some pair's depth, not the deepest: search pair by pair.
-        return self._pairs(T, np.full(len(self._links), np.inf), True, [g])[0].distance_m
-
     def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
-        """Signed distances [m] of the posed geometries that may hold the smallest one.
+        """Signed distances [m] of the hand geometries that may hold the smallest one.
 
-        Geometries are taken by increasing lower bound until the bound exceeds the smallest
-        distance found; a contact tip within its allowance is excepted, so left out.
+        Geometries are taken by increasing lower bound (their balls against the coarse hulls'
+        balls) until the bound exceeds the smallest distance found. A contact tip the piece
+        tree finds within its allowance is excepted; a link whose own shape is farther than
+        that distance from every coarse hull's ball is skipped; the others are measured against
+        the pieces whose bounds are below that distance, so a far link costs no GJK call.
         """
-        tree, links = self._tree, self._link_objects
-        bounds = np.array([tree.lower_bound(link) for link in links])
+        if not self._shapes:
+            return {}
+        every = range(len(self._links))
+        self._pose_links(T, every)
+        tree = self._tree
+        gaps = np.linalg.norm(self._posed_centres[:, None] - tree.coarse_centres_m, axis=2)
+        bounds = (gaps - tree.coarse_radii_m).min(axis=1) - self._link_radii
+        coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
+        placements, objects = self._geometry_data.oMg, self._geometry_model.geometryObjects
         measured: dict[int, float] = {}
         smallest = math.inf
         for g in (int(i) for i in np.argsort(bounds, kind="stable")):
             if bounds[g] > smallest:
                 break
-            if thresholds[g] < 0.0 and tree.clear_of(links[g], float(thresholds[g])):
+            tip = thresholds[g] < 0.0  # counts only deeper than its allowance
+            if tip and tree.clear_of(self._link_objects[g], float(thresholds[g])):
                 continue
-            measured[g] = self._link_distance(T, g)
-            smallest = min(smallest, measured[g])
+            gaps = self._signed_gaps(g, objects[g].geometry, placements[g], coarse)
+            if (gaps - tree.coarse_radii_m).min() > smallest:  # the link's shape: tighter
+                continue
+            for pair in self._pairs(T, np.full(len(every), smallest), True, [g]):
+                if pair.distance_m < smallest:  # exact below the limit
+                    measured[g] = smallest = pair.distance_m
         return measured
 
     def _pairs(
@@ -465,10 +473,11 @@ class HandObjectClearance:
     ) -> list[_Pair]:
         """Signed distances of hand geometries to the object pieces that may matter.
 
-        The hand is placed (:meth:`_place`) and the object at ``T``. ``nearest_only``: one pair
-        per geometry, its nearest piece. Otherwise every pair whose bounding spheres come closer
-        than the geometry's threshold. The search ends at the first pair closer than
-        ``stop_below_m``.
+        The hand is placed (:meth:`_place`), its ``geometries`` posed (:meth:`_pose_links`) and
+        the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
+        than the geometry's threshold (else some pair at least that far, or none). Otherwise
+        every pair whose bounds come closer than the threshold. The search ends at the first
+        pair closer than ``stop_below_m``.
         """
         placements = self._geometry_data.oMg
         piece_centres = self._piece_centres @ T[:3, :3].T + T[:3, 3]
@@ -476,13 +485,14 @@ class HandObjectClearance:
         out: list[_Pair] = []
         for g in geometries:
             M = placements[g]
-            gaps = np.linalg.norm(piece_centres - M.act(self._link_centres[g]), axis=1)
-            bounds = gaps - self._link_radii[g] - self._piece_radii
             geometry = self._geometry_model.geometryObjects[g].geometry
+            bounds = self._signed_gaps(g, geometry, M, piece_centres) - self._piece_radii
+            near = np.flatnonzero(bounds < thresholds[g])  # no other piece can be kept
+            bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
             best: _Pair | None = None
-            for i in np.argsort(bounds):
-                limit = best.distance_m if best is not None else thresholds[g]
+            for i in near[np.argsort(bounds[near])]:
+                limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
                 if bounds[i] >= limit:
                     break
                 if transforms[i] is None:
@@ -497,6 +507,43 @@ class HandObjectClearance:
             if best is not None:
                 out.append(best)
         return out
+
+    def _signed_gaps(
+        self, g: int, geometry: coal.ShapeBase, M: pin.SE3, points_m: FloatArray
+    ) -> FloatArray:
+        """Signed distance [m] from hand geometry ``g``, placed at ``M``, to world points (N, 3).
+
+        Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
+        to its bounding ball. A piece within a ball of radius r about a point is then at least
+        this minus r from the link, inside as well (its penetration is at most the ball's), a
+        much tighter bound than the link's own ball when the pieces are small.
+        """
+        local = (points_m - M.translation) @ M.rotation
+        if isinstance(geometry, coal.Sphere):
+            return np.asarray(np.linalg.norm(local, axis=1) - geometry.radius)
+        if isinstance(geometry, coal.Box):
+            excess = np.abs(local) - geometry.halfSide
+        elif isinstance(geometry, coal.Cylinder):  # axis z
+            radial = np.linalg.norm(local[:, :2], axis=1) - geometry.radius
+            excess = np.stack([radial, np.abs(local[:, 2]) - geometry.halfLength], axis=1)
+        else:
+            return np.asarray(
+                np.linalg.norm(local - self._link_centres[g], axis=1) - self._link_radii[g]
+            )
+        outside = np.linalg.norm(np.maximum(excess, 0.0), axis=1)
+        return np.asarray(outside + np.minimum(excess.max(axis=1), 0.0))
+
+    def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
+        """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
+
+        Both boxes in the object frame. Disjoint boxes bound the distance from below;
+        overlapping ones bound nothing (-inf).
+        """
+        box = self._link_objects[g].getAABB()
+        boxes = self._tree.boxes_m[pieces]
+        gaps = np.maximum(np.asarray(box.min_) - boxes[:, 1], boxes[:, 0] - np.asarray(box.max_))
+        gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=1)
+        return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _piece_transforms(self, T: FloatArray) -> list[coal.Transform3s | None]:
         """The pieces' coal transforms at object placement ``T``, built on first use."""

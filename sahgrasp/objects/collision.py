@@ -5,15 +5,14 @@ negative penetration depth inside, which a triangle mesh (``coal.BVHModel``) can
 point inside a closed surface. Each piece carries a bounding sphere, so that a query skips the
 pieces that cannot be the closest.
 
-:class:`PieceTree` puts the pieces in coal's broad phase (a dynamic AABB tree, queried in C++),
-with a coarse level of a few convex hulls that each hold the pieces of one grid cell: the
-distance to those hulls bounds the distance to the pieces from below, cheaply, so that a link far
-from the object costs one coarse query instead of GJK against every piece near its bounding box.
+:class:`PieceTree` puts the pieces in coal's broad phase (a dynamic AABB tree, queried in C++)
+under a coarse level of convex hulls, each holding the pieces of one grid cell: a link clear of
+the hulls by a margin is clear of the pieces, so most links cost one coarse query, and whether a
+link comes closer than a margin is answered without a Python call per piece.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -84,79 +83,78 @@ class PieceTree:
 
     Queries take a coal collision object (a hand link) already placed in the object frame. The
     fine level holds the pieces themselves; the coarse level one convex hull per grid cell of
-    ``cell_m`` holding the pieces whose centres fall in it (a lone piece stands for itself).
+    ``cell_m``, holding the pieces whose centres fall in it (a lone piece stands for itself).
+    A query is a coal collision test with a security margin, run in C++ over the AABB tree:
+    coal's default distance callback cannot serve, as it keeps the last pair's distance, not the
+    smallest.
 
     Args:
         shapes: The object's pieces.
         cell_m: Coarse grid cell [m].
+
+    Attributes:
+        coarse_centres_m: Centre of a ball about each coarse hull, object frame (K, 3) [m].
+        coarse_radii_m: Radius of each such ball (K,) [m].
+        boxes_m: Each piece's axis-aligned box in the object frame, (N, 2, 3): low, high [m].
     """
 
     def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
-        self._fine = _Manager([(s.geometry, s.placement) for s in shapes])
-        self._coarse = _Manager(_coarse_pieces(shapes, cell_m))
-        self.coarse_size = len(self._coarse.objects)
-        self._collision = coal.CollisionCallBackDefault()
-
-    def lower_bound(self, link: coal.CollisionObject) -> float:
-        """A lower bound [m] of the signed distance from ``link`` to the object (-inf: none).
-
-        The distance to the coarse hulls when it is positive: the hulls hold every piece.
-        """
-        bound = self._coarse.nearest(link)
-        return bound if bound > 0.0 else -math.inf
-
-    def nearest(self, link: coal.CollisionObject) -> float:
-        """The smallest signed distance [m] from ``link`` to a piece when it is positive.
-
-        When ``link`` touches or enters a piece, the signed distance of one such pair (<= 0): an
-        upper bound of the smallest, as coal's default callback stops at the first pair in
-        contact. ``inf`` for an object without pieces.
-        """
-        return self._fine.nearest(link)
+        coarse = _coarse_pieces(shapes, cell_m)
+        # The trees hold raw pointers to the collision objects: keep them (and their shapes).
+        self._shapes = (tuple(shapes), tuple(coarse))
+        self._objects = tuple([_collision_object(s) for s in level] for level in self._shapes)
+        self._fine, self._coarse = (_manager(objects) for objects in self._objects)
+        self.coarse_centres_m = np.array([s.placement[:3, 3] for s in coarse]).reshape(-1, 3)
+        self.coarse_radii_m = np.array([s.bounding_radius_m for s in coarse])
+        self.boxes_m = _boxes(self._objects[0])
+        self._callback = coal.CollisionCallBackDefault()
 
     def clear_of(self, link: coal.CollisionObject, threshold_m: float) -> bool:
-        """True if no piece is closer to ``link`` than ``threshold_m`` [m] (signed; exact)."""
-        if self.lower_bound(link) >= threshold_m:
-            return True
-        distance = self.nearest(link)
-        if distance > 0.0 or distance < threshold_m:
-            return distance >= threshold_m
-        if threshold_m > 0.0:
-            return False
-        # threshold <= distance <= 0: a deeper pair may exist; only overlapping boxes can hold one.
-        self._collision.init()
-        self._collision.data.request.security_margin = threshold_m
-        self._fine.manager.collide(link, self._collision)
-        return not self._collision.data.result.isCollision()
+        """True if no piece is closer to ``link`` than ``threshold_m`` [m] (signed distance).
 
+        Exact up to coal's GJK/EPA tolerances: the coarse hulls hold the pieces, so a link
+        clear of them is clear of the pieces; otherwise the pieces are tested.
+        """
+        return not (
+            self._closer(self._coarse, link, threshold_m)
+            and self._closer(self._fine, link, threshold_m)
+        )
 
-class _Manager:
-    """Placed shapes registered in a coal dynamic AABB tree, and its distance callback."""
-
-    def __init__(self, placed: Sequence[tuple[coal.ShapeBase, FloatArray]]) -> None:
-        self.objects = [
-            coal.CollisionObject(geometry, coal.Transform3s(T[:3, :3], T[:3, 3]))
-            for geometry, T in placed
-        ]
-        self.manager = coal.DynamicAABBTreeCollisionManager()
-        for obj in self.objects:
-            obj.computeAABB()
-            self.manager.registerObject(obj)
-        self.manager.setup()
-        self._callback = coal.DistanceCallBackDefault()
-        self._callback.data.request.enable_signed_distance = True
-
-    def nearest(self, link: coal.CollisionObject) -> float:
-        if not self.objects:
-            return math.inf
+    def _closer(
+        self, manager: coal.BroadPhaseCollisionManager, link: coal.CollisionObject, limit_m: float
+    ) -> bool:
+        """True if a shape of ``manager`` is closer to ``link`` than ``limit_m`` [m]."""
+        link.computeAABB()
+        if limit_m > 0.0:  # the tree only pairs overlapping boxes: grow the link's by the margin
+            link.getAABB().expand(limit_m)
         self._callback.init()
-        self.manager.distance(link, self._callback)
-        return float(self._callback.data.result.min_distance)
+        self._callback.data.request.security_margin = limit_m
+        manager.collide(link, self._callback)
+        link.computeAABB()  # leave the link's own box for the caller's bounds
+        return bool(self._callback.data.result.isCollision())
 
 
-def _coarse_pieces(
-    shapes: Sequence[CollisionShape], cell_m: float
-) -> list[tuple[coal.ShapeBase, FloatArray]]:
+def _boxes(objects: Sequence[coal.CollisionObject]) -> FloatArray:
+    """The objects' axis-aligned boxes, (N, 2, 3): low and high corners [m]."""
+    boxes = [(o.getAABB().min_, o.getAABB().max_) for o in objects]
+    return np.array(boxes, dtype=np.float64).reshape(-1, 2, 3)
+
+
+def _collision_object(shape: CollisionShape) -> coal.CollisionObject:
+    return coal.CollisionObject(shape.geometry, shape.transform(np.eye(4)))
+
+
+def _manager(objects: list[coal.CollisionObject]) -> coal.BroadPhaseCollisionManager:
+    """A dynamic AABB tree of ``objects`` (the caller keeps them alive)."""
+    manager = coal.DynamicAABBTreeCollisionManager()
+    for obj in objects:
+        obj.computeAABB()
+        manager.registerObject(obj)
+    manager.setup()
+    return manager
+
+
+def _coarse_pieces(shapes: Sequence[CollisionShape], cell_m: float) -> list[CollisionShape]:
     """One convex hull per grid cell of the pieces' centres, holding that cell's pieces."""
     if not shapes:
         return []
@@ -166,10 +164,9 @@ def _coarse_pieces(
     for cell in range(int(cells.max()) + 1):
         members = [shapes[int(i)] for i in np.flatnonzero(cells.ravel() == cell)]
         if len(members) == 1:
-            out.append((members[0].geometry, members[0].placement))
+            out.append(members[0])
         else:
-            hull = convex_hull(np.vstack([_support_points(m) for m in members]))
-            out.append((hull.geometry, hull.placement))
+            out.append(convex_hull(np.vstack([_support_points(m) for m in members])))
     return out
 
 
