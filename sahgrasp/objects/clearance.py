@@ -151,13 +151,29 @@ class HandObjectClearance:
         self._link_objects = [
             coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
         ]
-        self._posed_centres = np.zeros_like(self._link_centres)  # object frame, by _pose_links
+        self._describe_shapes([g.geometry for g in geometries])
         self._tree = PieceTree(self._shapes)
         self._tips = {f.name: f.tip_link for f in hand.description.fingers}
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._free: dict[str, _FreeFinger] = {}
         self._transforms_key = b""
+
+    def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
+        """Per hand geometry, the parameters :meth:`_shape_gaps` measures it with."""
+        self._half_m = np.zeros((len(shapes), 3))
+        self._rounding_m = np.zeros(len(shapes))
+        self._cylinder = np.array([isinstance(s, coal.Cylinder) for s in shapes])
+        self._other = np.zeros(len(shapes), dtype=bool)
+        for g, shape in enumerate(shapes):
+            if isinstance(shape, coal.Box):
+                self._half_m[g] = shape.halfSide
+            elif isinstance(shape, coal.Cylinder):
+                self._half_m[g, :2] = shape.radius, shape.halfLength
+            elif isinstance(shape, coal.Sphere):
+                self._rounding_m[g] = shape.radius
+            else:
+                self._other[g] = True
 
     @property
     def links(self) -> tuple[str, ...]:
@@ -411,7 +427,6 @@ class HandObjectClearance:
         T_object_world = pin.SE3(T).inverse()
         for g in geometries:
             M = T_object_world * self._geometry_data.oMg[g]
-            self._posed_centres[g] = M.act(self._link_centres[g])
             link = self._link_objects[g]
             link.setTransform(coal.Transform3s(M.rotation, M.translation))
             link.computeAABB()
@@ -432,21 +447,19 @@ class HandObjectClearance:
     def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
-        Geometries are taken by increasing lower bound (their balls against the coarse hulls'
-        balls) until the bound exceeds the smallest distance found. A contact tip the piece
-        tree finds within its allowance is excepted; a link whose own shape is farther than
-        that distance from every coarse hull's ball is skipped; the others are measured against
-        the pieces whose bounds are below that distance, so a far link costs no GJK call.
+        Geometries are taken by increasing lower bound (their own shapes against the coarse
+        hulls' balls) until the bound exceeds the smallest distance found. A contact tip the
+        piece tree finds within its allowance is excepted; the others are measured against the
+        pieces whose bounds are below that distance, so a far link costs no GJK call.
         """
         if not self._shapes:
             return {}
         every = range(len(self._links))
         self._pose_links(T, every)
         tree = self._tree
-        gaps = np.linalg.norm(self._posed_centres[:, None] - tree.coarse_centres_m, axis=2)
-        bounds = (gaps - tree.coarse_radii_m).min(axis=1) - self._link_radii
         coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
-        placements, objects = self._geometry_data.oMg, self._geometry_model.geometryObjects
+        gaps = self._shape_gaps(np.arange(len(every)), list(self._geometry_data.oMg), coarse)
+        bounds = (gaps - tree.coarse_radii_m).min(axis=1)
         measured: dict[int, float] = {}
         smallest = math.inf
         for g in (int(i) for i in np.argsort(bounds, kind="stable")):
@@ -454,9 +467,6 @@ class HandObjectClearance:
                 break
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
             if tip and tree.clear_of(self._link_objects[g], float(thresholds[g])):
-                continue
-            gaps = self._signed_gaps(g, objects[g].geometry, placements[g], coarse)
-            if (gaps - tree.coarse_radii_m).min() > smallest:  # the link's shape: tighter
                 continue
             for pair in self._pairs(T, np.full(len(every), smallest), True, [g]):
                 if pair.distance_m < smallest:  # exact below the limit
@@ -486,7 +496,7 @@ class HandObjectClearance:
         for g in geometries:
             M = placements[g]
             geometry = self._geometry_model.geometryObjects[g].geometry
-            bounds = self._signed_gaps(g, geometry, M, piece_centres) - self._piece_radii
+            bounds = self._shape_gaps(np.array([g]), [M], piece_centres)[0] - self._piece_radii
             near = np.flatnonzero(bounds < thresholds[g])  # no other piece can be kept
             bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
@@ -508,30 +518,37 @@ class HandObjectClearance:
                 out.append(best)
         return out
 
-    def _signed_gaps(
-        self, g: int, geometry: coal.ShapeBase, M: pin.SE3, points_m: FloatArray
+    def _shape_gaps(
+        self, geometries: NDArray[np.intp], placements: Sequence[pin.SE3], points_m: FloatArray
     ) -> FloatArray:
-        """Signed distance [m] from hand geometry ``g``, placed at ``M``, to world points (N, 3).
+        """Signed distances [m] from hand geometries, placed, to world points: (G, N).
 
         Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
         to its bounding ball. A piece within a ball of radius r about a point is then at least
-        this minus r from the link, inside as well (its penetration is at most the ball's), a
+        this minus r from the link, inside as well (its penetration is at most the ball's): a
         much tighter bound than the link's own ball when the pieces are small.
         """
-        local = (points_m - M.translation) @ M.rotation
-        if isinstance(geometry, coal.Sphere):
-            return np.asarray(np.linalg.norm(local, axis=1) - geometry.radius)
-        if isinstance(geometry, coal.Box):
-            excess = np.abs(local) - geometry.halfSide
-        elif isinstance(geometry, coal.Cylinder):  # axis z
-            radial = np.linalg.norm(local[:, :2], axis=1) - geometry.radius
-            excess = np.stack([radial, np.abs(local[:, 2]) - geometry.halfLength], axis=1)
-        else:
-            return np.asarray(
-                np.linalg.norm(local - self._link_centres[g], axis=1) - self._link_radii[g]
-            )
-        outside = np.linalg.norm(np.maximum(excess, 0.0), axis=1)
-        return np.asarray(outside + np.minimum(excess.max(axis=1), 0.0))
+        R = np.array([M.rotation for M in placements]).reshape(-1, 3, 3)
+        t = np.array([M.translation for M in placements]).reshape(-1, 3)
+        local = np.einsum("gnj,gji->gni", points_m[None] - t[:, None], R)
+        half = self._half_m[geometries][:, None]
+        excess = np.abs(local) - half  # box (a sphere is a box of no size, rounded)
+        cylinder = np.stack(
+            [
+                np.linalg.norm(local[..., :2], axis=2) - half[..., 0],
+                np.abs(local[..., 2]) - half[..., 1],
+                np.full(local.shape[:2], -np.inf),
+            ],
+            axis=2,
+        )
+        excess = np.where(self._cylinder[geometries][:, None, None], cylinder, excess)
+        exact = np.linalg.norm(np.maximum(excess, 0.0), axis=2) + np.minimum(
+            excess.max(axis=2), 0.0
+        )
+        exact -= self._rounding_m[geometries][:, None]
+        ball = np.linalg.norm(local - self._link_centres[geometries][:, None], axis=2)
+        ball -= self._link_radii[geometries][:, None]
+        return np.asarray(np.where(self._other[geometries][:, None], ball, exact))
 
     def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
         """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
