@@ -466,8 +466,9 @@ class HandObjectClearance:
             if bounds[g] > smallest:
                 break
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
-            if tip and tree.clear_of(self._link_objects[g], float(thresholds[g])):
-                continue
+            limit = float(thresholds[g]) if tip else smallest
+            if limit < math.inf and tree.clear_of(self._link_objects[g], limit):
+                continue  # one C++ query instead of bounding every piece in numpy
             for pair in self._pairs(T, np.full(len(every), smallest), True, [g]):
                 if pair.distance_m < smallest:  # exact below the limit
                     measured[g] = smallest = pair.distance_m
