@@ -15,6 +15,13 @@ accepts its contact point up to ``d_min`` from the surface: that sphere alone ma
 object by up to ``allowance_m``. Only the tip link's geometry is excepted; the distal phalanx on
 the same joint is checked as every other link.
 
+Cost. The object may have thousands of small pieces (one per mesh triangle, or per sector of a
+revolved band), so no query tries them all: a pair's distance is bounded from below by the
+link's own shape (sphere, box, cylinder) against a ball about the piece, and by their boxes; a
+coal broad phase (:class:`~sahgrasp.objects.collision.PieceTree`, in the object frame, built
+once) answers in C++ whether a link comes closer than a margin; only the pairs those leave are
+measured with GJK/EPA one by one. The results are those of measuring every pair.
+
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
 """
