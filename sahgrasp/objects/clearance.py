@@ -538,25 +538,24 @@ class HandObjectClearance:
         """
         R = np.array([M.rotation for M in placements]).reshape(-1, 3, 3)
         t = np.array([M.translation for M in placements]).reshape(-1, 3)
-        local = np.einsum("gnj,gji->gni", points_m[None] - t[:, None], R)
+        local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
         half = self._half_m[geometries][:, None]
         excess = np.abs(local) - half  # box (a sphere is a box of no size, rounded)
-        cylinder = np.stack(
-            [
-                np.linalg.norm(local[..., :2], axis=2) - half[..., 0],
-                np.abs(local[..., 2]) - half[..., 1],
-                np.full(local.shape[:2], -np.inf),
-            ],
-            axis=2,
-        )
-        excess = np.where(self._cylinder[geometries][:, None, None], cylinder, excess)
-        exact = np.linalg.norm(np.maximum(excess, 0.0), axis=2) + np.minimum(
-            excess.max(axis=2), 0.0
-        )
-        exact -= self._rounding_m[geometries][:, None]
-        ball = np.linalg.norm(local - self._link_centres[geometries][:, None], axis=2)
-        ball -= self._link_radii[geometries][:, None]
-        return np.asarray(np.where(self._other[geometries][:, None], ball, exact))
+        cylinder = self._cylinder[geometries]
+        if cylinder.any():  # axis z: (radial, axial) excess
+            excess[cylinder, :, 0] = np.hypot(local[cylinder, :, 0], local[cylinder, :, 1])
+            excess[cylinder, :, 0] -= half[cylinder, :, 0]
+            excess[cylinder, :, 1] = np.abs(local[cylinder, :, 2]) - half[cylinder, :, 1]
+            excess[cylinder, :, 2] = -np.inf
+        gaps = np.sqrt(np.square(np.maximum(excess, 0.0)).sum(axis=2))
+        gaps += np.minimum(excess.max(axis=2), 0.0) - self._rounding_m[geometries][:, None]
+        other = self._other[geometries]
+        if other.any():
+            ball = local[other] - self._link_centres[geometries[other]][:, None]
+            gaps[other] = (
+                np.linalg.norm(ball, axis=2) - self._link_radii[geometries[other]][:, None]
+            )
+        return gaps
 
     def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
         """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
