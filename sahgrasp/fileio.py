@@ -241,6 +241,6 @@ def read_json(path: PathLike, what: str, error: type[SahGraspError]) -> Any:
     try:
         return json.loads(text)
     except RecursionError:
-        raise error(f"{what} {path} nests arrays or objects too deeply to be read") from None
+        raise error(f"{what} {path} is nested too deeply (arrays or objects) to be read") from None
     except ValueError as exc:  # JSONDecodeError, or an integer with too many digits
         raise error(f"{what} {path} is not valid JSON: {exc}") from None
