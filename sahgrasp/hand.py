@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.collision import SelfCollision
+from sahgrasp.collision import Penetration, SelfCollision
 from sahgrasp.errors import HandModelError, InvalidConfigurationError
 from sahgrasp.hand_checks import (
     check_name,
@@ -53,6 +53,7 @@ __all__ = [
     "FingerSpec",
     "Hand",
     "HandDescription",
+    "HandState",
     "allegro_description",
     "load_hand",
     "sah_description",
@@ -65,7 +66,8 @@ _DEG = math.pi / 180.0
 _FINITE_WEIGHT = 1e-10
 """Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
 q_i (at most 1.8e298 each), nor fall into the slow subnormal range for joint-sized values."""
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_WRIST_NQ = 7
+"""Entries of ``q`` the free-flyer wrist takes (position, then quaternion)."""
 
 
 @dataclass(frozen=True)
@@ -410,6 +412,46 @@ class ContactJacobians:
         return -_skew_batch(self.state.normals) @ self.angular
 
 
+@dataclass(frozen=True)
+class HandState:
+    """Immutable kinematic snapshot of a hand at one configuration (every array is read-only).
+
+    Unlike Pinocchio's shared ``hand.data``, a snapshot cannot be overwritten by a later query,
+    so it can be kept, compared and passed between modules without call-order dependencies.
+
+    Attributes:
+        q: The configuration (a read-only copy).
+        contacts: Contact points, sphere centres and normals (world frame).
+        jacobians: Their Jacobians w.r.t. ``v``; None when not requested.
+        world_jacobian: Pinocchio's stack of every joint's motion subspace in the world frame,
+            shape (6, nvExtended) (linear part first, about the world origin; one column per
+            joint, mimic joints included); None without Jacobians.
+    """
+
+    q: NDArray[np.float64]
+    contacts: ContactState
+    jacobians: ContactJacobians | None
+    world_jacobian: NDArray[np.float64] | None
+    _supports: NDArray[np.float64] = field(repr=False)
+    _reduce: NDArray[np.float64] = field(repr=False)
+
+    def point_jacobian(self, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Jacobian (3, nv) [m/rad] of a world point ``point`` [m] fixed to ``joint``'s body.
+
+        Joint 0 is the world: its Jacobian is zero.
+
+        Raises:
+            InvalidConfigurationError: The snapshot was taken without Jacobians.
+        """
+        if self.world_jacobian is None:
+            raise InvalidConfigurationError(
+                "this hand state has no Jacobians; take it with hand.state(q, jacobians=True)"
+            )
+        J = self.world_jacobian
+        # v_p = v_o + omega x p = J_lin - [p]x J_ang, on the joints that move the body.
+        return np.asarray(((J[:3] - _skew(point) @ J[3:]) * self._supports[joint]) @ self._reduce)
+
+
 class Hand:
     """A hand: Pinocchio model/data, coal self-collision, and the contact queries of the papers.
 
@@ -432,8 +474,12 @@ class Hand:
         self.data = model.createData()
         self._q_shape = (model.nq,)
         self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
-        self._jacobian_frames = self._contact_frames + self._tip_frames
         self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
+        # The contact frame sits on the virtual yaw joint at (R, 0, 0): the joint origin is the
+        # sphere centre and its x axis the normal. Rows of H^T: normal, ..., origin.
+        self._yaw_joints = [model.frames[f].parentJoint for f in self._contact_frames]
+        self._stack_selector = np.array([[self.radius_m, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]])
+        self._supports, self._reduce = _support_masks(model)
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -618,6 +664,16 @@ class Hand:
         return self.check_q(q)
 
     @staticmethod
+    def wrist_part(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The wrist part of ``q``: position [m] and quaternion ``[x, y, z, w]`` (a view, 7)."""
+        return q[:_WRIST_NQ]
+
+    @staticmethod
+    def finger_part(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The joint coordinates of ``q`` [rad], virtual contact joints included (a view)."""
+        return q[_WRIST_NQ:]
+
+    @staticmethod
     def wrist_pose(q: NDArray[np.float64]) -> pin.SE3:
         """Palm pose ``T_world_palm`` encoded in ``q``."""
         return pin.XYZQUATToSE3(q[:7])
@@ -686,6 +742,67 @@ class Hand:
         # ndarray.dot dispatches faster than the @ operator.
         return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
 
+    def contact_stack(
+        self, q: NDArray[np.float64], fingers: NDArray[np.intp] | None = None
+    ) -> NDArray[np.float64]:
+        """Contact points and sphere centres as one vector ``(p_i, r_i)`` per finger [m].
+
+        The solvers' hot path: one forward-kinematics pass and one product, shape (6 k,) for the
+        ``k`` fingers (indices into :attr:`fingers`; all if None).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.forwardKinematics(self.model, self.data, self._finite(q))
+        return self._stack(self._joints_of(fingers)).ravel()
+
+    def contact_stack_jacobian(
+        self, q: NDArray[np.float64], fingers: NDArray[np.intp] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`contact_stack` and its Jacobian w.r.t. ``v``, shape (6 k, nv) [m/rad].
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        joints = self._joints_of(fingers)
+        stack = self._stack(joints)
+        return stack.ravel(), self._stack_jacobian(stack, joints, self.data.J)
+
+    def _joints_of(self, fingers: NDArray[np.intp] | None) -> list[int]:
+        if fingers is None:
+            return self._yaw_joints
+        return [self._yaw_joints[i] for i in fingers]
+
+    def _stack(self, joints: list[int]) -> NDArray[np.float64]:
+        """(k, 2, 3) points and centres of the yaw joints ``joints`` (kinematics up to date)."""
+        oMi = self.data.oMi
+        H = np.array([oMi[j].homogeneous for j in joints])
+        return np.asarray(self._stack_selector @ H.transpose(0, 2, 1)[:, :, :3])
+
+    def _stack_jacobian(
+        self, stack: NDArray[np.float64], joints: list[int], J: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Rows ``J_lin - [x]x J_ang`` of every point of ``stack``, on its finger's joints."""
+        skews = (stack.reshape(-1, 3) @ _SKEW_BASIS).reshape(-1, 3, 3)
+        rows = (J[:3] - skews @ J[3:]).reshape(len(joints), 2, 3, -1)
+        masked = (rows * self._supports[joints][:, None, None]).reshape(-1, J.shape[1])
+        return np.asarray(masked @ self._reduce)
+
+    def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
+        """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        q = np.array(self._finite(q))
+        if not jacobians:
+            pin.forwardKinematics(self.model, self.data, q)
+            return _frozen(HandState(q, self._state(), None, None, self._supports, self._reduce))
+        jac = self._jacobians(q)
+        J = np.array(self.data.J)
+        return _frozen(HandState(q, jac.state, jac, J, self._supports, self._reduce))
+
     def contact_jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
         """Contact state and its Jacobians w.r.t. ``v`` (see :class:`ContactJacobians`).
 
@@ -694,11 +811,15 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, self._finite(q))
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
-        F = len(self.fingers)
-        return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
+        return self._jacobians(self._finite(q))
+
+    def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
+        pin.computeJointJacobians(self.model, self.data, q)
+        state = self._state()
+        stack = np.stack([state.points, state.centres], axis=1)
+        J = self._stack_jacobian(stack, self._yaw_joints, self.data.J).reshape(-1, 2, 3, self.nv)
+        angular = (self.data.J[3:] * self._supports[self._yaw_joints][:, None]) @ self._reduce
+        return ContactJacobians(state, J[:, 0], J[:, 1], angular)
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""
@@ -736,6 +857,14 @@ class Hand:
         """
         return self.collision.in_collision(self._finite(q))
 
+    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+        """Pairs of hand bodies closer than ``margin_m`` [m] at ``q``, with their witnesses.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        return self.collision.penetrations(self._finite(q), margin_m)
+
     def min_distance(self, q: NDArray[np.float64]) -> float:
         """Smallest signed distance [m] between checked pairs of hand bodies at ``q``.
 
@@ -762,6 +891,53 @@ class Hand:
         fingers = len(self.joint_names)
         virtual = len(self.virtual_joint_names)
         return {"wrist": 6, "fingers": fingers, "virtual": virtual, "total": 6 + fingers + virtual}
+
+
+_SKEW_BASIS = np.array(
+    [
+        [0, 0, 0, 0, 0, -1, 0, 1, 0],
+        [0, 0, 1, 0, 0, 0, -1, 0, 0],
+        [0, -1, 0, 1, 0, 0, 0, 0, 0],
+    ],
+    dtype=np.float64,
+)
+"""``p @ _SKEW_BASIS`` is the flattened cross-product matrix ``[p]x`` of the row vector ``p``."""
+
+
+def _skew(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.asarray((p @ _SKEW_BASIS).reshape(3, 3))
+
+
+def _support_masks(model: pin.Model) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Masks of the columns of ``data.J`` that move each joint's body, and ``data.J`` -> ``v``.
+
+    Pinocchio's ``data.J`` has one column per joint degree of freedom, mimic joints included
+    (``nvExtended`` columns); ``v`` has only the independent ones. Returns the masks, shape
+    (njoints, nvExtended), 1 where the column moves the joint's body, and the matrix
+    (nvExtended, nv) folding a mimic joint's column into its leader's, times the multiplier.
+    """
+    masks = np.zeros((model.njoints, model.nvExtended))
+    reduce = np.zeros((model.nvExtended, model.nv))
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        ext, width = joint.idx_vExtended, max(joint.nv, 1)
+        scale = joint.extract().scaling if joint.shortname() == "JointModelMimic" else 1.0
+        reduce[ext : ext + width, joint.idx_v : joint.idx_v + width] += scale * np.eye(width)
+        for k in model.supports[j][1:]:
+            first = model.joints[k].idx_vExtended
+            masks[j, first : first + max(model.joints[k].nv, 1)] = 1.0
+    return masks, reduce
+
+
+def _frozen(state: HandState) -> HandState:
+    """``state`` with every array made read-only (a snapshot cannot be changed in place)."""
+    arrays = [state.q, *vars(state.contacts).values(), state.world_jacobian]
+    if state.jacobians is not None:
+        arrays += [state.jacobians.points, state.jacobians.centres, state.jacobians.angular]
+    for array in arrays:
+        if array is not None:
+            array.flags.writeable = False
+    return state
 
 
 def _skew_batch(v: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -27,10 +27,11 @@ from typing import TYPE_CHECKING, Any, Literal, get_args
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import ContactState, Hand
+from sahgrasp.hand import ContactState, Hand, HandState
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.obstacle import Obstacle
 from sahgrasp.ik.starts import initial_lambdas
@@ -256,6 +257,8 @@ class ContactProblem:
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
+        # The targets in the order of Hand.contact_stack: (p_i*, r_i*) per constrained finger.
+        self.target_stack = np.stack([self.points, self.centres], axis=1).ravel()
         self.obstacle = (
             None if obstacle is None else Obstacle(hand, obstacle, self.fingers, allowance_m)
         )
@@ -273,7 +276,7 @@ class ContactProblem:
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies, and links and the obstacle, closer than ``margin_m`` [m]."""
-        found = self.hand.collision.penetrations(q, margin_m)
+        found = self.hand.penetrations(q, margin_m)
         if self.obstacle is not None:
             found += self.obstacle.penetrations(q, margin_m)
         return found
@@ -393,14 +396,17 @@ def _lm_loop(
     max_iterations: int,
     history: list[NDArray[np.float64]] | None,
 ) -> Attempt:
-    """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set."""
+    """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set.
+
+    The hot loop of the IK: it works on the flat residual of :meth:`Hand.contact_stack` and
+    its Jacobian, so that an iteration is a handful of numpy calls (docs/ik.md, "Cost").
+    """
     damping = 1e-3
-    jac = hand.contact_jacobians(q)
-    residual = problem.residual(jac.state)
-    costs = [float(residual @ residual)]
+    stack, J = hand.contact_stack_jacobian(q, problem.rows)
+    residual = problem.target_stack - stack
+    costs = [float(residual.dot(residual))]
     for k in range(max_iterations):
-        pos, cen = problem.errors(jac.state)
-        error = max(pos.max(), cen.max())
+        error = _max_error(residual)
         if error < s.refine_m:
             return Attempt(q, "converged", k, error, history)
         stalled = (
@@ -410,31 +416,39 @@ def _lm_loop(
             return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
-        J = problem.jacobian(jac)
-        q_new, cost, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
-        if q_new is None:
+        q_new, r_new, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
+        if q_new is None or r_new is None:
             continue
         q = q_new
         if history is not None:
             history.append(q.copy())
-        jac = hand.contact_jacobians(q)
-        residual = problem.residual(jac.state)
-        costs.append(cost)
-    pos, cen = problem.errors(jac.state)
-    error = max(pos.max(), cen.max())
+        stack, J = hand.contact_stack_jacobian(q, problem.rows)
+        residual = problem.target_stack - stack
+        costs.append(float(residual.dot(residual)))
+    error = _max_error(residual)
     outcome = "converged" if error < s.d_min_m else "max_iterations"
     return Attempt(q, outcome, max_iterations, error, history)
 
 
+def _max_error(residual: NDArray[np.float64]) -> float:
+    """Largest contact-point or centre error [m] of a stacked residual."""
+    return math.sqrt(float((residual * residual).reshape(-1, 3).sum(axis=1).max()))
+
+
 def _free_coordinates(
     hand: Hand, q: NDArray[np.float64], gradient: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed."""
+) -> NDArray[np.bool_] | None:
+    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed.
+
+    Returns the mask of the free coordinates, or None when every coordinate is free (the usual
+    case, which then needs no column selection).
+    """
+    x, g = hand.finger_part(q), gradient[6:]
+    fixed = ((x <= hand.lower + 1e-12) & (g < 0)) | ((x >= hand.upper - 1e-12) & (g > 0))
+    if not fixed.any():
+        return None
     free = np.ones(hand.nv, dtype=bool)
-    x, g = q[7:], gradient[6:]
-    at_lower = (x <= hand.lower + 1e-12) & (g < 0)
-    at_upper = (x >= hand.upper - 1e-12) & (g > 0)
-    free[6:] = ~(at_lower | at_upper)
+    free[6:] = ~fixed
     return free
 
 
@@ -442,8 +456,30 @@ def _clamped_step(
     hand: Hand, q: NDArray[np.float64], step: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     candidate = hand.integrate(q, step)
-    candidate[7:] = np.clip(candidate[7:], hand.lower, hand.upper)
+    joints = hand.finger_part(candidate)
+    np.clip(joints, hand.lower, hand.upper, out=joints)
     return candidate
+
+
+def _damped_solve(
+    A: NDArray[np.float64], g: NDArray[np.float64], mu: float
+) -> NDArray[np.float64] | None:
+    """``(A + mu I)^-1 g`` by Cholesky (LAPACK ``dposv``); None if not positive definite."""
+    damped = A.copy()
+    damped.flat[:: len(A) + 1] += mu
+    _, x, info = dposv(damped, g, overwrite_a=True)
+    return None if info != 0 else np.asarray(x)
+
+
+def _full_step(
+    hand: Hand, free: NDArray[np.bool_] | None, x: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The step in ``v`` whose free coordinates are ``x`` (fixed ones stay)."""
+    if free is None:
+        return x
+    step = np.zeros(hand.nv)
+    step[free] = x
+    return step
 
 
 def _damped_step(
@@ -454,26 +490,24 @@ def _damped_step(
     residual: NDArray[np.float64],
     cost: float,
     damping: float,
-) -> tuple[NDArray[np.float64] | None, float, float]:
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, float]:
     """One Marquardt step, its damping adapted until the cost decreases.
 
-    Returns the new configuration (None if the damping ran out), its cost and the new damping.
+    Returns the new configuration and its residual (None, None if the damping ran out) and the
+    new damping.
     """
-    gradient = J.T @ residual
-    free = _free_coordinates(hand, q, gradient)
-    JF = J[:, free]
-    A = JF.T @ JF
-    scaling = np.eye(len(A))
+    free = _free_coordinates(hand, q, J.T.dot(residual))
+    JF = J if free is None else J[:, free]
+    A, g = JF.T.dot(JF), JF.T.dot(residual)
     while damping <= 1e4:
-        step = np.zeros(hand.nv)
-        step[free] = np.linalg.solve(A + damping * scaling, gradient[free])
-        candidate = _clamped_step(hand, q, step)
-        r_new = problem.residual(hand.contact_state(candidate))
-        c_new = float(r_new @ r_new)
-        if c_new < cost:
-            return candidate, c_new, max(damping / 3.0, 1e-7)
+        x = _damped_solve(A, g, damping)
+        if x is not None:
+            candidate = _clamped_step(hand, q, _full_step(hand, free, x))
+            r_new = problem.target_stack - hand.contact_stack(candidate, problem.rows)
+            if float(r_new.dot(r_new)) < cost:
+                return candidate, r_new, max(damping / 3.0, 1e-7)
         damping *= 4.0
-    return None, cost, damping
+    return None, None, damping
 
 
 def _separate(
@@ -495,43 +529,37 @@ def _separate(
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
-        jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
-        rows, depths = _separation_rows(hand, penetrations)
-        J = np.vstack([problem.jacobian(jac), rows])
-        e = np.concatenate([problem.residual(jac.state), depths])
-        free = _free_coordinates(hand, q, J.T @ e)
-        JF = J[:, free]
-        step = np.zeros(hand.nv)
-        step[free] = np.linalg.solve(JF.T @ JF + 1e-6 * np.eye(int(free.sum())), JF.T @ e)
-        q = _clamped_step(hand, q, step)
+        state = hand.state(q, jacobians=True)
+        stack, J_contacts = hand.contact_stack_jacobian(q, problem.rows)
+        rows, depths = _separation_rows(state, penetrations)
+        J = np.vstack([J_contacts, rows])
+        e = np.concatenate([problem.target_stack - stack, depths])
+        free = _free_coordinates(hand, q, J.T.dot(e))
+        JF = J if free is None else J[:, free]
+        x = _damped_solve(JF.T.dot(JF), JF.T.dot(e), 1e-6)
+        if x is None:  # the rows are degenerate: no separating step exists here
+            return q, k
+        q = _clamped_step(hand, q, _full_step(hand, free, x))
         if history is not None:
             history.append(q.copy())
     return q, s.repair_iterations
 
 
 def _separation_rows(
-    hand: Hand, penetrations: list[Penetration]
+    state: HandState, penetrations: list[Penetration]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
-    rows = np.empty((len(penetrations), hand.nv))
-    depths = np.empty(len(penetrations))
-    for i, pen in enumerate(penetrations):
-        J_b = _point_jacobian(hand, pen.joint_b, pen.point_b)
-        J_a = _point_jacobian(hand, pen.joint_a, pen.point_a)
-        rows[i] = pen.normal @ (J_b - J_a)
-        depths[i] = pen.depth_m
-    return rows, depths
-
-
-def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Jacobian of a point fixed to ``joint``'s body (joint Jacobians must be up to date).
-
-    Joint 0 is the world: its Jacobian is zero (an obstacle does not move).
-    """
-    J = pin.getJointJacobian(hand.model, hand.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-    lever = point - hand.data.oMi[joint].translation
-    # v_p = v_o + omega x (p - o)
-    return np.asarray(J[:3] + np.cross(J[3:].T, lever).T)
+    rows = np.array(
+        [
+            pen.normal
+            @ (
+                state.point_jacobian(pen.joint_b, pen.point_b)
+                - state.point_jacobian(pen.joint_a, pen.point_a)
+            )
+            for pen in penetrations
+        ]
+    )
+    return rows, np.array([pen.depth_m for pen in penetrations])
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
