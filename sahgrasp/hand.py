@@ -743,7 +743,7 @@ class Hand:
         return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
 
     def contact_stack(
-        self, q: NDArray[np.float64], fingers: NDArray[np.intp] | None = None
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
     ) -> NDArray[np.float64]:
         """Contact points and sphere centres as one vector ``(p_i, r_i)`` per finger [m].
 
@@ -757,7 +757,7 @@ class Hand:
         return self._stack(self._joints_of(fingers)).ravel()
 
     def contact_stack_jacobian(
-        self, q: NDArray[np.float64], fingers: NDArray[np.intp] | None = None
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`contact_stack` and its Jacobian w.r.t. ``v``, shape (6 k, nv) [m/rad].
 
@@ -769,7 +769,7 @@ class Hand:
         stack = self._stack(joints)
         return stack.ravel(), self._stack_jacobian(stack, joints, self.data.J)
 
-    def _joints_of(self, fingers: NDArray[np.intp] | None) -> list[int]:
+    def _joints_of(self, fingers: list[int] | None) -> list[int]:
         if fingers is None:
             return self._yaw_joints
         return [self._yaw_joints[i] for i in fingers]

@@ -254,6 +254,8 @@ class ContactProblem:
         self.target = target
         self.fingers = tuple(constrained)
         self.rows = np.array([hand.fingers.index(f) for f in constrained], dtype=np.intp)
+        # Fingers of Hand.contact_stack: None (all, the fast path) unless some are free.
+        self.stack_fingers = None if not free_fingers else self.rows.tolist()
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
@@ -402,7 +404,7 @@ def _lm_loop(
     its Jacobian, so that an iteration is a handful of numpy calls (docs/ik.md, "Cost").
     """
     damping = 1e-3
-    stack, J = hand.contact_stack_jacobian(q, problem.rows)
+    stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
     residual = problem.target_stack - stack
     costs = [float(residual.dot(residual))]
     for k in range(max_iterations):
@@ -422,7 +424,7 @@ def _lm_loop(
         q = q_new
         if history is not None:
             history.append(q.copy())
-        stack, J = hand.contact_stack_jacobian(q, problem.rows)
+        stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
         residual = problem.target_stack - stack
         costs.append(float(residual.dot(residual)))
     error = _max_error(residual)
@@ -503,7 +505,7 @@ def _damped_step(
         x = _damped_solve(A, g, damping)
         if x is not None:
             candidate = _clamped_step(hand, q, _full_step(hand, free, x))
-            r_new = problem.target_stack - hand.contact_stack(candidate, problem.rows)
+            r_new = problem.target_stack - hand.contact_stack(candidate, problem.stack_fingers)
             if float(r_new.dot(r_new)) < cost:
                 return candidate, r_new, max(damping / 3.0, 1e-7)
         damping *= 4.0
@@ -530,7 +532,7 @@ def _separate(
         if not penetrations:
             return q, k
         state = hand.state(q, jacobians=True)
-        stack, J_contacts = hand.contact_stack_jacobian(q, problem.rows)
+        stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
         rows, depths = _separation_rows(state, penetrations)
         J = np.vstack([J_contacts, rows])
         e = np.concatenate([problem.target_stack - stack, depths])
