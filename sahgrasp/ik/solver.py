@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal, get_args
 
@@ -33,6 +33,7 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand, HandState
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
+from sahgrasp.ik.learned import GraspDatabase, default_database
 from sahgrasp.ik.obstacle import Obstacle
 from sahgrasp.ik.starts import initial_lambdas
 
@@ -57,7 +58,7 @@ __all__ = [
 
 Method = Literal["auto", "paper"]
 """Inner solver of Algorithm 1."""
-Init = Literal["sequence", "random"]
+Init = Literal["sequence", "random", "learned"]
 """Where the initial configurations come from."""
 Reason = Literal[
     "converged", "max_inits", "no_progress", "collision", "object_collision", "invalid_input"
@@ -75,7 +76,10 @@ class IKSettings:
 
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
-        init: ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas, Fig. 9).
+        init: ``"sequence"`` (the offline sequence), ``"random"`` (random lambdas, Fig. 9) or
+            ``"learned"`` (the nearest grasps of a database first, then the sequence; see
+            :mod:`sahgrasp.ik.learned`).
+        learned_starts: With ``init="learned"``, how many database neighbours come first.
         max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
         d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
@@ -94,6 +98,7 @@ class IKSettings:
     method: Method = "auto"
     init: Init = "sequence"
     max_inits: int = 12
+    learned_starts: int = 2
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
     s_min_m: float = 1e-3
@@ -112,6 +117,7 @@ class IKSettings:
                     f"{name} must be one of {list(valid)}, got {getattr(self, name)!r}"
                 )
         _check_int("max_inits", self.max_inits, 1, MAX_INITS_LIMIT)
+        _check_int("learned_starts", self.learned_starts, 0, MAX_INITS_LIMIT)
         for name in ("max_iterations", "stall_iterations", "repair_iterations"):
             _check_int(name, getattr(self, name), 1)
         _check_int("seed", self.seed, 0)
@@ -379,6 +385,11 @@ def _lm_attempt(
 ) -> Attempt:
     """Free-wrist Levenberg-Marquardt from the thumb-hung start, then collision repair."""
     q, _ = hang_from_thumb(hand, coords, problem.target)
+    return _lm_from(hand, problem, q, s)
+
+
+def _lm_from(hand: Hand, problem: ContactProblem, q: NDArray[np.float64], s: IKSettings) -> Attempt:
+    """Levenberg-Marquardt from the configuration ``q``, then collision repair."""
     history = [q.copy()] if s.record_history else None
     attempt = _lm_loop(hand, problem, q, s, s.max_iterations, history)
     if attempt.outcome != "converged" or problem.collision(attempt.q) is None:
@@ -575,6 +586,7 @@ def solve_ik(
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
     obstacle: GraspObject | None = None,
+    database: GraspDatabase | None = None,
     **overrides: Any,
 ) -> IKResult:
     """Find wrist pose and joints that put every fingertip on its contact (Algorithm 1).
@@ -588,6 +600,8 @@ def solve_ik(
         obstacle: The object being grasped, placed in the world: a solution must not put any
             link into it, except each contact fingertip sphere up to ``d_min`` (docs/ik.md).
             Its collision pieces are built once per (hand, object) and kept for the next solves.
+        database: Grasp database of ``init="learned"`` (default: the hand's shipped one; the
+            sequence alone if it has none).
         **overrides: Fields of :class:`IKSettings` to change, e.g. ``method="paper"``.
 
     Returns:
@@ -597,11 +611,12 @@ def solve_ik(
     Raises:
         InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
             refused when the target is built); an obstacle that is not a GraspObject.
-        SequenceFileError: ``sequence`` was made for another hand.
+        SequenceFileError: ``sequence`` (or ``database``: :class:`GraspDatabaseError`) was made
+            for another hand.
     """
     s = replace(settings or IKSettings(), **overrides)
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle)
+    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle, database)
 
 
 def run_algorithm1(
@@ -612,18 +627,29 @@ def run_algorithm1(
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
     obstacle: GraspObject | None = None,
+    database: GraspDatabase | None = None,
 ) -> IKResult:
-    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here)."""
+    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here).
+
+    Learned starts (whole configurations) go to the auto method as they are; another inner
+    solver receives their finger coordinates and hangs the hand from the thumb as usual.
+    """
     problem = ContactProblem(hand, target, free_fingers, obstacle, settings.d_min_m)
     sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
+    if settings.init == "learned":
+        database = database or default_database(hand)
+        if database is not None:
+            database.check_hand(hand)
     start = time.perf_counter()
     attempts: list[Attempt] = []
-    starts = initial_lambdas(
-        settings.init, settings.max_inits, settings.seed, sequence, problem.target
-    )
-    for lambdas in starts:
-        attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), settings)
+    for kind, x in _starts(hand, problem, settings, sequence, database):
+        if kind == "q" and attempt_fn is _lm_attempt:
+            attempt = _lm_from(hand, problem, x, settings)
+        else:
+            attempt = attempt_fn(
+                hand, problem, x if kind == "coords" else hand.finger_part(x), settings
+            )
         if attempt.outcome == "converged":  # Step 8, and the obstacle
             attempt.outcome = problem.collision(attempt.q) or attempt.outcome
         attempt.seconds = time.perf_counter() - start
@@ -632,6 +658,26 @@ def run_algorithm1(
             return _result(hand, problem, attempt, attempts, True)
     best = min(attempts, key=lambda a: a.error_m)
     return _result(hand, problem, best, attempts, False)
+
+
+def _starts(
+    hand: Hand,
+    problem: ContactProblem,
+    s: IKSettings,
+    sequence: Sequence,
+    database: GraspDatabase | None,
+) -> Iterator[tuple[Literal["q", "coords"], NDArray[np.float64]]]:
+    """The ``max_inits`` starts: learned configurations first, then the sequence's coordinates."""
+    learned: list[NDArray[np.float64]] = []
+    if s.init == "learned" and database is not None:
+        count = min(s.learned_starts, s.max_inits)
+        learned = database.starts(hand, problem.target, count)
+    for q in learned:
+        yield "q", q
+    init = "sequence" if s.init == "learned" else s.init
+    rest = s.max_inits - len(learned)
+    for lambdas in initial_lambdas(init, rest, s.seed, sequence, problem.target):
+        yield "coords", sequence.basis.coordinates(hand, lambdas)
 
 
 _FAILURE_REASONS: dict[str, Reason] = {
