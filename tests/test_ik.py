@@ -143,7 +143,7 @@ def test_invalid_targets_raise(sah: Hand) -> None:
         ("seed", -1, "seed must be an integer >= 0"),
         ("seed", True, "seed must be an integer"),
         ("max_iterations", 0, "max_iterations must be an integer >= 1"),
-        ("init", "grid", r"init must be one of \['sequence', 'random'\]"),
+        ("init", "grid", r"init must be one of \['sequence', 'random', 'learned'\]"),
         ("method", "magic", r"method must be one of \['auto', 'paper'\]"),
         ("d_min_m", float("nan"), "d_min_m must be a finite number > 0"),
         ("alpha", float("inf"), "alpha must be a finite number > 0"),
