@@ -769,6 +769,23 @@ class Hand:
         stack = self._stack(joints)
         return stack.ravel(), self._stack_jacobian(stack, joints, self.data.J)
 
+    def contact_jacobian(
+        self,
+        q: NDArray[np.float64],
+        stack: NDArray[np.float64],
+        fingers: list[int] | None = None,
+    ) -> NDArray[np.float64]:
+        """The Jacobian of :meth:`contact_stack_jacobian` when ``stack`` at ``q`` is known.
+
+        Saves the placements' read-out when the caller has just computed ``stack``.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        points = stack.reshape(-1, 2, 3)
+        return self._stack_jacobian(points, self._joints_of(fingers), self.data.J)
+
     def _joints_of(self, fingers: list[int] | None) -> list[int]:
         if fingers is None:
             return self._yaw_joints

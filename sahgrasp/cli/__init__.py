@@ -14,7 +14,7 @@ from sahgrasp.errors import SahGraspError
 
 __all__ = ["main"]
 
-COMMANDS = ("info", "solve", "bench", "atlas", "sequence", "demo")
+COMMANDS = ("info", "solve", "bench", "atlas", "sequence", "learn", "demo")
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -418,25 +418,27 @@ def _lm_loop(
     stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
     residual = problem.target_stack - stack
     costs = [float(residual.dot(residual))]
+    # The largest error is at least sqrt(cost / blocks): below that bound it must be computed.
+    refine_cost = (len(residual) // 3) * s.refine_m**2
     for k in range(max_iterations):
-        error = _max_error(residual)
-        if error < s.refine_m:
+        if costs[-1] < refine_cost and (error := _max_error(residual)) < s.refine_m:
             return Attempt(q, "converged", k, error, history)
         stalled = (
             len(costs) > s.stall_iterations and costs[-1] > 0.5 * costs[-1 - s.stall_iterations]
         )
         if stalled or damping > 1e4:
+            error = _max_error(residual)
             return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
         q_new, r_new, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
         if q_new is None or r_new is None:
             continue
-        q = q_new
+        q, residual = q_new, r_new
         if history is not None:
             history.append(q.copy())
-        stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
-        residual = problem.target_stack - stack
+        # The step's kinematics gave the residual; only the Jacobian is new.
+        J = hand.contact_jacobian(q, problem.target_stack - residual, problem.stack_fingers)
         costs.append(float(residual.dot(residual)))
     error = _max_error(residual)
     outcome = "converged" if error < s.d_min_m else "max_iterations"
@@ -456,8 +458,12 @@ def _free_coordinates(
     Returns the mask of the free coordinates, or None when every coordinate is free (the usual
     case, which then needs no column selection).
     """
-    x, g = hand.finger_part(q), gradient[6:]
-    fixed = ((x <= hand.lower + 1e-12) & (g < 0)) | ((x >= hand.upper - 1e-12) & (g > 0))
+    x = hand.finger_part(q)
+    low, high = x <= hand.lower + 1e-12, x >= hand.upper - 1e-12
+    if not (low.any() or high.any()):  # the usual case: no coordinate at a bound
+        return None
+    g = gradient[6:]
+    fixed = (low & (g < 0)) | (high & (g > 0))
     if not fixed.any():
         return None
     free = np.ones(hand.nv, dtype=bool)
