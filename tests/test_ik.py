@@ -276,6 +276,19 @@ def test_three_finger_can_grasp_keeps_the_free_finger_out(sah: Hand) -> None:
     _assert_outside(sah, _object_distances(sah, entry, pieces), ("thumb", "index", "middle"))
 
 
+def test_free_finger_is_returned_placed_clear_of_the_other_links(sah: Hand) -> None:
+    from sahgrasp.objects.clearance import HandObjectClearance
+
+    for problem in random_problems(sah, 10, seed=7):
+        target = GraspTarget(problem.name, [c for c in problem.contacts if c.finger != "ring"])
+        result = solve_ik(sah, target, free_fingers=("ring",))
+        assert result.success
+        # Already placed: placing again leaves it where it is, and it is clear.
+        again = HandObjectClearance(sah, None).place_free_fingers(result.q, ("ring",))
+        assert again.clear
+        np.testing.assert_array_equal(again.q, result.q)
+
+
 @pytest.mark.parametrize("method", ["auto", "paper"])
 def test_only_solutions_through_the_object_fail_with_object_collision(
     sah: Hand, method: str

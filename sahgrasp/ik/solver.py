@@ -658,12 +658,31 @@ def run_algorithm1(
             )
         if attempt.outcome == "converged":  # Step 8, and the obstacle
             attempt.outcome = problem.collision(attempt.q) or attempt.outcome
+        if attempt.outcome == "converged" and free_fingers:
+            attempt.q = _place_free_fingers(problem, attempt.q, free_fingers, obstacle)
         attempt.seconds = time.perf_counter() - start
         attempts.append(attempt)
         if attempt.outcome == "converged":
             return _result(hand, problem, attempt, attempts, True)
     best = min(attempts, key=lambda a: a.error_m)
     return _result(hand, problem, best, attempts, False)
+
+
+def _place_free_fingers(
+    problem: ContactProblem,
+    q: NDArray[np.float64],
+    free_fingers: tuple[str, ...],
+    obstacle: GraspObject | None,
+) -> NDArray[np.float64]:
+    """``q`` with the fingers without a contact moved clear of the object and the other links.
+
+    Only the free fingers' joints move (``HandObjectClearance.place_free_fingers``), so the
+    contacts are untouched; a placement that would collide is not taken.
+    """
+    from sahgrasp.objects.clearance import HandObjectClearance  # objects imports the hand only
+
+    placed = HandObjectClearance(problem.hand, obstacle).place_free_fingers(q, free_fingers).q
+    return placed if problem.collision(placed) is None else q
 
 
 def _starts(
