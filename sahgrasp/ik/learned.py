@@ -16,6 +16,7 @@ so no IK runs to build the database. Its seeds (:data:`LEARN_SEED`) are used now
 from __future__ import annotations
 
 import io
+import zipfile
 import os
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -186,7 +187,7 @@ class GraspDatabase:
                 )  # fmt: skip
         except FileNotFoundError as exc:
             raise GraspDatabaseError(f"grasp database {path} not found") from exc
-        except (OSError, KeyError, ValueError, TypeError, EOFError) as exc:
+        except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as exc:
             raise GraspDatabaseError(
                 f"{path} is not a valid sahgrasp grasp database ({exc}); build one with "
                 "`sahgrasp learn --hand ... --out FILE`"
