@@ -615,12 +615,12 @@ class Hand:
     @cached_property
     def lower(self) -> NDArray[np.float64]:
         """Lower limits of ``q[7:]`` [rad]."""
-        return np.array(self.model.lowerPositionLimit[7:], dtype=np.float64)
+        return np.array(self.model.lowerPositionLimit[_WRIST_NQ:], dtype=np.float64)
 
     @cached_property
     def upper(self) -> NDArray[np.float64]:
         """Upper limits of ``q[7:]`` [rad]."""
-        return np.array(self.model.upperPositionLimit[7:], dtype=np.float64)
+        return np.array(self.model.upperPositionLimit[_WRIST_NQ:], dtype=np.float64)
 
     def check_q(self, q: ArrayLike) -> NDArray[np.float64]:
         """Return ``q`` as a float array, or raise if its size is wrong or it holds NaN/inf."""
@@ -637,7 +637,7 @@ class Hand:
 
     def within_limits(self, q: NDArray[np.float64], tol: float = 1e-9) -> bool:
         """True if every joint coordinate is within its limits (mimic joints follow)."""
-        joints = q[7:]
+        joints = self.finger_part(q)
         return bool(np.all(joints >= self.lower - tol) and np.all(joints <= self.upper + tol))
 
     def configuration(
@@ -654,13 +654,13 @@ class Hand:
         """
         q = np.empty(self.nq)
         pose = pin.SE3.Identity() if T_world_palm is None else T_world_palm
-        q[:7] = pin.SE3ToXYZQUAT(pose)
+        self.wrist_part(q)[:] = pin.SE3ToXYZQUAT(pose)
         if coordinates is None or isinstance(coordinates, Mapping):
-            q[7:] = 0.5 * (self.lower + self.upper)
+            self.finger_part(q)[:] = 0.5 * (self.lower + self.upper)
             for name, value in (coordinates or {}).items():
                 q[7 + self.coordinate_index(name)] = float(value)
         else:
-            q[7:] = np.asarray(coordinates, dtype=np.float64)
+            self.finger_part(q)[:] = np.asarray(coordinates, dtype=np.float64)
         return self.check_q(q)
 
     @staticmethod
@@ -676,11 +676,11 @@ class Hand:
     @staticmethod
     def wrist_pose(q: NDArray[np.float64]) -> pin.SE3:
         """Palm pose ``T_world_palm`` encoded in ``q``."""
-        return pin.XYZQUATToSE3(q[:7])
+        return pin.XYZQUATToSE3(q[:_WRIST_NQ])
 
     def joint_values(self, q: NDArray[np.float64]) -> dict[str, float]:
         """Every URDF joint angle [rad] by name, mimic joints included (virtual ones excluded)."""
-        coords = dict(zip(self.coordinate_names, q[7:].tolist(), strict=True))
+        coords = dict(zip(self.coordinate_names, self.finger_part(q).tolist(), strict=True))
         out = {n: coords[n] for n in self.joint_names}
         for mimic, (leader, scale, offset) in self.mimic_joints.items():
             out[mimic] = scale * coords[leader] + offset

@@ -16,8 +16,8 @@ so no IK runs to build the database. Its seeds (:data:`LEARN_SEED`) are used now
 from __future__ import annotations
 
 import io
-import zipfile
 import os
+import zipfile
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from functools import cached_property

@@ -191,7 +191,7 @@ class IKResult:
     @property
     def T_world_palm(self) -> pin.SE3:
         """Wrist pose of the result."""
-        return pin.XYZQUATToSE3(self.q[:7])
+        return Hand.wrist_pose(self.q)
 
     def to_dict(self, hand: Hand) -> dict[str, Any]:
         """The results-file entry (docs/formats.md); the object clearance only with an obstacle."""
