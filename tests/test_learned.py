@@ -64,7 +64,7 @@ def test_learned_start_places_the_neighbours_wrist_onto_the_target(sah: Hand) ->
     db = default_database(sah)
     assert db is not None
     problem = random_problems(sah, 1, seed=4)[0]
-    (start,) = db.starts(sah, problem, 1)
+    (start,) = list(db.starts(sah, problem, 1))
     state = sah.contact_state(start)
     target = np.array([problem.contact(f).point for f in sah.fingers])
     # The neighbour's contacts, rigidly aligned: within a few centimetres of the target's.
@@ -76,7 +76,7 @@ def test_no_learned_start_for_a_target_with_free_fingers(sah: Hand) -> None:
     assert db is not None
     problem = random_problems(sah, 1, seed=4)[0]
     three = type(problem)(problem.name, [c for c in problem.contacts if c.finger != "ring"])
-    assert db.starts(sah, three, 2) == []
+    assert list(db.starts(sah, three, 2)) == []
     assert solve_ik(sah, three, init="learned", free_fingers=("ring",)).success
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import io
 import os
 import zipfile
+from collections.abc import Iterator
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from functools import cached_property
@@ -119,7 +120,7 @@ class GraspDatabase:
     @cached_property
     def tree(self) -> cKDTree:
         """The k-d tree of the features, built on first use."""
-        return cKDTree(self.features)
+        return cKDTree(self.features.astype(np.float64))  # float64 queries are faster
 
     def check_hand(self, hand: Hand) -> None:
         """Raise :class:`GraspDatabaseError` unless this database was made for ``hand``."""
@@ -131,13 +132,14 @@ class GraspDatabase:
                 "build one with `sahgrasp learn --hand ...`"
             )
 
-    def starts(self, hand: Hand, target: GraspTarget, count: int) -> list[NDArray[np.float64]]:
+    def starts(self, hand: Hand, target: GraspTarget, count: int) -> Iterator[NDArray[np.float64]]:
         """The ``count`` nearest entries' configurations, each wrist moved onto ``target``.
 
-        Requires a target with a contact for every finger of the hand (else: no starts).
+        Lazy: a start is aligned only when the solver asks for it. Requires a target with a
+        contact for every finger of the hand (else: no starts).
         """
         if count <= 0 or set(target.fingers) != set(hand.fingers):
-            return []
+            return
         contacts = [target.contact(f) for f in hand.fingers]
         points = np.array([c.point for c in contacts])
         # Target normals point into the fingertips; the features use the fingertips' outward ones.
@@ -145,7 +147,8 @@ class GraspDatabase:
         key = rigid_features(points, normals)
         _, index = self.tree.query(key, k=min(count, len(self.features)))
         goal = np.vstack([points, points - hand.radius_m * normals])
-        return [self._moved(hand, int(i), goal) for i in np.atleast_1d(index)]
+        for i in np.atleast_1d(index):
+            yield self._moved(hand, int(i), goal)
 
     def _moved(self, hand: Hand, i: int, goal: NDArray[np.float64]) -> NDArray[np.float64]:
         q = self.configurations[i].astype(np.float64)

@@ -693,14 +693,13 @@ def _starts(
     database: GraspDatabase | None,
 ) -> Iterator[tuple[Literal["q", "coords"], NDArray[np.float64]]]:
     """The ``max_inits`` starts: learned configurations first, then the sequence's coordinates."""
-    learned: list[NDArray[np.float64]] = []
+    used = 0
     if s.init == "learned" and database is not None:
-        count = min(s.learned_starts, s.max_inits)
-        learned = database.starts(hand, problem.target, count)
-    for q in learned:
-        yield "q", q
+        for q in database.starts(hand, problem.target, min(s.learned_starts, s.max_inits)):
+            used += 1
+            yield "q", q
     init = "sequence" if s.init == "learned" else s.init
-    rest = s.max_inits - len(learned)
+    rest = s.max_inits - used
     for lambdas in initial_lambdas(init, rest, s.seed, sequence, problem.target):
         yield "coords", sequence.basis.coordinates(hand, lambdas)
 
