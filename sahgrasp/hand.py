@@ -480,6 +480,7 @@ class Hand:
         self._yaw_joints = [model.frames[f].parentJoint for f in self._contact_frames]
         self._stack_selector = np.array([[self.radius_m, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]])
         self._supports, self._reduce = _support_masks(model)
+        self._masked_reduce = self._fold(self._yaw_joints)
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -787,7 +788,7 @@ class Hand:
         return self._stack_jacobian(points, self._joints_of(fingers), self.data.J)
 
     def _joints_of(self, fingers: list[int] | None) -> list[int]:
-        if fingers is None:
+        if fingers is None:  # the same list object: _stack_jacobian's precomputed fast path
             return self._yaw_joints
         return [self._yaw_joints[i] for i in fingers]
 
@@ -802,9 +803,14 @@ class Hand:
     ) -> NDArray[np.float64]:
         """Rows ``J_lin - [x]x J_ang`` of every point of ``stack``, on its finger's joints."""
         skews = (stack.reshape(-1, 3) @ _SKEW_BASIS).reshape(-1, 3, 3)
-        rows = (J[:3] - skews @ J[3:]).reshape(len(joints), 2, 3, -1)
-        masked = (rows * self._supports[joints][:, None, None]).reshape(-1, J.shape[1])
-        return np.asarray(masked @ self._reduce)
+        rows = (J[:3] - skews @ J[3:]).reshape(len(joints), 6, -1)
+        # One batched product masks each finger's columns and folds the mimic ones.
+        folded = self._masked_reduce if joints is self._yaw_joints else self._fold(joints)
+        return np.asarray((rows @ folded).reshape(-1, self._reduce.shape[1]))
+
+    def _fold(self, joints: list[int]) -> NDArray[np.float64]:
+        """Per joint, ``diag(support mask) @ reduce``: (len(joints), nvExtended, nv)."""
+        return np.asarray(self._supports[joints][:, :, None] * self._reduce)
 
     def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
         """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
