@@ -66,6 +66,7 @@ _DEG = math.pi / 180.0
 _FINITE_WEIGHT = 1e-10
 """Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
 q_i (at most 1.8e298 each), nor fall into the slow subnormal range for joint-sized values."""
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _WRIST_NQ = 7
 """Entries of ``q`` the free-flyer wrist takes (position, then quaternion)."""
 
@@ -475,12 +476,13 @@ class Hand:
         self._q_shape = (model.nq,)
         self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
         self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
-        # The contact frame sits on the virtual yaw joint at (R, 0, 0): the joint origin is the
-        # sphere centre and its x axis the normal. Rows of H^T: normal, ..., origin.
-        self._yaw_joints = [model.frames[f].parentJoint for f in self._contact_frames]
-        self._stack_selector = np.array([[self.radius_m, 0.0, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]])
+        self._jacobian_frames = self._contact_frames + self._tip_frames
+        # Frames of Hand.contact_stack, (contact, fingertip-sphere centre) per finger.
+        self._stack_frames = [
+            f for pair in zip(self._contact_frames, self._tip_frames, strict=True) for f in pair
+        ]
+        self._stack_selector = np.array([[0.0, 0.0, 0.0, 1.0], [-self.radius_m, 0.0, 0.0, 1.0]])
         self._supports, self._reduce = _support_masks(model)
-        self._masked_reduce = self._fold(self._yaw_joints)
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -755,7 +757,7 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._stack(self._joints_of(fingers)).ravel()
+        return self._stack(fingers)
 
     def contact_stack_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -765,52 +767,35 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        pin.computeJointJacobians(self.model, self.data, self._finite(q))
-        joints = self._joints_of(fingers)
-        stack = self._stack(joints)
-        return stack.ravel(), self._stack_jacobian(stack, joints, self.data.J)
+        J = self.contact_jacobian(q, fingers)  # its joint pass leaves the placements too
+        return self._stack(fingers), J
 
     def contact_jacobian(
-        self,
-        q: NDArray[np.float64],
-        stack: NDArray[np.float64],
-        fingers: list[int] | None = None,
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
     ) -> NDArray[np.float64]:
-        """The Jacobian of :meth:`contact_stack_jacobian` when ``stack`` at ``q`` is known.
-
-        Saves the placements' read-out when the caller has just computed ``stack``.
+        """The Jacobian of :meth:`contact_stack_jacobian` alone, for a caller that has the stack.
 
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        pin.computeJointJacobians(self.model, self.data, self._finite(q))
-        points = stack.reshape(-1, 2, 3)
-        return self._stack_jacobian(points, self._joints_of(fingers), self.data.J)
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, self._finite(q))
+        frames = self._stack_frames if fingers is None else self._stack_frames_of(fingers)
+        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in frames])
+        return J[:, :3].reshape(-1, self.model.nv)
 
-    def _joints_of(self, fingers: list[int] | None) -> list[int]:
-        if fingers is None:  # the same list object: _stack_jacobian's precomputed fast path
-            return self._yaw_joints
-        return [self._yaw_joints[i] for i in fingers]
+    def _stack_frames_of(self, fingers: list[int]) -> list[int]:
+        return [f for i in fingers for f in self._stack_frames[2 * i : 2 * i + 2]]
 
-    def _stack(self, joints: list[int]) -> NDArray[np.float64]:
-        """(k, 2, 3) points and centres of the yaw joints ``joints`` (kinematics up to date)."""
-        oMi = self.data.oMi
-        H = np.array([oMi[j].homogeneous for j in joints])
-        return np.asarray(self._stack_selector @ H.transpose(0, 2, 1)[:, :, :3])
-
-    def _stack_jacobian(
-        self, stack: NDArray[np.float64], joints: list[int], J: NDArray[np.float64]
-    ) -> NDArray[np.float64]:
-        """Rows ``J_lin - [x]x J_ang`` of every point of ``stack``, on its finger's joints."""
-        skews = (stack.reshape(-1, 3) @ _SKEW_BASIS).reshape(-1, 3, 3)
-        rows = (J[:3] - skews @ J[3:]).reshape(len(joints), 6, -1)
-        # One batched product masks each finger's columns and folds the mimic ones.
-        folded = self._masked_reduce if joints is self._yaw_joints else self._fold(joints)
-        return np.asarray((rows @ folded).reshape(-1, self._reduce.shape[1]))
-
-    def _fold(self, joints: list[int]) -> NDArray[np.float64]:
-        """Per joint, ``diag(support mask) @ reduce``: (len(joints), nvExtended, nv)."""
-        return np.asarray(self._supports[joints][:, :, None] * self._reduce)
+    def _stack(self, fingers: list[int] | None) -> NDArray[np.float64]:
+        """(6 k,) points and centres of ``fingers`` (joint placements up to date)."""
+        model, data = self.model, self.data
+        frames = (
+            self._contact_frames if fingers is None else [self._contact_frames[i] for i in fingers]
+        )
+        H = np.array([pin.updateFramePlacement(model, data, f).homogeneous for f in frames])
+        # Rows of H^T: normal, ..., origin = contact point; centre = point - R normal.
+        return np.asarray((self._stack_selector @ H.transpose(0, 2, 1)[:, :, :3]).ravel())
 
     def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
         """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
@@ -837,12 +822,12 @@ class Hand:
         return self._jacobians(self._finite(q))
 
     def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
-        pin.computeJointJacobians(self.model, self.data, q)
-        state = self._state()
-        stack = np.stack([state.points, state.centres], axis=1)
-        J = self._stack_jacobian(stack, self._yaw_joints, self.data.J).reshape(-1, 2, 3, self.nv)
-        angular = (self.data.J[3:] * self._supports[self._yaw_joints][:, None]) @ self._reduce
-        return ContactJacobians(state, J[:, 0], J[:, 1], angular)
+        # Frame by frame: for this (F, 3, nv) layout faster than the folded data.J product.
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, q)
+        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
+        F = len(self.fingers)
+        return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""

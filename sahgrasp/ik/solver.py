@@ -438,7 +438,7 @@ def _lm_loop(
         if history is not None:
             history.append(q.copy())
         # The step's kinematics gave the residual; only the Jacobian is new.
-        J = hand.contact_jacobian(q, problem.target_stack - residual, problem.stack_fingers)
+        J = hand.contact_jacobian(q, problem.stack_fingers)
         costs.append(float(residual.dot(residual)))
     error = _max_error(residual)
     outcome = "converged" if error < s.d_min_m else "max_iterations"
