@@ -531,3 +531,51 @@ def test_bench_kinematics_refuses_non_positive_calls(calls: int) -> None:
 
     with pytest.raises(InvalidSettingsError, match="calls must be a positive integer"):
         run(calls=calls)
+
+
+def test_state_is_an_immutable_snapshot(any_hand: Hand) -> None:
+    rng = np.random.default_rng(21)
+    q = any_hand.random_configuration(rng)
+    state = any_hand.state(q, jacobians=True)
+    points = state.contacts.points.copy()
+    any_hand.contact_state(any_hand.random_configuration(rng))  # another query in between
+    np.testing.assert_array_equal(state.contacts.points, points)
+    with pytest.raises(ValueError, match="read-only"):
+        state.contacts.points[0, 0] = 1.0
+    assert state.jacobians is not None
+    with pytest.raises(ValueError, match="read-only"):
+        state.jacobians.points[0, 0, 0] = 1.0
+    assert any_hand.state(q).jacobians is None
+
+
+def test_stack_jacobian_and_point_jacobian_match_finite_differences(any_hand: Hand) -> None:
+    rng = np.random.default_rng(22)
+    q = any_hand.random_configuration(rng)
+    stack, J = any_hand.contact_stack_jacobian(q)
+    state = any_hand.state(q, jacobians=True)
+    np.testing.assert_allclose(stack.reshape(-1, 2, 3)[:, 0], state.contacts.points, atol=1e-15)
+    np.testing.assert_allclose(stack.reshape(-1, 2, 3)[:, 1], state.contacts.centres, atol=1e-15)
+    np.testing.assert_allclose(any_hand.contact_jacobian(q), J, atol=1e-15)
+    v, eps = rng.normal(size=any_hand.nv), 1e-7
+    moved = any_hand.integrate(q, eps * v)
+    fd = (any_hand.contact_stack(moved) - stack) / eps
+    np.testing.assert_allclose(fd, J @ v, atol=1e-5)
+    # A point on the last joint's body moves with it; the world (joint 0) does not move.
+    joint, point = any_hand.model.njoints - 1, state.contacts.points[-1]
+    np.testing.assert_allclose(state.point_jacobian(joint, point), J[-6:-3], atol=1e-12)
+    assert not state.point_jacobian(0, point).any()
+    with pytest.raises(InvalidConfigurationError, match="no Jacobians"):
+        any_hand.state(q).point_jacobian(joint, point)
+
+
+def test_wrist_and_finger_parts_split_q(sah: Hand) -> None:
+    q = sah.random_configuration(np.random.default_rng(23))
+    np.testing.assert_array_equal(np.concatenate([sah.wrist_part(q), sah.finger_part(q)]), q)
+    assert sah.finger_part(q).shape == (len(sah.coordinate_names),)
+
+
+def test_penetrations_refuse_non_finite_q(sah: Hand) -> None:
+    q = sah.configuration()
+    q[9] = np.nan
+    with pytest.raises(InvalidConfigurationError, match="NaN"):
+        sah.penetrations(q, 1e-3)

@@ -1,7 +1,8 @@
 """``sahgrasp bench ik``: success and time of Algorithm 1 against the number of initial poses.
 
 On the same problems, from the same initial configurations and with the same acceptance test, it
-runs ``method=paper`` and ``method=auto`` each with ``init=sequence`` and ``init=random``, the
+runs ``method=auto`` with ``init=learned`` (the database's nearest grasps first, then the
+sequence), ``method=paper`` and ``method=auto`` each with ``init=sequence`` and ``init=random``, the
 peers of :mod:`sahgrasp.bench.peers` with ``init=sequence``, and, when the hand's sequence comes
 from the offline search, ``method=auto`` with the paper's Table 1 lambdas on the same PCA basis.
 Because Algorithm 1 tries its initial configurations in order, one run with ``i_max = 12``
@@ -13,6 +14,7 @@ budget.
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -34,12 +36,14 @@ from sahgrasp.ik import (
     default_sequence,
     random_problems,
 )
-from sahgrasp.ik.solver import run_algorithm1, solve_ik
+from sahgrasp.ik.learned import default_database
+from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
 from sahgrasp.progress import ProgressCallback
 
 __all__ = ["run", "summarize"]
 
-RUNS: tuple[tuple[str, str], ...] = (
+RUNS: tuple[tuple[Method, Init], ...] = (
+    ("auto", "learned"),
     ("auto", "sequence"),
     ("auto", "random"),
     ("paper", "sequence"),
@@ -69,6 +73,10 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
         "mean_time_ms": float(times_ms.mean()),
         "p95_time_ms": float(np.percentile(times_ms, 95)),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
+        # All in: the whole solve's time (starts, collision checks) per Jacobian iteration.
+        "us_per_iteration": float(
+            times_ms.sum() * 1e3 / max(sum(r.iterations for r in results), 1)
+        ),
         "by_inits": by_inits,
         "solved_times_ms": sorted(
             float(t) for r, t in zip(results, times_ms, strict=True) if r.success
@@ -143,9 +151,13 @@ def run(
         list(load_targets(targets).problems) if targets else random_problems(model, problems, seed)
     )
     default_sequence(model)  # built before timing
+    learned = default_database(model)
+    if learned is not None:
+        learned.tree  # noqa: B018 -- the k-d tree is built before timing
     solvers = _solvers(model, seed, peers)
     subset = len(problem_set) if peer_problems is None else peer_problems
     results: dict[str, list[IKResult]] = {label: [] for label in solvers}
+    load_before = os.getloadavg()
     with progress_reporter(progress, quiet) as report:
         for i, target in enumerate(problem_set):
             for label, solve in solvers.items():
@@ -167,6 +179,9 @@ def run(
         "peer_problems": min(subset, len(problem_set)),
         "skipped_peers": skipped,
         "runs": runs,
+        # The machine may be shared: its 1-min load average (and cores) beside the timings.
+        "load_average": {"before": load_before[0], "after": os.getloadavg()[0]},
+        "cores": os.cpu_count(),
         "created_unix_s": time.time(),
     }
     if plot:
