@@ -390,7 +390,7 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
     [
         (["info", "--hand", "deep.json"], r"hand description deep\.json is nested too deeply"),
         (["solve", "one.json", "--hand", "u16.json"], r"hand description u16\.json is not UTF-8"),
-        (["solve", "one.json", "--sequence", "deep.json"], r"sequence file deep\.json nests"),
+        (["solve", "one.json", "--sequence", "deep.json"], r"sequence file deep\.json is nested too deeply"),
         (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
     ],
 )
