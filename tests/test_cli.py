@@ -128,6 +128,10 @@ def test_cli_defaults_are_the_library_defaults() -> None:
         "grid": settings.grid, "problems": settings.problems, "rounds": settings.rounds,
         "seed": settings.seed, "method": settings.method,
     } == sequence_cli.SEARCH_DEFAULTS  # fmt: skip
+    from sahgrasp.cli.learn import LEARN_DEFAULTS
+    from sahgrasp.ik.learned import LEARN_SEED
+
+    assert LEARN_DEFAULTS["seed"] == LEARN_SEED
     parsers = {p.prog: p for p in _every_parser()}
     ik_defaults = IKSettings()
     solve = parsers["sahgrasp solve"]
@@ -390,7 +394,10 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
     [
         (["info", "--hand", "deep.json"], r"hand description deep\.json is nested too deeply"),
         (["solve", "one.json", "--hand", "u16.json"], r"hand description u16\.json is not UTF-8"),
-        (["solve", "one.json", "--sequence", "deep.json"], r"sequence file deep\.json is nested too deeply"),
+        (
+            ["solve", "one.json", "--sequence", "deep.json"],
+            r"sequence file deep\.json is nested too deeply",
+        ),
         (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
     ],
 )

@@ -151,4 +151,4 @@ def test_learn_command_writes_a_database(sah: Hand, tmp_path: Path) -> None:
 def test_learn_command_refuses_bad_samples(tmp_path: Path) -> None:
     done = _cli("learn", "--samples", "0", "--out", str(tmp_path / "x.npz"))
     assert done.returncode == 2
-    assert "--samples must be an integer >= 1" in done.stderr
+    assert "argument --samples: 0 is out of range: must be an integer >= 1" in done.stderr
