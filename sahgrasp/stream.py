@@ -210,9 +210,13 @@ class ResultsWriter:
         self.header = header
         self._end = 0
         self._stream: IO[bytes] | None = None
-        if resume and not self.in_place and not self.part.exists() and self.path.is_file():
-            os.replace(self.path, self.part)
-        self.resuming = resume and not self.in_place and self.part.exists()
+        source = self.part if self.part.exists() else self.path
+        self.resuming = resume and not self.in_place and source.is_file()
+        if self.resuming:
+            with source.open("rb") as stream:
+                self._check_header(stream.readline(MAX_LINE_BYTES), source)
+            if source != self.part:  # a finished run: continued (and renamed back) as a part
+                os.replace(source, self.part)
 
     def finished(self) -> Iterator[dict[str, Any]]:
         """The entries already in the file being resumed, in order (none unless resuming).
@@ -222,7 +226,7 @@ class ResultsWriter:
         if not self.resuming:
             return
         with self.part.open("rb") as stream:
-            self._check_header(stream.readline())
+            stream.readline(MAX_LINE_BYTES)  # the header, checked on opening
             self._end = stream.tell()
             for line in stream:
                 try:
@@ -234,21 +238,21 @@ class ResultsWriter:
                 self._end += len(line)
                 yield entry
 
-    def _check_header(self, line: bytes) -> None:
+    def _check_header(self, line: bytes, source: Path) -> None:
         try:
             found = json.loads(line)
         except ValueError:
             found = None
         if not isinstance(found, dict) or found.get("format") != RESULTS_FORMAT:
             raise InvalidSettingsError(
-                f"cannot resume {self.part}: it is not a JSON Lines results file of sahgrasp "
+                f"cannot resume {source}: it is not a JSON Lines results file of sahgrasp "
                 f"(first line must be a {RESULTS_FORMAT!r} header); remove it or drop --resume"
             )
         if found.get("settings_digest") != self.header["settings_digest"]:
             changed = [k for k in ("hand_digest", "settings", "sequence_digest")
                        if found.get(k) != self.header[k]]  # fmt: skip
             raise InvalidSettingsError(
-                f"cannot resume {self.part}: it was written with other settings (differing: "
+                f"cannot resume {source}: it was written with other settings (differing: "
                 f"{', '.join(changed) or 'settings digest'}); resume with the same hand, options "
                 "and sequence, or write to another file"
             )
