@@ -73,11 +73,22 @@ def _sequence(benches: Any) -> None:
     add_json_argument(seq, "the timings")
 
 
+def _solve(benches: Any) -> None:
+    solve = add_command(benches, "solve", "sahgrasp solve at scale: problems/s, peak memory")
+    solve.add_argument("--problems", type=positive_int, default=10_000, help="random problems")
+    solve.add_argument(
+        "--lines", type=nonnegative_int, default=1_000_000, help="lines, mostly invalid (0: none)"
+    )
+    solve.add_argument("--seed", type=nonnegative_int, default=9090, help="seed of the problems")
+    solve.add_argument("--no-dask", dest="dask", action="store_false", help="skip the Dask case")
+    add_json_argument(solve, "the timings")
+
+
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print or write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
-    for add in (_kinematics, _ik, _atlas, _sequence):
+    for add in (_kinematics, _ik, _atlas, _sequence, _solve):
         add(benches)
     p.set_defaults(run=run)
 
