@@ -188,6 +188,8 @@ def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
 
     if args.scheduler is not None:
         return CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
+    if args.workers <= 1:  # solved here: each chunk written as soon as it is solved
+        return CHUNK_SIZE, 1
     per_worker = math.ceil(total / (CHUNKS_IN_FLIGHT * args.workers))
     return max(1, min(CHUNK_SIZE, per_worker)), CHUNKS_IN_FLIGHT * args.workers
 
@@ -212,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
 
     from sahgrasp.hand import load_hand
     from sahgrasp.ik import IKSettings, Sequence, default_sequence
-    from sahgrasp.ik.batch import solve_stream
+    from sahgrasp.ik.batch import solve_chunks
     from sahgrasp.stream import ResultsWriter, is_jsonl, settings_header
 
     hand = load_hand(hand_name)
@@ -232,16 +234,18 @@ def run(args: argparse.Namespace) -> int:
     try:
         with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
             size, in_flight = _chunking(args, targets.total - summary.resumed)
-            stream = solve_stream(hand, items, settings, sequence, pool, "entry", size, in_flight)
-            for entry in stream:
-                assert isinstance(entry, dict)
-                summary.add(entry)
-                bar.update()
+            chunks = solve_chunks(hand, items, settings, sequence, pool, "entry", size, in_flight)
+            for chunk in chunks:
+                done: list[dict[str, Any]] = chunk  # type: ignore[assignment]
+                for entry in done:
+                    summary.add(entry)
+                bar.update(len(done))
                 if writer is not None:
-                    writer.write([entry])
+                    writer.write(done)
                 else:
-                    entries.append(entry)
-                    print(_line(entry), file=out)
+                    entries += done
+                    for entry in done:
+                        print(_line(entry), file=out)
         complete = True
     finally:
         if writer is not None:

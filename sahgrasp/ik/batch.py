@@ -46,6 +46,7 @@ __all__ = [
     "Job",
     "invalid_entry",
     "invalid_result",
+    "solve_chunks",
     "solve_many",
     "solve_stream",
     "worker_hand",
@@ -154,24 +155,24 @@ Item = tuple["GraspTarget | InvalidProblem", Any, str]
 """A problem, its obstacle (GraspObject, ObjectSpec or None) and the obstacle's content key."""
 
 
+def _invalid(job: Job, hand: Hand, name: str, detail: str) -> IKResult | dict[str, Any]:
+    if job.output == "entry":
+        return invalid_entry(name, detail)
+    return invalid_result(hand, name)
+
+
 def _solve_item(job: Job, hand: Hand, item: Item) -> IKResult | dict[str, Any]:
     problem, obstacle, key = item
-    detail = problem.detail if isinstance(problem, InvalidProblem) else None
-    obj: GraspObject | str | None = None
-    if detail is None and obstacle is not None:
-        obj = _worker_obstacle(obstacle, key)
-        detail = obj if isinstance(obj, str) else None
-    if detail is None:
-        assert isinstance(problem, GraspTarget)
-        try:
-            problem.check_fingers(hand.fingers)
-            result = solve_ik(hand, problem, job.settings, job.sequence, obstacle=obj)  # type: ignore[arg-type]
-            return result.to_dict(hand) if job.output == "entry" else result
-        except InvalidTargetError as exc:
-            detail = str(exc)
-    if job.output == "entry":
-        return invalid_entry(problem.name, detail)
-    return invalid_result(hand, problem.name)
+    assert isinstance(problem, GraspTarget)
+    obj = None if obstacle is None else _worker_obstacle(obstacle, key)
+    if isinstance(obj, str):
+        return _invalid(job, hand, problem.name, obj)
+    try:
+        problem.check_fingers(hand.fingers)
+        result = solve_ik(hand, problem, job.settings, job.sequence, obstacle=obj)
+    except InvalidTargetError as exc:
+        return _invalid(job, hand, problem.name, str(exc))
+    return result.to_dict(hand) if job.output == "entry" else result
 
 
 def _solve_chunk(job: Job, items: list[Item]) -> list[IKResult | dict[str, Any]]:
@@ -180,18 +181,47 @@ def _solve_chunk(job: Job, items: list[Item]) -> list[IKResult | dict[str, Any]]
     return [_solve_item(job, hand, item) for item in items]
 
 
+_MAX_CHUNK_ITEMS = 64 * CHUNK_SIZE
+"""Items of a chunk at most, invalid problems included (they are answered by the caller)."""
+
+
 def _chunks(items: Iterable[Item], size: int) -> Iterator[list[Item]]:
+    """Chunks of ``size`` problems to solve, with the invalid problems among them."""
     chunk: list[Item] = []
+    valid = 0
     for item in items:
         chunk.append(item)
-        if len(chunk) == size:
+        valid += isinstance(item[0], GraspTarget)
+        if valid == size or len(chunk) >= _MAX_CHUNK_ITEMS:
             yield chunk
-            chunk = []
+            chunk, valid = [], 0
     if chunk:
         yield chunk
 
 
-def solve_stream(
+class _Batch:
+    """A chunk under way: its valid problems sent to be solved, its invalid ones answered here."""
+
+    def __init__(self, chunk: list[Item], job: Job, executor: Executor | None) -> None:
+        self.chunk = chunk
+        todo = [item for item in chunk if isinstance(item[0], GraspTarget)]
+        self.future: Future[list[Any]] = Future()
+        if not todo:
+            self.future.set_result([])
+        elif executor is None:
+            self.future.set_result(_solve_chunk(job, todo))
+        else:
+            self.future = executor.submit(_solve_chunk, job, todo)
+
+    def results(self, job: Job, hand: Hand) -> list[IKResult | dict[str, Any]]:
+        solved = iter(self.future.result())
+        return [
+            next(solved) if isinstance(p, GraspTarget) else _invalid(job, hand, p.name, p.detail)
+            for p, _, _ in self.chunk
+        ]
+
+
+def solve_chunks(
     hand: Hand,
     items: Iterable[Item],
     settings: IKSettings,
@@ -200,11 +230,12 @@ def solve_stream(
     output: Output = "entry",
     chunk_size: int = CHUNK_SIZE,
     in_flight: int = 2 * CHUNKS_IN_FLIGHT,
-) -> Iterator[IKResult | dict[str, Any]]:
-    """Solve ``items`` lazily, yielding the results in input order as they are done.
+) -> Iterator[list[IKResult | dict[str, Any]]]:
+    """Solve ``items`` lazily, yielding the results in input order, a chunk at a time.
 
     At most ``in_flight`` chunks of ``chunk_size`` problems are submitted and not yet collected,
-    so ``items`` may be an unbounded stream: memory does not grow with its length.
+    so ``items`` may be an unbounded stream: memory does not grow with its length. Invalid
+    problems are answered here, without a trip to a worker.
 
     Args:
         hand: The hand.
@@ -219,22 +250,35 @@ def solve_stream(
         in_flight: Chunks submitted ahead of the oldest uncollected one.
     """
     job = Job(hand.description, hand.description.digest(), settings, sequence, output)
-    if executor is None:
-        _CACHE.hands.setdefault(job.digest, hand)
-        for chunk in _chunks(items, chunk_size):
-            yield from _solve_chunk(job, chunk)
-        return
-    pending: deque[Future[list[Any]]] = deque()
+    _CACHE.hands.setdefault(job.digest, hand)
+    pending: deque[_Batch] = deque()
     try:
         for chunk in _chunks(items, chunk_size):
-            pending.append(executor.submit(_solve_chunk, job, chunk))
+            pending.append(_Batch(chunk, job, executor))
             if len(pending) >= in_flight:
-                yield from pending.popleft().result()
+                yield pending.popleft().results(job, hand)
         while pending:
-            yield from pending.popleft().result()
+            yield pending.popleft().results(job, hand)
     finally:
-        for future in pending:
-            future.cancel()
+        for batch in pending:
+            batch.future.cancel()
+
+
+def solve_stream(
+    hand: Hand,
+    items: Iterable[Item],
+    settings: IKSettings,
+    sequence: PoseSequence | None = None,
+    executor: Executor | None = None,
+    output: Output = "entry",
+    chunk_size: int = CHUNK_SIZE,
+    in_flight: int = 2 * CHUNKS_IN_FLIGHT,
+) -> Iterator[IKResult | dict[str, Any]]:
+    """:func:`solve_chunks`, one result at a time."""
+    for results in solve_chunks(
+        hand, items, settings, sequence, executor, output, chunk_size, in_flight
+    ):
+        yield from results
 
 
 def _keyed(
