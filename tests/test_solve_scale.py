@@ -135,7 +135,7 @@ def test_same_results_on_one_worker_two_workers_and_dask(
     hand: Hand, problems: list[GraspTarget]
 ) -> None:
     distributed = pytest.importorskip("dask.distributed")
-    subset = problems[:40]
+    subset = problems[:20]
     settings = IKSettings(seed=3)
     one = solve_many(hand, subset, settings)
     _same(one, solve_many(hand, subset, settings, workers=2))
