@@ -4,10 +4,13 @@ Each case runs the command line as a user would (``sahgrasp solve T.jsonl --json
 subprocess, on random SAH problems written as JSON Lines, with 1 and 2 local workers and on a
 Dask LocalCluster of 2 single-threaded workers. The memory is the resident set size summed over
 the command's process tree (and over the cluster's processes for Dask), sampled every
-:data:`SAMPLE_S` seconds with psutil; the peak is reported. A last case solves a file of mostly
+:data:`SAMPLE_S` seconds with psutil; the peak is reported, and the CPU seconds of those
+processes (as last sampled: the work of the final 0.2 s is missed). A last case solves a file of mostly
 invalid lines (a few valid problems among them) to show that the memory does not grow with the
 file. Wall times include starting Python and the workers: other processes on the machine share
-the cores, so the load average is recorded with the numbers.
+the cores, so the load average is recorded with the numbers, and the problems per CPU second
+show the parallel overhead even on a busy machine (equal per-CPU-second rates for 1 and 2
+workers mean a 2x speed-up on two idle cores).
 """
 
 from __future__ import annotations
@@ -49,17 +52,23 @@ def _write_problems(path: Path, count: int, seed: int, every: int = 1) -> None:
                 out.write(_INVALID_LINE)
 
 
-def _tree_rss(roots: list[Any]) -> int:
-    """Resident bytes of ``roots`` and all their descendants."""
+def _sample(roots: list[Any], cpu: dict[int, float]) -> int:
+    """Resident bytes of ``roots`` and their descendants; their CPU seconds recorded in ``cpu``."""
     import psutil
 
     total = 0
     for root in roots:
         try:
-            for p in [root, *root.children(recursive=True)]:
-                total += p.memory_info().rss
-        except psutil.Error:  # a process ended between listing and reading
+            tree = [root, *root.children(recursive=True)]
+        except psutil.Error:  # the root ended
             continue
+        for p in tree:
+            try:
+                total += p.memory_info().rss
+                times = p.cpu_times()
+                cpu[p.pid] = times.user + times.system
+            except psutil.Error:  # a process ended between listing and reading
+                continue
     return total
 
 
@@ -75,8 +84,9 @@ def _case(targets: Path, where: list[str], extra: list[Any]) -> dict[str, Any]:
     process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     root = psutil.Process(process.pid)
     peak = 0
+    cpu: dict[int, float] = {}
     while process.poll() is None:
-        peak = max(peak, _tree_rss([root, *extra]))
+        peak = max(peak, _sample([root, *extra], cpu))
         time.sleep(SAMPLE_S)
     wall = time.perf_counter() - started
     stdout, stderr = process.communicate()
@@ -90,6 +100,8 @@ def _case(targets: Path, where: list[str], extra: list[Any]) -> dict[str, Any]:
         "wall_s": wall,
         "problems_per_s": lines / wall,
         "peak_rss_mb": peak / 1e6,
+        "cpu_s": sum(cpu.values()),
+        "problems_per_cpu_s": lines / max(sum(cpu.values()), 1e-9),
         "summary": stdout.decode().splitlines()[0],
     }
 
@@ -106,9 +118,11 @@ def _dask_case(targets: Path) -> dict[str, Any]:
 
 
 def _table(cases: list[dict[str, Any]]) -> str:
-    rows = [f"{'case':<34} {'lines':>9} {'wall s':>8} {'lines/s':>9} {'peak MB':>8}"]
-    rows += [f"{c['where']:<34} {c['lines']:>9} {c['wall_s']:>8.1f} {c['problems_per_s']:>9.1f} "
-             f"{c['peak_rss_mb']:>8.0f}" for c in cases]  # fmt: skip
+    rows = [f"{'case':<30} {'lines':>8} {'wall s':>7} {'lines/s':>8} {'CPU s':>7} "
+            f"{'lines/CPU s':>11} {'peak MB':>7}"]  # fmt: skip
+    rows += [f"{c['where']:<30} {c['lines']:>8} {c['wall_s']:>7.1f} {c['problems_per_s']:>8.1f} "
+             f"{c['cpu_s']:>7.1f} {c['problems_per_cpu_s']:>11.1f} {c['peak_rss_mb']:>7.0f}"
+             for c in cases]  # fmt: skip
     return "\n".join(rows)
 
 
