@@ -7,10 +7,10 @@ the command's process tree (and over the cluster's processes for Dask), sampled 
 :data:`SAMPLE_S` seconds with psutil; the peak is reported, and the CPU seconds of those
 processes (as last sampled: the work of the final 0.2 s is missed). A last case solves a file
 of mostly invalid lines (a few valid problems among them) to show that the memory does not grow
-with the file. Wall times include starting Python and the workers: other processes on the machine share
-the cores, so the load average is recorded with the numbers, and the problems per CPU second
-show the parallel overhead even on a busy machine (equal per-CPU-second rates for 1 and 2
-workers mean a 2x speed-up on two idle cores).
+with the file. Wall times include starting Python and the workers: other processes on the
+machine share the cores, so the load average is recorded with the numbers, and the problems per
+CPU second show the parallel overhead even on a busy machine (equal per-CPU-second rates for 1
+and 2 workers mean a 2x speed-up on two idle cores).
 """
 
 from __future__ import annotations
