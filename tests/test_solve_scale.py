@@ -208,3 +208,16 @@ def test_a_bad_default_object_is_a_one_line_error(tmp_path: Path) -> None:
     done = sahgrasp("solve", path, cwd=tmp_path)
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert done.stderr.strip() == "sahgrasp: error: object 'xyz' must have 3 components [m], got 2"
+
+
+def test_solve_many_takes_one_object_per_target(hand: Hand) -> None:
+    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.objects import load_object, paper_grasp
+
+    can, grasp = load_object("can"), paper_grasp("can")
+    with_can, alone = solve_many(hand, [grasp, grasp], obstacle=[can, None])
+    assert with_can.object_clearance_m is not None and alone.object_clearance_m is None
+    with pytest.raises(InvalidTargetError, match="1 objects for 2 targets"):
+        solve_many(hand, [grasp, grasp], obstacle=[can])
+    with pytest.raises(InvalidTargetError, match="obstacle must be a GraspObject"):
+        solve_many(hand, [grasp], obstacle=["can"])  # type: ignore[list-item]
