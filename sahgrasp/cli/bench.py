@@ -80,7 +80,12 @@ def _solve(benches: Any) -> None:
         "--lines", type=nonnegative_int, default=1_000_000, help="lines, mostly invalid (0: none)"
     )
     solve.add_argument("--seed", type=nonnegative_int, default=9090, help="seed of the problems")
-    solve.add_argument("--no-dask", dest="dask", action="store_false", help="skip the Dask case")
+    solve.add_argument(
+        "--dask",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run on a Dask LocalCluster of 2 workers",
+    )
     add_json_argument(solve, "the timings")
 
 
