@@ -272,24 +272,24 @@ def run(args: argparse.Namespace) -> int:
         writer = ResultsWriter(args.json, header, args.resume)
         _skip_finished(writer, targets.problems, summary)
     items = ((p, getattr(p, "object_spec", None), _key(p)) for p in targets.problems)
-    entries: list[dict[str, Any]] = []
     out = human_stream(args.json)
+    size, in_flight = _chunking(args, targets.total - summary.resumed)
+    entries: list[dict[str, Any]] = []
     complete = False
     try:
         with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
-            size, in_flight = _chunking(args, targets.total - summary.resumed)
-            chunks = solve_chunks(hand, items, settings, sequence, pool, "entry", size, in_flight)
-            for chunk in chunks:
+            for chunk in solve_chunks(
+                hand, items, settings, sequence, pool, "entry", size, in_flight
+            ):
                 done: list[dict[str, Any]] = chunk  # type: ignore[assignment]
                 for entry in done:
                     summary.add(entry)
                 bar.update(len(done))
                 if writer is not None:
                     writer.write(done)
-                else:
+                else:  # a document: written at the end, each problem shown as it is solved
                     entries += done
-                    for entry in done:
-                        print(_line(entry), file=out)
+                    print("\n".join(map(_line, done)), file=out)
         complete = True
     finally:
         if writer is not None:
