@@ -149,3 +149,52 @@ def test_relative_hand_path_is_resolved_against_the_targets_file(tmp_path: Path)
 def test_hand_must_be_a_name_or_path(tmp_path: Path, hand: object) -> None:
     with pytest.raises(InvalidTargetError, match="'hand' must be"):
         read_problems(_write(tmp_path, {"hand": hand, "problems": []}))
+
+
+MUG = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
+
+
+def test_an_object_spec_names_a_catalog_object_or_a_mesh_placed_in_the_world() -> None:
+    from sahgrasp.contacts import object_spec
+
+    can = object_spec({"name": "can", "xyz": [0.1, 0, 0], "quat": [0, 0, 1, 0]}, ".")
+    assert can is not None and can.load().name == "can"
+    np.testing.assert_allclose(can.placement()[:3, :3], np.diag([-1.0, -1.0, 1.0]), atol=1e-15)
+    mug = object_spec({"mesh": MUG.name}, MUG.parent)
+    assert mug is not None and mug.mesh == str(MUG) and mug.key() != can.key()
+    assert object_spec(mug.to_dict(), "/") == mug and object_spec(None, ".") is None
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ({"name": "teapot"}, r"unknown object 'teapot'; valid names are \['fork'"),
+        ({"name": "can", "mesh": "m.stl"}, r"either 'name' \(a catalog object\) or 'mesh'"),
+        ({"xyz": [0, 0, 0]}, r"either 'name'"),
+        ({"name": "can", "scale": 2}, r"unknown key\(s\) \['scale'\]"),
+        ({"name": "can", "xyz": [0, 0, "1"]}, r"object 'xyz' must be 3 numbers \[m\]"),
+        ({"name": "can", "quat": [0, 0, 1]}, r"'quat' must have 4 components \[x, y, z, w\]"),
+        ({"name": "can", "quat": [0, 0, 0, 1.01]}, r"length 1.01; it must be a unit quaternion"),
+        ({"name": "can", "xyz": [0, 0, float("nan")]}, r"NaN or inf"),
+        ({"mesh": "mug.txt"}, r"unsupported type; use one of \['.stl'"),
+        ({"mesh": "none.stl"}, r"object mesh 'none.stl' not found"),
+        ("can", r"must be an object with either 'name'"),
+    ],
+)
+def test_a_bad_object_spec_is_refused_with_the_reason(spec: object, message: str) -> None:
+    from sahgrasp.contacts import object_spec
+
+    with pytest.raises(InvalidTargetError, match=message):
+        object_spec(spec, MUG.parent)
+
+
+def test_targets_files_give_a_default_object_and_per_problem_ones(tmp_path: Path) -> None:
+    contacts = [{"finger": "thumb", "point": [0, 0, 0], "normal": [0, 0, 1]}]
+    objects = [None, {"name": "cup"}, {"name": "cup", "quat": [1, 1, 0, 0]}]
+    problems = [{"contacts": contacts}] + [{"contacts": contacts, "object": o} for o in objects]
+    path = tmp_path / "t.json"
+    path.write_text(json.dumps({"hand": "sah", "object": {"name": "can"}, "problems": problems}))
+    _, read = read_problems(path)
+    names = [getattr(getattr(p, "object_spec", None), "name", None) for p in read[:3]]
+    assert names == ["can", None, "cup"]
+    assert isinstance(read[3], InvalidProblem) and "unit quaternion" in read[3].detail

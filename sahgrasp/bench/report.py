@@ -94,6 +94,20 @@ def _sequence_table(doc: Document) -> str:
     ))  # fmt: skip
 
 
+def _solve_table(doc: Document) -> str:
+    rows = [
+        (c["where"], c["lines"], c["wall_s"], c["problems_per_s"], c["cpu_s"],
+         c["problems_per_cpu_s"], c["peak_rss_mb"])
+        for c in doc["cases"]
+    ]  # fmt: skip
+    headers = ("case", "lines", "wall [s]", "lines/s", "CPU [s]", "lines/CPU s", "peak [MB]")
+    return "\n".join((
+        f"bench solve: {doc['problems']} problems, seed {doc['seed']}",
+        format_table(headers, rows),
+        f"speed-up 1 -> 2 workers {doc['speedup_1_to_2_workers']:.3g}",
+    ))  # fmt: skip
+
+
 def _grasps_table(doc: Document) -> str:
     from sahgrasp.bench.grasps import format_table as grasps_table
 
@@ -106,6 +120,7 @@ _TABLES: dict[str, Callable[[Document], str]] = {
     "kinematics": _kinematics_table,
     "sequence": _sequence_table,
     "grasps": _grasps_table,
+    "solve": _solve_table,
 }
 
 

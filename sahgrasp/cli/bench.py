@@ -116,11 +116,27 @@ def _grasps(benches: Any) -> None:
     add_json_argument(grasps, "the results")
 
 
+def _solve(benches: Any) -> None:
+    solve = add_command(benches, "solve", "sahgrasp solve at scale: problems/s, peak memory")
+    solve.add_argument("--problems", type=positive_int, default=10_000, help="random problems")
+    solve.add_argument(
+        "--lines", type=nonnegative_int, default=1_000_000, help="lines, mostly invalid (0: none)"
+    )
+    solve.add_argument("--seed", type=nonnegative_int, default=9090, help="seed of the problems")
+    solve.add_argument(
+        "--dask",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run on a Dask LocalCluster of 2 workers",
+    )
+    add_json_argument(solve, "the timings")
+
+
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
-    for add in (_kinematics, _ik, _atlas, _sequence, _grasps):
+    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve):
         add(benches)
     p.set_defaults(run=run)
 

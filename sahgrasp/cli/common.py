@@ -41,6 +41,7 @@ __all__ = [
     "human_stream",
     "int_at_least",
     "int_in_range",
+    "json_safe",
     "json_text",
     "nonnegative_int",
     "output_file",
@@ -196,14 +197,14 @@ def output_file(path: str | None) -> Iterator[str | None]:
         yield str(tmp)
 
 
-def _json_safe(data: Any) -> Any:
+def json_safe(data: Any) -> Any:
     """``data`` with every NaN or infinite number (undefined, e.g. an unsolved error) as None."""
     if isinstance(data, float):
         return data if math.isfinite(data) else None
     if isinstance(data, dict):
-        return {key: _json_safe(value) for key, value in data.items()}
+        return {key: json_safe(value) for key, value in data.items()}
     if isinstance(data, list | tuple):
-        return [_json_safe(value) for value in data]
+        return [json_safe(value) for value in data]
     return data
 
 
@@ -230,7 +231,7 @@ def json_text(data: Any) -> str:
     try:
         return _layout(data) + "\n"
     except ValueError:  # NaN or inf somewhere: rare, so only then pay for a cleaned copy
-        return _layout(_json_safe(data)) + "\n"
+        return _layout(json_safe(data)) + "\n"
 
 
 def emit_json(data: Any, out: str | None) -> None:

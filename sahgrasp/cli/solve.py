@@ -1,8 +1,16 @@
-"""``sahgrasp solve TARGETS.json``: IK for every problem of a targets file."""
+"""``sahgrasp solve TARGETS``: IK for every problem of a targets file (JSON or JSON Lines)."""
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
+import shlex
+import signal
+import sys
+import threading
+import time
+from collections import Counter
 from pathlib import Path
 from statistics import mean, median
 from typing import TYPE_CHECKING, Any
@@ -13,7 +21,6 @@ from sahgrasp.cli.common import (
     MAX_INITS,
     METHOD_HELP,
     add_command,
-    add_json_argument,
     check_json_inputs,
     check_outputs,
     emit_json,
@@ -25,24 +32,27 @@ from sahgrasp.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator
+    from concurrent.futures import Executor
 
     from sahgrasp.contacts import GraspTarget, InvalidProblem
+    from sahgrasp.stream import ResultsWriter
 
-__all__ = ["add_parser", "results_document", "run"]
+__all__ = ["Summary", "add_parser", "results_document", "run"]
 
-INVALID_ENTRY: dict[str, Any] = {
-    "success": False, "reason": "invalid_input", "inits_used": 0, "iterations": 0, "time_ms": 0.0,
-    "max_position_error_mm": None, "max_centre_error_mm": None, "collision_free": None,
-    "wrist": None, "joints": None, "contact_params": None,
-}  # fmt: skip
-"""The results entry of a problem refused as invalid input, besides its name and detail."""
+TARGETS_HELP = "targets file: a JSON document, or JSON Lines (.jsonl) read line by line"
+JSON_HELP = (
+    "write the results to OUT: a JSON document, or JSON Lines if OUT ends in .jsonl (written "
+    "as solved, resumable); '-': JSON alone on stdout, other lines on stderr"
+)
+DISPATCH_CHUNKS_IN_FLIGHT = 64
+"""Chunks queued on a Dask cluster (its size is not known here): 2,048 problems."""
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
     p = add_command(sub, "solve", "inverse kinematics for every problem of a targets file")
-    p.add_argument("targets", type=Path, help="targets JSON file (format: docs/formats.md)")
+    p.add_argument("targets", type=Path, help=TARGETS_HELP)
     p.add_argument("--hand", default=None, help=HAND_OVERRIDE_HELP)
     p.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
     p.add_argument(
@@ -59,24 +69,30 @@ def add_parser(sub: Any) -> None:
         help="sequence file of initial poses (default: the one shipped for the hand)",
     )
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
-    p.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
-    add_json_argument(p, "the results")
-    p.set_defaults(run=run)
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
+    where.add_argument(
+        "--scheduler", default=None, metavar="ADDR", help="Dask scheduler, e.g. tcp://host:8786"
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the JSON Lines results of a stopped run (--json OUT.jsonl)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", default=None, metavar="OUT", help=JSON_HELP)
+    p.set_defaults(run=run, on_interrupt=resume_hint)
 
 
-def _check_fingers(
-    problem: GraspTarget | InvalidProblem, fingers: Sequence[str]
-) -> GraspTarget | InvalidProblem:
-    """``problem``, or an :class:`InvalidProblem` if its fingers are not the hand's."""
-    from sahgrasp.contacts import GraspTarget, InvalidProblem
-    from sahgrasp.errors import InvalidTargetError
+def resume_hint(args: argparse.Namespace) -> str:
+    """What to say when a run is interrupted: how to continue a JSON Lines output."""
+    from sahgrasp.stream import is_jsonl
 
-    if isinstance(problem, GraspTarget):
-        try:
-            problem.check_fingers(fingers)
-        except InvalidTargetError as exc:
-            return InvalidProblem(problem.name, str(exc))
-    return problem
+    if not is_jsonl(args.json):
+        return "interrupted"
+    words = ["sahgrasp", *sys.argv[1:]]
+    command = shlex.join(words if "--resume" in words else [*words, "--resume"])
+    return f"interrupted; results so far in {args.json}.part; continue with: {command}"
 
 
 def _line(entry: dict[str, Any]) -> str:
@@ -108,36 +124,194 @@ def results_document(hand_name: str, entries: list[dict[str, Any]]) -> dict[str,
     }
 
 
-def run(args: argparse.Namespace) -> int:
-    """Execute ``sahgrasp solve``; 0 if every problem was solved, 1 otherwise."""
-    from sahgrasp.contacts import GraspTarget, read_problems
+class Summary:
+    """Counts of a run, in constant memory: solved, unsolved by reason, invalid, resumed."""
 
-    file_hand, problems = read_problems(args.targets)
-    hand_name = args.hand or file_hand
+    def __init__(self) -> None:
+        self.reasons: Counter[str] = Counter()
+        self.solved = 0
+        self.resumed = 0
+        self.solve_ms = 0.0
+        self.started = time.perf_counter()
+
+    def add(self, entry: dict[str, Any], resumed: bool = False) -> None:
+        """Count one result entry (``resumed``: read from the output, not solved now)."""
+        self.solved += bool(entry.get("success"))
+        self.reasons[str(entry.get("reason"))] += not entry.get("success")
+        self.resumed += resumed
+        if not resumed:
+            self.solve_ms += float(entry.get("time_ms") or 0.0)
+
+    @property
+    def problems(self) -> int:
+        """Problems counted."""
+        return self.solved + sum(self.reasons.values())
+
+    def line(self) -> str:
+        """The final summary line."""
+        invalid = self.reasons["invalid_input"]
+        unsolved = ", ".join(f"{r} {n}" for r, n in sorted(self.reasons.items())
+                             if n and r != "invalid_input")  # fmt: skip
+        seconds = time.perf_counter() - self.started
+        done = self.problems - self.resumed
+        return (f"solved {self.solved}/{self.problems} ({invalid} invalid input); unsolved: "
+                f"{unsolved or 'none'}; {self.resumed} resumed; {done} problems in {seconds:.1f} "
+                f"s, {done / max(seconds, 1e-9):.1f} problems/s")  # fmt: skip
+
+
+def _skip_finished(
+    writer: ResultsWriter, problems: Iterator[GraspTarget | InvalidProblem], summary: Summary
+) -> None:
+    """Count the results a resumed output already holds, and skip their problems."""
+    from sahgrasp.errors import InvalidSettingsError
+
+    for index, entry in enumerate(writer.finished()):
+        problem = next(problems, None)
+        if problem is None or problem.name != entry.get("name"):
+            raise InvalidSettingsError(
+                f"cannot resume {writer.part}: its result {index} ({entry.get('name')!r}) is not "
+                f"for problem {index} of the targets file "
+                f"({problem.name if problem else 'none'!r}); was it made from another file?"
+            )
+        summary.add(entry, resumed=True)
+
+
+def _executor(args: argparse.Namespace) -> Any:
+    """Where the chunks run: None (this process), local workers, or a Dask cluster."""
+    if args.scheduler is not None:
+        from sahgrasp.sequence.executors import open_executor
+
+        return open_executor(args.scheduler)
+    if args.workers <= 1:
+        return contextlib.nullcontext(None)
+    return _local_pool(args.workers)
+
+
+@contextlib.contextmanager
+def _local_pool(workers: int) -> Iterator[Executor]:
+    """Local worker processes, all started (signals held meanwhile) before the work is sent.
+
+    A stop signal that unwinds the parent while it writes a spawned worker's start-up data makes
+    that worker print an ``EOFError`` traceback; held until the workers are up, the signal stops
+    the run cleanly (one line, exit status 130).
+    """
+    from concurrent.futures import wait
+
+    from sahgrasp.parallel import process_pool
+
+    with process_pool(workers) as pool:
+        with _signals_held():
+            wait([pool.submit(time.monotonic) for _ in range(workers)])  # one spawn per submit
+        yield pool
+
+
+_HELD_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Record the stop signals instead of acting on them; raise KeyboardInterrupt after, if any."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set in the main thread
+        return
+    caught: list[int] = []
+    numbers = [getattr(signal, name) for name in _HELD_SIGNALS if hasattr(signal, name)]
+    previous = {n: signal.signal(n, lambda number, _: caught.append(number)) for n in numbers}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
+    """Problems per chunk and chunks in flight: all workers busy, scheduling cost under 1%."""
+    from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT
+
+    if args.scheduler is not None:
+        return CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
+    if args.workers <= 1:  # solved here: each chunk written as soon as it is solved
+        return CHUNK_SIZE, 1
+    per_worker = math.ceil(total / (CHUNKS_IN_FLIGHT * args.workers))
+    return max(1, min(CHUNK_SIZE, per_worker)), CHUNKS_IN_FLIGHT * args.workers
+
+
+def _check_run(args: argparse.Namespace, hand_name: str) -> None:
+    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.stream import is_jsonl
+
     check_outputs([args.json], inputs=[args.targets, args.sequence, hand_name])
     check_json_inputs(hand_name, args.sequence)
+    if args.resume and not is_jsonl(args.json):
+        raise InvalidSettingsError("--resume continues a JSON Lines output: give --json OUT.jsonl")
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``sahgrasp solve``; 0 if every problem was solved, 1 otherwise."""
+    from sahgrasp.stream import open_targets
+
+    targets = open_targets(args.targets)
+    hand_name = args.hand or targets.hand
+    _check_run(args, hand_name)
 
     from sahgrasp.hand import load_hand
-    from sahgrasp.ik import IKSettings, Sequence, solve_many
+    from sahgrasp.ik import IKSettings, Sequence, default_sequence
+    from sahgrasp.ik.batch import solve_chunks
+    from sahgrasp.stream import ResultsWriter, is_jsonl, settings_header
 
     hand = load_hand(hand_name)
     settings = IKSettings(method=args.method, init=args.init, max_inits=args.inits, seed=args.seed)
     sequence = Sequence.load(args.sequence) if args.sequence else None
-    problems = [_check_fingers(p, hand.fingers) for p in problems]
-    targets = [p for p in problems if isinstance(p, GraspTarget)]
-    solved = iter(solve_many(hand, targets, settings, sequence, workers=args.workers))
-    entries = [
-        next(solved).to_dict(hand) if isinstance(p, GraspTarget)
-        else {"name": p.name, **INVALID_ENTRY, "detail": p.detail}
-        for p in problems
-    ]  # fmt: skip
+    summary = Summary()
+    writer = None
+    if is_jsonl(args.json):
+        used = sequence or default_sequence(hand)
+        header = settings_header(hand, settings, used.to_dict(), args.targets)
+        writer = ResultsWriter(args.json, header, args.resume)
+        _skip_finished(writer, targets.problems, summary)
+    items = ((p, getattr(p, "object_spec", None), _key(p)) for p in targets.problems)
     out = human_stream(args.json)
-    for entry in entries:
-        print(_line(entry), file=out)
-    document = results_document(hand.description.name, entries)
-    s = document["summary"]
-    print(f"solved {s['solved']}/{s['problems']} ({s['invalid']} invalid input), "
-          f"median {s['median_time_ms']:.2f} ms", file=out)  # fmt: skip
-    if args.json:
-        emit_json(document, args.json)
-    return 0 if s["solved"] == s["problems"] else 1
+    size, in_flight = _chunking(args, targets.total - summary.resumed)
+    entries: list[dict[str, Any]] = []
+    complete = False
+    try:
+        with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
+            for chunk in solve_chunks(
+                hand, items, settings, sequence, pool, "entry", size, in_flight
+            ):
+                done: list[dict[str, Any]] = chunk  # type: ignore[assignment]
+                for entry in done:
+                    summary.add(entry)
+                bar.update(len(done))
+                if writer is not None:
+                    writer.write(done)
+                else:  # a document: written at the end, each problem shown as it is solved
+                    entries += done
+                    print("\n".join(map(_line, done)), file=out)
+        complete = True
+    finally:
+        if writer is not None:
+            writer.close(complete)
+    print(summary.line(), file=out)
+    if writer is None and args.json:
+        emit_json(results_document(hand.description.name, entries), args.json)
+    elif writer is not None:
+        print(f"wrote {args.json}", file=out)
+    return 0 if summary.solved == summary.problems else 1
+
+
+def _key(problem: GraspTarget | InvalidProblem) -> str:
+    spec = getattr(problem, "object_spec", None)
+    return spec.key() if spec is not None else ""
+
+
+def _bar(args: argparse.Namespace, total: int, done: int) -> Any:
+    """A tqdm bar on stderr (problems/s and ETA), shown on a terminal unless ``--quiet``."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total, initial=done, unit="problem", smoothing=0.05, file=sys.stderr,
+        disable=True if args.quiet else None, dynamic_ncols=True,
+    )  # fmt: skip
