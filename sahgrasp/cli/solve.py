@@ -57,9 +57,10 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
     p.add_argument(
         "--init",
-        choices=("sequence", "random"),
+        choices=("sequence", "random", "learned"),
         default="sequence",
-        help="initial configurations: the searched sequence of poses, or random ones",
+        help="initial configurations: the searched sequence of poses, random ones, or the nearest "
+        "solved grasps of the shipped database followed by the sequence",
     )
     p.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
     p.add_argument(
