@@ -1,4 +1,4 @@
-"""The feasible-grasp system F(x) = 0 of atlas-grasp-optimization (Section II) on a sahgrasp hand.
+"""The feasible-grasp system F(x) = 0 of the atlas paper (Section II) on a sahgrasp hand.
 
 Frame: the palm (the paper's absolute frame is attached to the palm, so the wrist does not enter x).
 Variables ``x = [x_h, x_c, x_o]``:
@@ -23,11 +23,18 @@ rank, first derivatives only; the sign is kept by continuity from the first gras
 
 Dimension reduction (Section III): the PCA of sampled hand configurations gives ``E``; the ``s``
 directions of least variance, through the first grasp ``x_1``, add ``E_s^T (x_h - x_1h) = 0``
-(Eq. (13)), with ``s = t - k`` (Eq. (12)).
+(Eq. (13)), with ``s = t - k`` (Eq. (12)). :class:`SahGraspManifold` is that reduced set R as a
+:class:`~sahgrasp.optimization.GraspManifold`, with the collision checks of its chart centres: at
+each, the fingers without a contact region are first placed where they touch nothing
+(``HandObjectClearance.place_free_fingers``: the nearest configuration of their own joints clear of
+the object and of the other links; they are no part of F, so this changes neither the grasp nor its
+index), then the hand is checked for self-collision and, given the object, for hand-object
+collision (any link inside the object, the contact fingertip spheres excepted up to ``d_min``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,12 +42,25 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import AtlasError
+from sahgrasp.errors import GraspSystemError, OptimizationError
 from sahgrasp.hand import Hand
-from sahgrasp.motions import PrincipalMotions
+from sahgrasp.ik import solve_ik
+from sahgrasp.motions import PrincipalMotions, principal_motions
+from sahgrasp.objects import GraspObject
+from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
+from sahgrasp.optimization import ChartChecks
+from sahgrasp.quality import Manipulability, ellipsoid_indices, null_space
 
-__all__ = ["GraspSystem", "reduced_system"]
+__all__ = [
+    "GraspSystem",
+    "SahGraspManifold",
+    "first_grasp_system",
+    "free_fingers",
+    "hand_motions",
+    "make_sah_manifold",
+    "reduced_system",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -150,7 +170,9 @@ class GraspSystem:
             return np.eye(3)
         axis = np.asarray(symmetry_axis, dtype=np.float64)
         if axis.shape != (3,) or not np.linalg.norm(axis) > 0:
-            raise AtlasError(f"symmetry_axis must be a non-zero 3-vector, got {symmetry_axis!r}")
+            raise GraspSystemError(
+                f"symmetry_axis must be a non-zero 3-vector, got {symmetry_axis!r}"
+            )
         axis = self.T_palm_object0.rotation @ axis
         return np.linalg.svd(axis[None, :])[2][1:].T  # the plane normal to the axis
 
@@ -319,7 +341,7 @@ def reduced_system(
     ``x1`` is the first feasible grasp the principal motions pass through (default: the IK's).
     """
     if not 1 <= k <= system.t:
-        raise AtlasError(f"k must be between 1 and t = {system.t}, got {k}")
+        raise GraspSystemError(f"k must be between 1 and t = {system.t}, got {k}")
     Es = motions.constraints(system.t - k)
     rows = system.hand_rows
     x1h = (system.x_first if x1 is None else x1)[rows]
@@ -333,3 +355,196 @@ def reduced_system(
         return np.concatenate([system.J(x), linear])
 
     return R, JR
+
+
+# ----- the SAH grasp system as a grasp manifold -------------------------------------------------
+class SahGraspManifold:
+    """R of Eq. (11) for a sahgrasp hand: the grasp system F plus its principal-motion constraints.
+
+    Args:
+        system: The feasible-grasp system F.
+        motions: The principal hand motions (Section III), over ``x_h``.
+        dimension: ``k``, 1 <= k <= t.
+        start: The first grasp ``x_1`` (on F, inside the bounds) Eq. (13) passes through.
+        obj: The object in the frame of the contact regions: chart centres where a link is inside
+            it are no candidates and the free fingers are placed clear of it. None: only
+            self-collision is checked.
+
+    Raises:
+        GraspSystemError: ``dimension`` is not in ``[1, t]``.
+    """
+
+    def __init__(
+        self,
+        system: GraspSystem,
+        motions: PrincipalMotions,
+        dimension: int,
+        start: FloatArray,
+        obj: GraspObject | None = None,
+    ) -> None:
+        self.system = system
+        self.motions = motions
+        self.obj = obj
+        self._dimension = dimension
+        self._start = start
+        self.F, self.J = reduced_system(system, motions, dimension, start)
+
+    @property
+    def dimension(self) -> int:
+        """``k``, the dimension of R."""
+        return self._dimension
+
+    @property
+    def t(self) -> int:
+        """Dimension of F."""
+        return self.system.t
+
+    @property
+    def start(self) -> FloatArray:
+        """The first grasp ``x_1``."""
+        return self._start
+
+    @property
+    def retained_variance(self) -> float:
+        """Share of the hand-motion variance the ``t - s`` kept motions explain."""
+        return self.motions.retained_variance(self.system.t - self.dimension)
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Joint limits and contact-region parameter ranges; the object pose is free."""
+        return self.system.lower, self.system.upper
+
+    def manipulability(self, x: FloatArray) -> Manipulability:
+        """Ellipsoids of object twists reachable with unit actuated joint velocity (hard fingers).
+
+        ``x`` is one grasp (n,) or a batch (..., n).
+        """
+        X = np.asarray(x, dtype=np.float64)
+        points = X.reshape(-1, self.system.n)
+        C = np.array([self.system.hard_finger_constraints(p) for p in points])
+        C = C.reshape(*X.shape[:-1], *C.shape[1:])
+        a = len(self.system.actuated_rows)
+        motions = null_space(C, C.shape[-1] - C.shape[-2])
+        return ellipsoid_indices(motions[..., :a, :], motions[..., a:, :])
+
+    def check_charts(self, centres: FloatArray) -> ChartChecks:
+        """Place the free fingers at every chart centre, then check self- and object collision."""
+        system, hand = self.system, self.system.hand
+        configurations = np.array([system.configuration(x) for x in centres])
+        object_collision = np.zeros(len(centres), dtype=bool)
+        if self.obj is not None:
+            checker = HandObjectClearance(hand, self.obj)
+            free = free_fingers(hand, system.patches)
+            contacts = [c.finger for c in system.contacts]
+            for i, x in enumerate(centres):
+                T = system.object_pose(x).homogeneous  # palm at the origin: palm frame = world
+                if free:
+                    configurations[i] = checker.place_free_fingers(configurations[i], free,
+                                                                   T_world_object=T).q  # fmt: skip
+                # Any penetration, not the clearance: only pieces whose bounding balls overlap a
+                # link are measured.
+                inside = checker.penetrations(configurations[i], 0.0, contacts, T_world_object=T)
+                object_collision[i] = bool(inside)
+        self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
+        return ChartChecks(configurations, self_collision, object_collision)
+
+
+def hand_motions(hand: Hand, system: GraspSystem, samples: int, seed: int) -> PrincipalMotions:
+    """PCA of collision-free random hand configurations, restricted to ``x_h`` (Section III)."""
+    rng = np.random.default_rng(seed)
+    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
+    return principal_motions(X[:, system.coordinates])
+
+
+def free_fingers(hand: Hand, patches: GraspPatches) -> tuple[str, ...]:
+    """The fingers without a contact region: no part of F, placed clear of everything."""
+    return tuple(f for f in hand.fingers if f not in patches.regions)
+
+
+def first_grasp_system(
+    hand: Hand,
+    patches: GraspPatches,
+    free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
+    obj: GraspObject | None = None,
+) -> GraspSystem:
+    """F for ``hand`` and ``patches`` around the IK's grasp at the regions' nominal parameters.
+
+    Fingers without a contact region are left free (they do not enter ``x``); given the object
+    (in the regions' frame), they are placed clear of it and of the other links
+    (``HandObjectClearance.place_free_fingers``). ``free_object`` and ``symmetry_axis`` are those
+    of :class:`~sahgrasp.grasp.GraspSystem`.
+
+    Raises:
+        OptimizationError: The IK finds no such grasp.
+    """
+    free = free_fingers(hand, patches)
+    first = solve_ik(hand, patches.target(), free_fingers=free)
+    if not first.success:
+        raise OptimizationError(f"{patches.name}: the IK found no first grasp ({first.reason})")
+    q = first.q
+    if obj is not None and free:  # the IK's world is the object frame
+        q = HandObjectClearance(hand, obj.placed(np.eye(4))).place_free_fingers(q, free).q
+    return GraspSystem(hand, patches, q, free_object, symmetry_axis)
+
+
+def make_sah_manifold(
+    hand: Hand,
+    patches: GraspPatches,
+    k: int = 2,
+    free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
+    obj: GraspObject | None = None,
+    motion_samples: int = 2000,
+    seed: int = 0,
+) -> SahGraspManifold:
+    """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
+
+    Args:
+        hand: The hand.
+        patches: Contact regions per finger in the object frame (fingers without one are free).
+        k: Dimension of the relevant-grasp set R.
+        free_object: Let the object pose vary (else it is fixed in the palm).
+        symmetry_axis: Axis (object frame) about which every contact region is revolved: the
+            object's spin about it, which changes nothing but the parametrisation, is left out.
+        obj: The object, in the frame of ``patches`` (see :class:`SahGraspManifold`).
+        motion_samples: Random hand configurations sampled for the principal motions.
+        seed: Seed of those samples.
+
+    Raises:
+        OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds.
+        GraspSystemError: ``k`` is not in ``[1, t]``.
+    """
+    system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
+    motions = hand_motions(hand, system, motion_samples, seed)
+    x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
+    return SahGraspManifold(system, motions, k, x1, obj)
+
+
+def _start_inside(
+    F: Callable[[FloatArray], FloatArray],
+    J: Callable[[FloatArray], FloatArray],
+    x: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    margin: float = 1e-4,
+) -> FloatArray:
+    """The first grasp moved ``margin`` inside the box and back onto ``F = 0``.
+
+    The IK leaves joints exactly at their limits, where the atlas's projection could step out of
+    the box; coordinates moved inside stay fixed while Newton corrects the others, until all are
+    inside.
+    """
+    inside = x.copy()
+    free = np.ones(x.size, dtype=bool)
+    for _ in range(10):
+        clipped = np.clip(inside, lower + margin, upper - margin)
+        free &= clipped == inside
+        inside = clipped
+        for _ in range(20):
+            residual = F(inside)
+            if np.linalg.norm(residual) < 1e-12:
+                break
+            inside[free] += np.linalg.lstsq(J(inside)[:, free], -residual, rcond=None)[0]
+        if np.all((inside >= lower + margin) & (inside <= upper - margin)):
+            return inside
+    raise OptimizationError("the first grasp cannot be moved inside the joint and region bounds")

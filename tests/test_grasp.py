@@ -8,13 +8,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.errors import AtlasError
-from sahgrasp.grasp import GraspSystem, reduced_system
+from sahgrasp.errors import GraspSystemError, PrincipalMotionsError
+from sahgrasp.grasp import GraspSystem, first_grasp_system, reduced_system
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings
 from sahgrasp.motions import principal_motions
 from sahgrasp.objects import bottle_patches, can_patches
-from sahgrasp.optimization import first_grasp_system
 
 EXPECTED_T = {"can": 11, "bottle": 12, "bottle-spinless": 11}  # 16 + params + pose - 15
 PATCHES = {"can": can_patches, "bottle": bottle_patches, "bottle-spinless": bottle_patches}
@@ -57,7 +56,7 @@ def test_spinning_the_bottle_moves_nothing(sah: Hand) -> None:
     for contact in system.contacts:
         dx[contact.params.start] = -1.0  # u: the angle about the axis
     assert np.allclose(system.J(system.x_first) @ dx, 0.0, atol=1e-12)
-    with pytest.raises(AtlasError, match="symmetry_axis"):
+    with pytest.raises(GraspSystemError, match="symmetry_axis"):
         GraspSystem(sah, system.patches, system.q_first, True, symmetry_axis=(0.0, 0.0))
 
 
@@ -150,10 +149,10 @@ def test_reduced_system(system: GraspSystem, sah: Hand) -> None:
         assert np.allclose(R(system.x_first)[system.m :], 0.0)
         assert np.linalg.matrix_rank(JR(system.x_first)) == system.m + s  # R has dimension k
     for k in (0, system.t + 1):
-        with pytest.raises(AtlasError, match="k must"):
+        with pytest.raises(GraspSystemError, match="k must"):
             reduced_system(system, motions, k)
     few = principal_motions(rng.normal(size=(50, 2)))  # h = 2 <= s = t - 1
-    with pytest.raises(AtlasError, match="s = t - k"):
+    with pytest.raises(PrincipalMotionsError, match="s = t - k"):
         reduced_system(system, few, 1)
 
 
@@ -172,7 +171,7 @@ def test_principal_motions_ordering_and_orthonormality() -> None:
     assert motions.constraints(0).shape == (0, 4)
     assert motions.retained_variance(0) == pytest.approx(1.0)
     assert motions.retained_variance(3) == pytest.approx(variances[0] / variances.sum())
-    with pytest.raises(AtlasError, match="s = t - k"):
+    with pytest.raises(PrincipalMotionsError, match="s = t - k"):
         motions.constraints(4)
 
 
