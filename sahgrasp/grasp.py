@@ -53,6 +53,7 @@ from sahgrasp.optimization import ChartChecks
 from sahgrasp.quality import Manipulability, ellipsoid_indices, null_space
 
 __all__ = [
+    "MOTION_SOURCES",
     "GraspSystem",
     "SahGraspManifold",
     "first_grasp_system",
@@ -448,11 +449,54 @@ class SahGraspManifold:
         return ChartChecks(configurations, self_collision, object_collision)
 
 
-def hand_motions(hand: Hand, system: GraspSystem, samples: int, seed: int) -> PrincipalMotions:
-    """PCA of collision-free random hand configurations, restricted to ``x_h`` (Section III)."""
+MOTION_SOURCES = ("random", "grasps")
+"""Where the principal motions come from: random hand poses, or solved grasps of the regions."""
+
+
+def hand_motions(
+    hand: Hand, system: GraspSystem, samples: int, seed: int, source: str = "random"
+) -> PrincipalMotions:
+    """PCA of hand configurations, restricted to ``x_h`` (Section III).
+
+    Args:
+        hand: The hand.
+        system: The grasp system (its touching fingers' coordinates are ``x_h``).
+        samples: Number of configurations sampled (``"grasps"``: IK problems posed).
+        seed: Seed of the samples.
+        source: ``"random"``: collision-free random hand configurations; ``"grasps"``: grasp
+            postures, the IK's solutions of the regions' grasps at uniformly random contact
+            parameters (the paper takes human grasp postures; these are the hand's own grasps of
+            this object).
+
+    Raises:
+        OptimizationError: ``source`` is unknown, or fewer than two grasps were solved.
+    """
     rng = np.random.default_rng(seed)
-    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
-    return principal_motions(X[:, system.coordinates])
+    if source == "random":
+        X = [hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)]
+    elif source == "grasps":
+        X = _grasp_postures(hand, system.patches, samples, rng)
+    else:
+        raise OptimizationError(f"unknown motion source {source!r}; valid: {MOTION_SOURCES}")
+    return principal_motions(np.array(X)[:, system.coordinates])
+
+
+def _grasp_postures(
+    hand: Hand, patches: GraspPatches, samples: int, rng: np.random.Generator
+) -> list[FloatArray]:
+    """Joint coordinates of the IK's solved grasps at random contact parameters."""
+    free = free_fingers(hand, patches)
+    postures = []
+    for _ in range(samples):
+        params = {f: rng.uniform(r.lower, r.upper) for f, r in patches.regions.items()}
+        result = solve_ik(hand, patches.target(params), free_fingers=free)
+        if result.success:
+            postures.append(result.q[7:])
+    if len(postures) < 2:
+        raise OptimizationError(
+            f"{patches.name}: the IK solved {len(postures)} of {samples} grasps; need two or more"
+        )
+    return postures
 
 
 def free_fingers(hand: Hand, patches: GraspPatches) -> tuple[str, ...]:
@@ -496,6 +540,7 @@ def make_sah_manifold(
     obj: GraspObject | None = None,
     motion_samples: int = 2000,
     seed: int = 0,
+    motion_source: str = "random",
 ) -> SahGraspManifold:
     """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
 
@@ -507,15 +552,18 @@ def make_sah_manifold(
         symmetry_axis: Axis (object frame) about which every contact region is revolved: the
             object's spin about it, which changes nothing but the parametrisation, is left out.
         obj: The object, in the frame of ``patches`` (see :class:`SahGraspManifold`).
-        motion_samples: Random hand configurations sampled for the principal motions.
+        motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
+        motion_source: Where they come from, one of :data:`MOTION_SOURCES` (see
+            :func:`hand_motions`).
 
     Raises:
-        OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds.
+        OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds,
+            or ``motion_source`` is unknown or gives too few grasps.
         GraspSystemError: ``k`` is not in ``[1, t]``.
     """
     system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
-    motions = hand_motions(hand, system, motion_samples, seed)
+    motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
     return SahGraspManifold(system, motions, k, x1, obj)
 

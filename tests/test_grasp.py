@@ -8,8 +8,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.errors import GraspSystemError, PrincipalMotionsError
-from sahgrasp.grasp import GraspSystem, first_grasp_system, reduced_system
+from sahgrasp.errors import GraspSystemError, OptimizationError, PrincipalMotionsError
+from sahgrasp.grasp import GraspSystem, first_grasp_system, hand_motions, reduced_system
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings
 from sahgrasp.motions import principal_motions
@@ -187,3 +187,16 @@ def test_the_free_finger_is_no_part_of_f(sah: Hand) -> None:
     x = perturbed(system, seed=3)
     assert np.array_equal(other.x_first, system.x_first)
     assert np.array_equal(other.F(x), system.F(x)) and np.array_equal(other.J(x), system.J(x))
+
+
+def test_principal_motions_from_grasp_postures(sah: Hand) -> None:
+    """Solved grasps of the bottle's regions vary along fewer motions than random hand poses."""
+    system = first_grasp_system(sah, bottle_patches(), symmetry_axis=AXIS)
+    grasps = hand_motions(sah, system, 30, seed=1, source="grasps")
+    random = hand_motions(sah, system, 300, seed=1, source="random")
+    h = len(system.coordinates)
+    assert grasps.directions.shape == (h, h)
+    s = system.t - 2  # k = 2: the motions kept are h - s
+    assert grasps.retained_variance(s) > random.retained_variance(s) + 0.1
+    with pytest.raises(OptimizationError, match="unknown motion source 'human'"):
+        hand_motions(sah, system, 10, seed=1, source="human")

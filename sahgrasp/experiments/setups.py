@@ -60,8 +60,13 @@ SAH_EXPERIMENTS = {
 EXPERIMENTS = ("planar", *SAH_EXPERIMENTS)
 """Every experiment's name."""
 
+_MOTION_SAMPLES = {"random": 2000, "grasps": 200}
+"""Configurations sampled for the principal motions per source (an IK solve each for grasps)."""
 
-def make_experiment(name: str, k: int = 2, hand: str = "sah") -> GraspManifold:
+
+def make_experiment(
+    name: str, k: int = 2, hand: str = "sah", motions: str = "random"
+) -> GraspManifold:
     """The grasp manifold of experiment ``name`` with ``k`` kept dimensions.
 
     The SAH experiments check their chart centres against the object.
@@ -70,6 +75,8 @@ def make_experiment(name: str, k: int = 2, hand: str = "sah") -> GraspManifold:
         name: One of :data:`EXPERIMENTS`.
         k: Dimension of the relevant-grasp set R.
         hand: The hand of the SAH experiments (a name or a hand-description JSON).
+        motions: Source of the SAH's principal motions, one of
+            :data:`~sahgrasp.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
 
     Raises:
         OptimizationError: ``name`` is unknown, or the IK finds no first grasp.
@@ -80,9 +87,11 @@ def make_experiment(name: str, k: int = 2, hand: str = "sah") -> GraspManifold:
     if name not in SAH_EXPERIMENTS:
         raise OptimizationError(f"unknown experiment {name!r}; valid: {', '.join(EXPERIMENTS)}")
     setup = SAH_EXPERIMENTS[name]
+    samples = _MOTION_SAMPLES.get(motions, 0)
     return make_sah_manifold(
-        load_hand(hand), setup.patches(), k, setup.free_object, setup.symmetry_axis, setup.object()
-    )
+        load_hand(hand), setup.patches(), k, setup.free_object, setup.symmetry_axis,
+        setup.object(), samples, motion_source=motions,
+    )  # fmt: skip
 
 
 def experiment_settings(
@@ -119,10 +128,11 @@ def run_experiment(
     max_charts: int = 20_000,
     progress: ProgressCallback | None = None,
     hand: str = "sah",
+    motions: str = "random",
 ) -> OptimizationResult:
     """Algorithm 1 on experiment ``name``.
 
     The arguments are those of :func:`make_experiment` and :func:`experiment_settings`.
     """
     settings = experiment_settings(name, radius, epsilon, index, max_charts, progress)
-    return optimize(make_experiment(name, k, hand), settings)
+    return optimize(make_experiment(name, k, hand, motions), settings)
