@@ -42,11 +42,13 @@ from sahgrasp.quality import (
 
 __all__ = [
     "ChartChecks",
+    "ComponentSearch",
     "GraspManifold",
     "IndexFunction",
     "OptimizationResult",
     "OptimizationSettings",
     "optimize",
+    "optimize_components",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -279,3 +281,79 @@ def _evaluate(
         problem, atlas, settings, evaluation.values, valid, evaluation.best, evaluation.worst,
         evaluation.best_overall, checks, quality, time.perf_counter() - begin,
     )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ComponentSearch:
+    """Algorithm 1 run once per connected component of R met by a set of seed grasps.
+
+    Attributes:
+        components: One optimization per component, in the order their first seed came.
+        seed_components: Per seed, the component it fell in; None when it could not be brought
+            onto R inside the bounds.
+    """
+
+    components: tuple[OptimizationResult, ...]
+    seed_components: tuple[int | None, ...]
+
+    @property
+    def best(self) -> tuple[int, int]:
+        """Component and chart of the best valid grasp over every component."""
+        values = [result.all_values[result.best] for result in self.components]
+        component = int(np.argmax(values))
+        return component, self.components[component].best
+
+
+def optimize_components(
+    problem: GraspManifold, settings: OptimizationSettings, seeds: ArrayLike
+) -> ComponentSearch:
+    """Seed Algorithm 1 from several grasps; one atlas per connected component of R they reach.
+
+    Each seed is moved onto R (Newton's method, minimum-norm steps); a seed within one chart
+    radius of a chart centre of an atlas already built lies in that atlas's component (components
+    closer than ``r`` to each other count as one), any other starts a new atlas.
+
+    Args:
+        problem: The grasp manifold.
+        settings: As for :func:`optimize`.
+        seeds: Grasps near R, (S, n), e.g. IK solutions of the same contacts from other starts.
+
+    Raises:
+        OptimizationError: ``seeds`` is not (S, n), or no seed reaches R inside the bounds.
+    """
+    X = np.asarray(seeds, dtype=np.float64)
+    n = problem.start.size
+    if X.ndim != 2 or X.shape[1] != n or not len(X):
+        raise OptimizationError(f"seeds must be an (S, {n}) array with S >= 1, got {X.shape}")
+    components: list[OptimizationResult] = []
+    owners: list[int | None] = []
+    for seed in X:
+        x = _onto(problem, seed)
+        owner = None if x is None else _component_of(components, x)
+        if x is not None and owner is None:
+            components.append(optimize(problem, settings, start=x))
+            owner = len(components) - 1
+        owners.append(owner)
+    if not components:
+        raise OptimizationError(f"none of the {len(X)} seeds could be brought onto R in bounds")
+    return ComponentSearch(tuple(components), tuple(owners))
+
+
+def _onto(problem: GraspManifold, x: FloatArray, tol: float = 1e-10) -> FloatArray | None:
+    """``x`` moved onto ``F = 0`` by minimum-norm Newton steps; None on failure or out of bounds."""
+    lower, upper = problem.bounds()
+    for _ in range(30):
+        residual = problem.F(x)
+        if np.linalg.norm(residual) <= tol:
+            return x if np.all((x >= lower) & (x <= upper)) else None
+        x = x - np.linalg.lstsq(problem.J(x), residual, rcond=None)[0]
+    return None
+
+
+def _component_of(components: list[OptimizationResult], x: FloatArray) -> int | None:
+    """The first component whose atlas has a chart centre within one radius of ``x``."""
+    for i, result in enumerate(components):
+        atlas = result.atlas
+        if np.min(np.linalg.norm(atlas.centres - x, axis=1)) <= atlas.radius:
+            return i
+    return None

@@ -15,7 +15,14 @@ from sahgrasp.grasp import SahGraspManifold, make_sah_manifold
 from sahgrasp.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.optimization import (
+    ChartChecks,
+    OptimizationResult,
+    OptimizationSettings,
+    optimize,
+    optimize_components,
+)
+from sahgrasp.quality import Manipulability
 from sahgrasp.viz import Viewer
 from sahgrasp.viz.atlas_view import COLLIDING_RGB
 
@@ -143,3 +150,42 @@ def test_viewer_marks_the_colliding_charts(can: OptimizationResult) -> None:
     report = "\n".join(collision_notes(can))
     assert f"{int((~can.valid).sum())} of {can.atlas.n_charts}" in report
     assert f"{int(can.checks.object_collision.sum())} hand-object" in report
+
+
+class TwoLines:
+    """R = the lines x0 = -1 and x0 = 1 of the plane, x1 in [-1, 1]: two components."""
+
+    dimension, t = 1, 1
+    start = np.array([1.0, 0.0])
+
+    def F(self, x: np.ndarray) -> np.ndarray:
+        return np.array([x[0] ** 2 - 1.0])
+
+    def J(self, x: np.ndarray) -> np.ndarray:
+        return np.array([[2.0 * x[0], 0.0]])
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.array([-2.0, -1.0]), np.array([2.0, 1.0])
+
+    def manipulability(self, x: np.ndarray) -> Manipulability:
+        raise AssertionError("a user index needs no ellipsoid")
+
+    def check_charts(self, centres: np.ndarray) -> ChartChecks:
+        return ChartChecks.none(centres)
+
+
+def test_one_atlas_per_component_met_by_the_seeds() -> None:
+    settings = OptimizationSettings(radius=0.1, epsilon=0.5, index_fn=lambda X: X[:, 0] + X[:, 1])
+    seeds = [[1.1, 0.0], [-0.9, 0.5], [0.95, 0.8], [1.0, 5.0], [-1.0, -0.9]]
+    search = optimize_components(TwoLines(), settings, seeds)
+    assert search.seed_components == (0, 1, 0, None, 1)  # [1, 5] is out of bounds
+    right, left = search.components
+    assert np.allclose(right.atlas.centres[:, 0], 1.0) and np.allclose(
+        left.atlas.centres[:, 0], -1.0
+    )
+    assert search.best == (0, right.best)
+    assert right.atlas.centres[right.best, 1] == pytest.approx(1.0, abs=1e-9)
+    with pytest.raises(OptimizationError, match="none of the 1 seeds"):
+        optimize_components(TwoLines(), settings, [[0.0, 5.0]])
+    with pytest.raises(OptimizationError, match="seeds must be"):
+        optimize_components(TwoLines(), settings, [1.0, 0.0])
