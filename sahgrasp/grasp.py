@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.errors import GraspSystemError, OptimizationError
 from sahgrasp.hand import Hand
-from sahgrasp.ik import solve_ik
+from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.motions import PrincipalMotions, principal_motions
 from sahgrasp.objects import GraspObject
 from sahgrasp.objects.clearance import HandObjectClearance
@@ -59,6 +59,7 @@ __all__ = [
     "first_grasp_system",
     "free_fingers",
     "hand_motions",
+    "ik_seeds",
     "make_sah_manifold",
     "reduced_system",
 ]
@@ -205,6 +206,24 @@ class GraspSystem:
         x[self.hand_rows] = self.q_first[7:][self.coordinates]
         for c in self.contacts:
             x[c.params] = c.region.nominal
+        return x
+
+    def point(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The ``x`` of a grasp ``q`` of the regions at their nominal parameters.
+
+        ``q`` has the object frame as world, as the IK solves it. The object's rotation from its
+        first orientation is expressed in the rotation basis (with a symmetry axis, its spin about
+        the axis is dropped: Newton's method onto F lets the contacts absorb it).
+        """
+        x = self.x_first.copy()
+        x[self.hand_rows] = np.asarray(q, dtype=np.float64)[7:][self.coordinates]
+        if self.free_object:
+            T = self.hand.wrist_pose(q).inverse()  # the object in the palm frame
+            T0 = self.T_palm_object0
+            start = self.pose_slice.start
+            x[start : start + 3] = T.translation - T0.translation
+            turn = pin.log3(T.rotation @ T0.rotation.T)
+            x[start + 3 : self.n] = np.linalg.lstsq(self._rotation_basis, turn, rcond=None)[0]
         return x
 
     def configuration(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -566,6 +585,24 @@ def make_sah_manifold(
     motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
     return SahGraspManifold(system, motions, k, x1, obj)
+
+
+def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
+    """Seed grasps for :func:`~sahgrasp.optimization.optimize_components`, (S, n).
+
+    ``x_1`` first, then the IK's solutions of the same contacts (the regions' nominal parameters)
+    from ``count`` random starts (seeds 0..count-1); problems the IK did not solve are left out.
+    """
+    system = problem.system
+    hand, patches = system.hand, system.patches
+    free = free_fingers(hand, patches)
+    seeds = [problem.start]
+    for seed in range(count):
+        settings = IKSettings(init="random", seed=seed)
+        result = solve_ik(hand, patches.target(), settings, free_fingers=free)
+        if result.success:
+            seeds.append(system.point(result.q))
+    return np.array(seeds)
 
 
 def _start_inside(

@@ -11,7 +11,7 @@ from sahgrasp.errors import GraspSystemError, OptimizationError, QualityError
 from sahgrasp.experiments.atlas_examples import show_optimization
 from sahgrasp.experiments.report import collision_notes, summary
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.grasp import SahGraspManifold, make_sah_manifold
+from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
 from sahgrasp.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
@@ -189,3 +189,17 @@ def test_one_atlas_per_component_met_by_the_seeds() -> None:
         optimize_components(TwoLines(), settings, [[0.0, 5.0]])
     with pytest.raises(OptimizationError, match="seeds must be"):
         optimize_components(TwoLines(), settings, [1.0, 0.0])
+
+
+def test_ik_seeds_of_the_can_fall_in_the_first_grasps_component(
+    can_problem: SahGraspManifold, can: OptimizationResult
+) -> None:
+    system = can_problem.system
+    assert np.allclose(system.point(system.q_first), system.x_first)
+    seeds = ik_seeds(can_problem, 3)
+    assert np.array_equal(seeds[0], can_problem.start) and seeds.shape[1] == system.n
+    search = optimize_components(can_problem, SAH, seeds)
+    assert search.seed_components[0] == 0
+    first = search.components[0]
+    assert first.atlas.n_charts == can.atlas.n_charts and first.best == can.best
+    assert all(c in (0, None) for c in search.seed_components)  # those reaching R: x_1's

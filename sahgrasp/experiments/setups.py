@@ -14,10 +14,17 @@ from dataclasses import dataclass
 
 from sahgrasp.errors import OptimizationError
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
-from sahgrasp.grasp import make_sah_manifold
+from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
 from sahgrasp.hand import load_hand
 from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
-from sahgrasp.optimization import GraspManifold, OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.optimization import (
+    ComponentSearch,
+    GraspManifold,
+    OptimizationResult,
+    OptimizationSettings,
+    optimize,
+    optimize_components,
+)
 from sahgrasp.planar import make_planar_problem
 from sahgrasp.progress import ProgressCallback
 
@@ -27,6 +34,7 @@ __all__ = [
     "SahExperiment",
     "experiment_settings",
     "make_experiment",
+    "run_components",
     "run_experiment",
 ]
 
@@ -136,3 +144,30 @@ def run_experiment(
     """
     settings = experiment_settings(name, radius, epsilon, index, max_charts, progress)
     return optimize(make_experiment(name, k, hand, motions), settings)
+
+
+def run_components(
+    name: str,
+    seeds: int = 8,
+    k: int = 2,
+    radius: float | None = None,
+    epsilon: float | None = None,
+    index: str = "volume",
+    max_charts: int = 20_000,
+    motions: str = "random",
+) -> ComponentSearch:
+    """Algorithm 1 on every connected component of an SAH experiment's R met by IK seeds.
+
+    The seeds are the first grasp and the IK's solutions of the same contacts from ``seeds``
+    random starts (:func:`sahgrasp.grasp.ik_seeds`); other arguments as :func:`run_experiment`.
+
+    Raises:
+        OptimizationError: ``name`` is not an SAH experiment, or no seed reaches R.
+    """
+    problem = make_experiment(name, k, motions=motions)
+    if not isinstance(problem, SahGraspManifold):
+        raise OptimizationError(
+            f"components are searched for {sorted(SAH_EXPERIMENTS)}, not {name!r}"
+        )
+    settings = experiment_settings(name, radius, epsilon, index, max_charts)
+    return optimize_components(problem, settings, ik_seeds(problem, seeds))
