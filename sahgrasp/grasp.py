@@ -56,6 +56,7 @@ __all__ = [
     "MOTION_SOURCES",
     "GraspSystem",
     "SahGraspManifold",
+    "coordinate_scales",
     "first_grasp_system",
     "free_fingers",
     "hand_motions",
@@ -381,17 +382,25 @@ def reduced_system(
 class SahGraspManifold:
     """R of Eq. (11) for a sahgrasp hand: the grasp system F plus its principal-motion constraints.
 
+    The atlas works in scaled coordinates ``y`` with ``x = scales * y`` (:meth:`x_of`): with
+    :func:`coordinate_scales`, a unit of ``y`` in any direction moves the hand, the object or a
+    contact by about the same distance, so that a chart radius means the same in every direction.
+    ``F``, ``J``, :meth:`bounds`, :attr:`start`, :meth:`manipulability` and :meth:`check_charts`
+    all take ``y``.
+
     Args:
         system: The feasible-grasp system F.
         motions: The principal hand motions (Section III), over ``x_h``.
         dimension: ``k``, 1 <= k <= t.
-        start: The first grasp ``x_1`` (on F, inside the bounds) Eq. (13) passes through.
+        start: The first grasp ``x_1`` (on F, inside the bounds) Eq. (13) passes through, in ``x``.
         obj: The object in the frame of the contact regions: chart centres where a link is inside
             it are no candidates and the free fingers are placed clear of it. None: only
             self-collision is checked.
+        scales: ``x = scales * y``, (n,) positive; all ones (``y = x``) if None.
 
     Raises:
-        GraspSystemError: ``dimension`` is not in ``[1, t]``.
+        GraspSystemError: ``dimension`` is not in ``[1, t]``, or ``scales`` is not n positive
+            finite numbers.
     """
 
     def __init__(
@@ -401,13 +410,31 @@ class SahGraspManifold:
         dimension: int,
         start: FloatArray,
         obj: GraspObject | None = None,
+        scales: ArrayLike | None = None,
     ) -> None:
         self.system = system
         self.motions = motions
         self.obj = obj
         self._dimension = dimension
-        self._start = start
-        self.F, self.J = reduced_system(system, motions, dimension, start)
+        self.scales = np.ones(system.n) if scales is None else np.asarray(scales, np.float64)
+        if self.scales.shape != (system.n,) or not np.all(
+            np.isfinite(self.scales) & (self.scales > 0)
+        ):
+            raise GraspSystemError(f"scales must be {system.n} positive finite numbers")
+        self._start = start / self.scales
+        self._R, self._JR = reduced_system(system, motions, dimension, start)
+
+    def x_of(self, y: ArrayLike) -> FloatArray:
+        """The grasp-system coordinates ``x = scales * y`` of atlas points ``y`` (..., n)."""
+        return np.asarray(y, dtype=np.float64) * self.scales
+
+    def F(self, y: FloatArray) -> FloatArray:
+        """``R(x)`` of Eq. (11) at ``x = scales * y``."""
+        return self._R(self.x_of(y))
+
+    def J(self, y: FloatArray) -> FloatArray:
+        """Jacobian of :meth:`F` by ``y``."""
+        return self._JR(self.x_of(y)) * self.scales
 
     @property
     def dimension(self) -> int:
@@ -421,7 +448,7 @@ class SahGraspManifold:
 
     @property
     def start(self) -> FloatArray:
-        """The first grasp ``x_1``."""
+        """The first grasp ``x_1``, in ``y``."""
         return self._start
 
     @property
@@ -430,15 +457,15 @@ class SahGraspManifold:
         return self.motions.retained_variance(self.system.t - self.dimension)
 
     def bounds(self) -> tuple[FloatArray, FloatArray]:
-        """Joint limits and contact-region parameter ranges; the object pose is free."""
-        return self.system.lower, self.system.upper
+        """Joint limits and contact-region parameter ranges (in ``y``); the object pose is free."""
+        return self.system.lower / self.scales, self.system.upper / self.scales
 
-    def manipulability(self, x: FloatArray) -> Manipulability:
+    def manipulability(self, y: FloatArray) -> Manipulability:
         """Ellipsoids of object twists reachable with unit actuated joint velocity (hard fingers).
 
-        ``x`` is one grasp (n,) or a batch (..., n).
+        ``y`` is one grasp (n,) or a batch (..., n).
         """
-        X = np.asarray(x, dtype=np.float64)
+        X = self.x_of(y)
         points = X.reshape(-1, self.system.n)
         C = np.array([self.system.hard_finger_constraints(p) for p in points])
         C = C.reshape(*X.shape[:-1], *C.shape[1:])
@@ -449,6 +476,7 @@ class SahGraspManifold:
     def check_charts(self, centres: FloatArray) -> ChartChecks:
         """Place the free fingers at every chart centre, then check self- and object collision."""
         system, hand = self.system, self.system.hand
+        centres = self.x_of(centres)
         configurations = np.array([system.configuration(x) for x in centres])
         object_collision = np.zeros(len(centres), dtype=bool)
         if self.obj is not None:
@@ -466,6 +494,31 @@ class SahGraspManifold:
                 object_collision[i] = bool(inside)
         self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
         return ChartChecks(configurations, self_collision, object_collision)
+
+
+def coordinate_scales(system: GraspSystem, length_m: float) -> FloatArray:
+    """``x = scales * y`` so that a unit of ``y`` moves something by about ``length_m`` [m].
+
+    Joint angles and the object's rotation vector [rad] keep scale 1: a unit turns a link of
+    ``length_m`` (about a finger's length) through ``length_m``. The object's translation [m]
+    gets ``length_m``. A contact parameter gets ``length_m / |dO/dp|``, ``|dO/dp|`` being how far
+    the contact point moves per unit of it at the regions' nominal parameters.
+
+    Raises:
+        GraspSystemError: ``length_m`` is not a positive finite length.
+    """
+    if not (np.isfinite(length_m) and length_m > 0):
+        raise GraspSystemError(f"length_m must be a positive finite length [m], got {length_m}")
+    scales = np.ones(system.n)
+    for contact in system.contacts:
+        rates = np.linalg.norm(
+            contact.region.evaluate(contact.region.nominal).point_jacobian, axis=0
+        )
+        scales[contact.params] = length_m / np.where(rates > 0, rates, length_m)
+    if system.free_object:
+        start = system.pose_slice.start
+        scales[start : start + 3] = length_m
+    return scales
 
 
 MOTION_SOURCES = ("random", "grasps")
@@ -560,6 +613,7 @@ def make_sah_manifold(
     motion_samples: int = 2000,
     seed: int = 0,
     motion_source: str = "random",
+    length_scale_m: float | None = None,
 ) -> SahGraspManifold:
     """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
 
@@ -575,6 +629,8 @@ def make_sah_manifold(
         seed: Seed of those samples.
         motion_source: Where they come from, one of :data:`MOTION_SOURCES` (see
             :func:`hand_motions`).
+        length_scale_m: Scale the coordinates with :func:`coordinate_scales` at this length [m];
+            None: the atlas works in ``x`` itself (radians and metres mixed).
 
     Raises:
         OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds,
@@ -584,14 +640,16 @@ def make_sah_manifold(
     system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
     motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
-    return SahGraspManifold(system, motions, k, x1, obj)
+    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m)
+    return SahGraspManifold(system, motions, k, x1, obj, scales)
 
 
 def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
     """Seed grasps for :func:`~sahgrasp.optimization.optimize_components`, (S, n).
 
-    ``x_1`` first, then the IK's solutions of the same contacts (the regions' nominal parameters)
-    from ``count`` random starts (seeds 0..count-1); problems the IK did not solve are left out.
+    In the atlas's coordinates ``y``: ``x_1`` first, then the IK's solutions of the same contacts
+    (the regions' nominal parameters) from ``count`` random starts (seeds 0..count-1); problems
+    the IK did not solve are left out.
     """
     system = problem.system
     hand, patches = system.hand, system.patches
@@ -601,7 +659,7 @@ def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
         settings = IKSettings(init="random", seed=seed)
         result = solve_ik(hand, patches.target(), settings, free_fingers=free)
         if result.success:
-            seeds.append(system.point(result.q))
+            seeds.append(system.point(result.q) / problem.scales)
     return np.array(seeds)
 
 

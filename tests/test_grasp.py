@@ -9,7 +9,13 @@ import pinocchio as pin
 import pytest
 
 from sahgrasp.errors import GraspSystemError, OptimizationError, PrincipalMotionsError
-from sahgrasp.grasp import GraspSystem, first_grasp_system, hand_motions, reduced_system
+from sahgrasp.grasp import (
+    GraspSystem,
+    coordinate_scales,
+    first_grasp_system,
+    hand_motions,
+    reduced_system,
+)
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings
 from sahgrasp.motions import principal_motions
@@ -200,3 +206,17 @@ def test_principal_motions_from_grasp_postures(sah: Hand) -> None:
     assert grasps.retained_variance(s) > random.retained_variance(s) + 0.1
     with pytest.raises(OptimizationError, match="unknown motion source 'human'"):
         hand_motions(sah, system, 10, seed=1, source="human")
+
+
+def test_coordinate_scales_make_every_direction_move_alike(sah: Hand) -> None:
+    system = first_grasp_system(sah, can_patches())
+    scales = coordinate_scales(system, 0.1)
+    assert np.all(scales[system.hand_rows] == 1.0)  # joint angles [rad]
+    pose = system.pose_slice.start
+    assert np.all(scales[pose : pose + 3] == 0.1) and np.all(scales[pose + 3 :] == 1.0)
+    for contact in system.contacts:  # a unit of y moves the contact by 0.1 m
+        jet = contact.region.evaluate(contact.region.nominal)
+        moved = np.linalg.norm(jet.point_jacobian * scales[contact.params], axis=0)
+        assert np.allclose(moved[moved > 0], 0.1)
+    with pytest.raises(GraspSystemError, match="length_m"):
+        coordinate_scales(system, 0.0)

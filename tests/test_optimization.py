@@ -11,7 +11,7 @@ from sahgrasp.errors import GraspSystemError, OptimizationError, QualityError
 from sahgrasp.experiments.atlas_examples import show_optimization
 from sahgrasp.experiments.report import collision_notes, summary
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
+from sahgrasp.grasp import SahGraspManifold, coordinate_scales, ik_seeds, make_sah_manifold
 from sahgrasp.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
@@ -203,3 +203,20 @@ def test_ik_seeds_of_the_can_fall_in_the_first_grasps_component(
     first = search.components[0]
     assert first.atlas.n_charts == can.atlas.n_charts and first.best == can.best
     assert all(c in (0, None) for c in search.seed_components)  # those reaching R: x_1's
+
+
+def test_scaled_coordinates_cover_the_same_grasps(
+    can_problem: SahGraspManifold, can: OptimizationResult
+) -> None:
+    system = can_problem.system
+    scales = coordinate_scales(system, 0.1)
+    scaled = SahGraspManifold(system, can_problem.motions, 2, can_problem.x_of(can_problem.start),
+                              can_problem.obj, scales)  # fmt: skip
+    assert np.allclose(scaled.x_of(scaled.start), can_problem.start)
+    result = optimize(scaled, SAH)
+    x = scaled.x_of(result.atlas.centres)
+    assert np.abs([can_problem.F(p) for p in x]).max() <= 1e-8  # on R, in x
+    assert np.all((x >= system.lower - 1e-12) & (x <= system.upper + 1e-12))
+    assert result.all_values[result.best] == pytest.approx(can.all_values[can.best], rel=0.1)
+    with pytest.raises(GraspSystemError, match="scales must be"):
+        SahGraspManifold(system, can_problem.motions, 2, can_problem.start, scales=-scales)

@@ -72,7 +72,8 @@ def _show_sah(viewer: Viewer, result: OptimizationResult, problem: SahGraspManif
     system = problem.system
 
     def grasp(chart: int) -> ChartGrasp:
-        T = system.object_pose(result.atlas.centres[chart])  # palm at the origin: palm = world
+        x = problem.x_of(result.atlas.centres[chart])
+        T = system.object_pose(x)  # palm at the origin: palm = world
         obj = problem.obj.placed(T) if problem.obj else load_object(system.patches.name, T)
         return ChartGrasp(chart, result.configurations[chart], obj)
 

@@ -42,6 +42,7 @@ def describe_grasp(result: OptimizationResult, chart: int) -> dict[str, Any]:
         }
     elif isinstance(problem, SahGraspManifold):
         out["joints"] = problem.system.hand.joint_values(result.configurations[chart])
+        out["x"] = problem.x_of(x).tolist()
     return out
 
 

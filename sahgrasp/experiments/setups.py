@@ -73,7 +73,11 @@ _MOTION_SAMPLES = {"random": 2000, "grasps": 200}
 
 
 def make_experiment(
-    name: str, k: int = 2, hand: str = "sah", motions: str = "random"
+    name: str,
+    k: int = 2,
+    hand: str = "sah",
+    motions: str = "random",
+    length_scale_m: float | None = None,
 ) -> GraspManifold:
     """The grasp manifold of experiment ``name`` with ``k`` kept dimensions.
 
@@ -85,6 +89,8 @@ def make_experiment(
         hand: The hand of the SAH experiments (a name or a hand-description JSON).
         motions: Source of the SAH's principal motions, one of
             :data:`~sahgrasp.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
+        length_scale_m: Scale the SAH's coordinates at this length
+            (:func:`sahgrasp.grasp.coordinate_scales`); None: unscaled.
 
     Raises:
         OptimizationError: ``name`` is unknown, or the IK finds no first grasp.
@@ -98,7 +104,7 @@ def make_experiment(
     samples = _MOTION_SAMPLES.get(motions, 0)
     return make_sah_manifold(
         load_hand(hand), setup.patches(), k, setup.free_object, setup.symmetry_axis,
-        setup.object(), samples, motion_source=motions,
+        setup.object(), samples, motion_source=motions, length_scale_m=length_scale_m,
     )  # fmt: skip
 
 
@@ -137,13 +143,14 @@ def run_experiment(
     progress: ProgressCallback | None = None,
     hand: str = "sah",
     motions: str = "random",
+    length_scale_m: float | None = None,
 ) -> OptimizationResult:
     """Algorithm 1 on experiment ``name``.
 
     The arguments are those of :func:`make_experiment` and :func:`experiment_settings`.
     """
     settings = experiment_settings(name, radius, epsilon, index, max_charts, progress)
-    return optimize(make_experiment(name, k, hand, motions), settings)
+    return optimize(make_experiment(name, k, hand, motions, length_scale_m), settings)
 
 
 def run_components(
