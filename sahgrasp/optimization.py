@@ -54,7 +54,10 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 IndexFunction = Callable[[FloatArray], ArrayLike]
-"""A user quality index: chart centres (N, n) -> N values, larger is better (NaN: undefined)."""
+"""A user quality index: chart centres (N, n) -> N values, larger is better (NaN: undefined).
+
+The centres are in the problem's coordinates (a scaled :class:`~sahgrasp.grasp.SahGraspManifold`
+maps them back with ``x_of``)."""
 
 
 @dataclass(frozen=True)
