@@ -17,18 +17,23 @@ import psutil
 import pytest
 
 from sahgrasp.contacts import ContactTarget, GraspTarget
+from sahgrasp.errors import VizError
+from sahgrasp.experiments.ik_examples import (
+    EXAMPLE_NAMES,
+    format_report,
+    show_examples,
+    solve_example,
+)
 from sahgrasp.hand import Hand
 from sahgrasp.ik import random_problem, solve_ik
 from sahgrasp.objects import load_object, paper_grasp, transform_points
 from sahgrasp.viz import (
     CAMERA_FOV_DEG,
-    EXAMPLE_NAMES,
     ChartGrasp,
     HandView,
     RecordingWindow,
     Viewer,
     display_points,
-    format_report,
     frame_grasp,
     grasp_points,
     hex_color,
@@ -38,9 +43,7 @@ from sahgrasp.viz import (
     show_atlas,
     show_atlas_grasps,
     show_contacts,
-    show_examples,
     show_grasp,
-    solve_example,
     visual_model,
 )
 from sahgrasp.viz.hand_view import visual_corners
@@ -395,7 +398,7 @@ def test_display_points_fit_the_atlas_size(dim: int) -> None:
     assert np.allclose(shown.mean(axis=0), 0.0, atol=1e-12)
     if dim == 2:
         assert np.allclose(shown[:, 2], 0.0)
-    with pytest.raises(ValueError, match="finite"):
+    with pytest.raises(VizError, match="finite"):
         display_points(np.zeros((0, 3)))
 
 
@@ -411,7 +414,7 @@ def test_atlas_points_coloured_by_quality_best_and_worst_marked() -> None:
     assert cloud["object"]["type"] == "Points"
     best = transform(by_path(html, "set_transform")["/meshcat/atlas/best"])
     assert np.allclose(best[:3, 3], plot.positions_m[29])
-    with Viewer() as viewer, pytest.raises(ValueError, match="values of shape"):
+    with Viewer() as viewer, pytest.raises(VizError, match="values of shape"):
         show_atlas(viewer, "atlas", points, values[:5], 0.05)
 
 

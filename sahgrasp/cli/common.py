@@ -1,6 +1,8 @@
 """Pieces shared by the subcommands: option types, help format, output paths, JSON output.
 
 This module is imported to build the parser (``sahgrasp --help``), so it imports nothing heavy.
+The option types and the IK options shared with the example scripts are those of
+:mod:`sahgrasp.experiments.arguments`, re-exported here for the subcommands.
 """
 
 from __future__ import annotations
@@ -11,11 +13,23 @@ import json
 import math
 import os
 import sys
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
 from sahgrasp.errors import HandModelError, SequenceFileError
+from sahgrasp.experiments.arguments import (
+    HAND_HELP,
+    INITS_HELP,
+    MAX_INITS,
+    METHOD_HELP,
+    add_ik_arguments,
+    int_at_least,
+    int_in_range,
+    nonnegative_int,
+    positive_float,
+    positive_int,
+)
 from sahgrasp.fileio import (
     OutputPathError,
     atomic_path,
@@ -50,13 +64,7 @@ __all__ = [
     "printable",
 ]
 
-MAX_INITS = 1000
-"""Largest ``--inits`` accepted: the initial configurations are built before the first solve."""
-
-HAND_HELP = "sah, allegro, or the path of a hand-description JSON (not a URDF)"
 HAND_OVERRIDE_HELP = f"use this hand instead of the targets file's: {HAND_HELP}"
-METHOD_HELP = "IK inner loop: the paper's (paper) or the Levenberg-Marquardt default (auto)"
-INITS_HELP = f"i_max, initial configurations per problem (1..{MAX_INITS})"
 
 
 class Parser(argparse.ArgumentParser):
@@ -83,37 +91,6 @@ def add_command(sub: Any, name: str, summary: str, description: str | None = Non
     )
 
 
-def _checked(kind: Callable[[str], Any], ok: Callable[[Any], bool], rule: str) -> Any:
-    """An argparse ``type``: parse with ``kind``, then require ``ok`` (``rule`` says what is)."""
-
-    def parse(text: str) -> Any:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {rule}") from None
-        if not ok(value):
-            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {rule}")
-        return value
-
-    parse.__name__ = rule  # argparse names the type in some messages
-    return parse
-
-
-def int_at_least(low: int) -> Any:
-    """An argparse ``type`` accepting integers ``>= low``."""
-    return _checked(int, lambda v: v >= low, f"an integer >= {low}")
-
-
-def int_in_range(low: int, high: int) -> Any:
-    """An argparse ``type`` accepting integers in ``low..high``."""
-    return _checked(int, lambda v: low <= v <= high, f"an integer in {low}..{high}")
-
-
-positive_int = int_at_least(1)
-nonnegative_int = int_at_least(0)
-positive_float = _checked(float, lambda v: math.isfinite(v) and v > 0.0, "a finite number > 0")
-
-
 def add_json_argument(parser: argparse.ArgumentParser, what: str) -> None:
     """Add ``--json OUT``: write ``what`` as JSON to OUT, or to stdout with ``-``."""
     parser.add_argument(
@@ -121,19 +98,6 @@ def add_json_argument(parser: argparse.ArgumentParser, what: str) -> None:
         default=None,
         metavar="OUT",
         help=f"write {what} as JSON to OUT ('-': JSON alone on stdout, other lines on stderr)",
-    )
-
-
-def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the IK options of the paper examples: ``--hand``, ``--method``, ``--inits``, ...
-
-    The destinations are those of ``sahgrasp.viz.ik_settings``.
-    """
-    parser.add_argument("--hand", default="sah", help=HAND_HELP)
-    parser.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
-    parser.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
-    parser.add_argument(
-        "--iterations", type=positive_int, default=100, help="k_max, iterations per start"
     )
 
 

@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from sahgrasp.cli.common import add_command, add_ik_arguments, check_json_inputs, check_outputs
+from sahgrasp.cli.common import add_command, check_json_inputs, check_outputs
+from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings
 
 __all__ = ["DEFAULT_HTML", "add_parser", "run"]
 
@@ -33,15 +34,14 @@ def run(args: argparse.Namespace) -> int:
     check_json_inputs(args.hand)
     from tqdm import tqdm
 
-    from sahgrasp.hand import load_hand
-    from sahgrasp.viz import (
+    from sahgrasp.experiments.ik_examples import (
         EXAMPLE_NAMES,
-        Viewer,
         format_report,
-        ik_settings,
         show_examples,
         solve_example,
     )
+    from sahgrasp.hand import load_hand
+    from sahgrasp.viz import Viewer
 
     hand = load_hand(args.hand)
     settings = ik_settings(args)

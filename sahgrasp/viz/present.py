@@ -1,29 +1,18 @@
 """How a script shows a scene: write standalone HTML, or serve it live until the user is done.
 
 Scripts (the examples, ``sahgrasp demo``) build their scene in a function of a :class:`Viewer` and
-call :func:`present`; it owns the viewer, so no meshcat server outlives the call.
+call :func:`present` (``--html`` is :func:`sahgrasp.experiments.arguments.add_html_argument`);
+it owns the viewer, so no meshcat server outlives the call.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Callable
 from pathlib import Path
 
 from sahgrasp.viz.viewer import Viewer
 
-__all__ = ["add_html_argument", "present"]
-
-
-def add_html_argument(parser: argparse.ArgumentParser, default: str | None = None) -> None:
-    """Add ``--html OUT``: write the scene there instead of opening the live viewer."""
-    parser.add_argument(
-        "--html",
-        default=default,
-        metavar="OUT",
-        help="write the scene as a standalone HTML file"
-        + (f" (default: {default})" if default else " instead of opening the viewer"),
-    )
+__all__ = ["present"]
 
 
 def present(

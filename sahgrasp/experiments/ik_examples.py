@@ -1,10 +1,11 @@
-"""The IK examples of ik-initial-sequence Section 4.1 (Figs. 6-8): solve, report, show.
+"""The IK examples of Claret & Suárez's IK paper, Section 4.1 (Figs. 6-8): solve, report, show.
 
 Each example is a paper object with its precision grasp (``sahgrasp.objects``). It is solved with
 the default IK (iterates recorded), reported beside the paper's counts of initial configurations
 and Jacobian iterations, and drawn as Fig. 6 draws the fork: object, contact disks with normal
 cylinders, and the hand animated from the initial configuration to the solution. The example
 scripts ``examples/grasp_*.py`` and ``sahgrasp demo`` are thin wrappers around this module.
+The paper's counts are :data:`sahgrasp.objects.PAPER_IK_REPORT`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from sahgrasp.contacts import GraspTarget
+from sahgrasp.experiments.arguments import add_html_argument, add_ik_arguments, ik_settings
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
 from sahgrasp.objects import (
@@ -31,7 +33,7 @@ from sahgrasp.objects import (
 )
 from sahgrasp.tables import format_table
 from sahgrasp.viz.grasp_view import grasp_points, show_grasp
-from sahgrasp.viz.present import add_html_argument, present
+from sahgrasp.viz.present import present
 from sahgrasp.viz.viewer import Viewer
 
 __all__ = [
@@ -39,9 +41,7 @@ __all__ = [
     "EXAMPLE_NAMES",
     "ROW_ASPECT",
     "GraspExample",
-    "add_ik_arguments",
     "format_report",
-    "ik_settings",
     "run_grasp_example",
     "show_examples",
     "solve_example",
@@ -163,19 +163,6 @@ def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
     return T
 
 
-def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the examples' IK options: ``--hand``, ``--method``, ``--inits``, ``--iterations``."""
-    parser.add_argument("--hand", default="sah", help="sah, allegro, or a hand-description JSON")
-    parser.add_argument("--method", choices=("auto", "paper"), default="auto")
-    parser.add_argument("--inits", type=int, default=12, help="i_max, initial configurations")
-    parser.add_argument("--iterations", type=int, default=100, help="k_max, per configuration")
-
-
-def ik_settings(args: argparse.Namespace) -> IKSettings:
-    """The IK settings of :func:`add_ik_arguments`'s options."""
-    return IKSettings(method=args.method, max_inits=args.inits, max_iterations=args.iterations)
-
-
 def run_grasp_example(name: str, argv: Sequence[str] | None = None) -> int:
     """Main of ``examples/grasp_<name>.py``: solve, print beside the paper, show or write HTML.
 
@@ -183,7 +170,7 @@ def run_grasp_example(name: str, argv: Sequence[str] | None = None) -> int:
         0 if the grasp was solved, 1 otherwise (the scene is shown either way).
     """
     parser = argparse.ArgumentParser(
-        description=f"IK of the paper's {name} grasp (ik-initial-sequence Section 4.1)."
+        description=f"IK of the paper's {name} grasp (Claret & Suárez's IK paper, Section 4.1)."
     )
     add_ik_arguments(parser)
     add_html_argument(parser)
