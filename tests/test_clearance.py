@@ -9,6 +9,8 @@ import pytest
 
 from sahgrasp.collision import CollisionPair
 from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
+from sahgrasp.experiments.ik_examples import solve_example
+from sahgrasp.experiments.setups import SAH_EXPERIMENTS, run_experiment
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
 from sahgrasp.objects import (
@@ -20,8 +22,6 @@ from sahgrasp.objects import (
     placement,
 )
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.optimization import EXPERIMENTS, run_experiment
-from sahgrasp.viz.paper_examples import solve_example
 
 CUBE_M = 0.004
 
@@ -213,10 +213,10 @@ def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
     assert max(depths.values()) <= TOLERANCE_M, sorted(depths.items(), key=lambda kv: -kv[1])[:3]
 
 
-@pytest.mark.parametrize("name", sorted(EXPERIMENTS))
+@pytest.mark.parametrize("name", sorted(SAH_EXPERIMENTS))
 def test_experiment_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
     result = run_experiment(name)  # as examples/optimize_<name>.py runs it
-    system, obj = result.system, EXPERIMENTS[name].object()
+    system, obj = result.problem.system, SAH_EXPERIMENTS[name].object()
     contacts = {c.finger for c in system.contacts}
     assert result.valid[result.best] and result.valid[result.worst]
     for chart in np.flatnonzero(result.valid):

@@ -117,12 +117,12 @@ def test_cli_defaults_are_the_library_defaults() -> None:
 
     from sahgrasp.bench import atlas, ik, kinematics
     from sahgrasp.bench import sequence as bench_sequence
-    from sahgrasp.cli import atlas as atlas_cli
     from sahgrasp.cli import sequence as sequence_cli
+    from sahgrasp.experiments.arguments import INDEX_CHOICES
     from sahgrasp.quality import INDICES
     from sahgrasp.sequence import SearchSettings
 
-    assert atlas_cli.INDEX_CHOICES == INDICES
+    assert INDEX_CHOICES == INDICES
     settings = SearchSettings()
     assert {
         "grid": settings.grid, "problems": settings.problems, "rounds": settings.rounds,

@@ -23,9 +23,9 @@ import numpy as np
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.bench.report import progress_reporter
 from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.fileio import write_json_atomic
-from sahgrasp.optimization import run_experiment
-from sahgrasp.planar import build_planar_atlas, make_planar_problem
+from sahgrasp.planar import make_planar_problem
 from sahgrasp.progress import ProgressCallback
 
 __all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "run"]
@@ -107,7 +107,13 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
 
 def _planar_row(repeats: int) -> dict[str, Any]:
     problem = make_planar_problem()
-    atlas, seconds, cpu = _best_build(lambda: build_planar_atlas(problem), repeats)
+    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
+    atlas, seconds, cpu = _best_build(
+        lambda: build_atlas(
+            problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds()
+        ),
+        repeats,
+    )
     quality_seconds = float("inf")
     for _ in range(repeats):
         start = time.perf_counter()
@@ -132,19 +138,19 @@ def _planar_row(repeats: int) -> dict[str, Any]:
 def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
     """Algorithm 1 once (IK, principal motions, atlas, index), then the atlas timed again."""
     result = run_experiment(name, k=k, radius=radius, max_charts=_SAH_MAX_CHARTS)
-    R, JR = result.reduced_system()
-    lower, upper = result.system.lower, result.system.upper
+    p = result.problem
+    atlas_settings = result.settings.atlas_settings()
     atlas, seconds, cpu = _best_build(
-        lambda: build_atlas(R, JR, result.start, k, result.settings, lower, upper), repeats
+        lambda: build_atlas(p.F, p.J, p.start, k, atlas_settings, *p.bounds()), repeats
     )
     paper = SAH_PAPER[name, k]
     rate, paper_rate = atlas.n_charts / seconds, paper["charts"] / paper["seconds"]
     return {
         "k": k,
-        "t": result.system.t,
-        "n": result.system.n,
+        "t": p.t,
+        "n": result.atlas.ambient_dim,
         "radius": radius,
-        "epsilon": result.settings.epsilon,
+        "epsilon": atlas_settings.epsilon,
         "charts": atlas.n_charts,
         "complete": atlas.complete,
         "seconds": seconds,
