@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import re
 import secrets
@@ -39,6 +40,7 @@ __all__ = [
     "atomic_path",
     "check_output_path",
     "is_temporary",
+    "json_safe",
     "read_json",
     "write_bytes_atomic",
     "write_json_atomic",
@@ -207,6 +209,17 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def json_safe(data: Any) -> Any:
+    """``data`` with every NaN or infinite number (undefined, e.g. an unsolved error) as None."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {key: json_safe(value) for key, value in data.items()}
+    if isinstance(data, list | tuple):
+        return [json_safe(value) for value in data]
+    return data
 
 
 def write_json_atomic(path: PathLike, data: Any) -> None:

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from sahgrasp.cli.common import json_safe
 from sahgrasp.contacts import (
     GraspTarget,
     InvalidProblem,
@@ -33,6 +32,7 @@ from sahgrasp.contacts import (
     targets_hand,
 )
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
+from sahgrasp.fileio import json_safe
 
 __all__ = [
     "MAX_LINE_BYTES",

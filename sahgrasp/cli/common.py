@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import os
 import sys
 from collections.abc import Iterable, Iterator
@@ -34,6 +33,7 @@ from sahgrasp.fileio import (
     OutputPathError,
     atomic_path,
     check_output_path,
+    json_safe,
     read_json,
     write_bytes_atomic,
 )
@@ -55,7 +55,6 @@ __all__ = [
     "human_stream",
     "int_at_least",
     "int_in_range",
-    "json_safe",
     "json_text",
     "nonnegative_int",
     "output_file",
@@ -159,17 +158,6 @@ def output_file(path: str | None) -> Iterator[str | None]:
         return
     with atomic_path(path) as tmp:
         yield str(tmp)
-
-
-def json_safe(data: Any) -> Any:
-    """``data`` with every NaN or infinite number (undefined, e.g. an unsolved error) as None."""
-    if isinstance(data, float):
-        return data if math.isfinite(data) else None
-    if isinstance(data, dict):
-        return {key: json_safe(value) for key, value in data.items()}
-    if isinstance(data, list | tuple):
-        return [json_safe(value) for value in data]
-    return data
 
 
 def _layout(data: Any, depth: int = 0) -> str:
