@@ -114,20 +114,33 @@ def _module_distributions() -> dict[str, frozenset[str]]:
 
 
 def _providers(module: str) -> frozenset[str]:
-    providers = _module_distributions().get(module)
-    assert providers, f"no installed distribution provides the imported module {module!r}"
-    return providers
+    return _module_distributions().get(module, frozenset())
+
+
+def _installed(distribution: str) -> bool:
+    try:
+        importlib.metadata.distribution(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return False
+    return True
 
 
 def test_every_library_import_is_a_declared_runtime_dependency() -> None:
     runtime, bench = _runtime(), _extra("bench")
+    # Without the bench extra installed (CI installs dev and docs only), its modules cannot be
+    # mapped to distributions; the benchmarks import them inside functions, behind a check.
+    bench_installed = all(_installed(d) for d in bench)
     undeclared = []
     for path in _sources():
-        allowed = runtime | bench if BENCH in path.parents else runtime
+        in_bench = BENCH in path.parents
+        allowed = runtime | bench if in_bench else runtime
         for module, line in _third_party_imports(path):
-            if not _providers(module) & allowed:
+            providers = _providers(module)
+            if not providers and in_bench and not bench_installed:
+                continue
+            if not providers & allowed:
                 rel = path.relative_to(ROOT)
-                undeclared.append(f"{rel}:{line} imports {module} ({sorted(_providers(module))})")
+                undeclared.append(f"{rel}:{line} imports {module} (from {sorted(providers)})")
     assert not undeclared, "undeclared runtime dependencies:\n" + "\n".join(undeclared)
 
 
