@@ -197,17 +197,3 @@ def test_cli_help_loads_no_optional_layer() -> None:
     )
     assert _loaded_after(code) == []
 
-
-def _library_modules() -> list[str]:
-    """Top-level modules and packages of the library (entry points excluded)."""
-    entries = [p for p in PACKAGE.iterdir() if p.suffix == ".py" or (p / "__init__.py").is_file()]
-    names = {p.name.removesuffix(".py") for p in entries}
-    return sorted(n for n in names if not n.startswith("_") and n not in {"cli", "bench"})
-
-
-@pytest.mark.parametrize("module", _library_modules())
-def test_every_library_module_has_an_api_reference_page(module: str) -> None:
-    page = ROOT / "docs" / "api" / f"{module}.md"
-    assert page.is_file(), f"no API page {page.relative_to(ROOT)} (add it to mkdocs.yml's nav too)"
-    assert f"::: sahgrasp.{module}\n" in page.read_text(encoding="utf-8")
-    assert f"api/{module}.md" in (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
