@@ -196,4 +196,3 @@ def test_cli_help_loads_no_optional_layer() -> None:
         "    main(['--help'])"
     )
     assert _loaded_after(code) == []
-
