@@ -120,14 +120,16 @@ def violations() -> list[str]:
     table = layers()
     found = []
     for path in sources():
-        own = table[module_of(path)]
+        own = table.get(module_of(path))
+        if own is None:  # reported by test_every_module_has_a_layer
+            continue
         for edge in edges(path):
             if edge.target == "argparse":
                 if not own.argparse:
                     found.append(f"{edge}: the {own.name} layer may not parse arguments")
                 continue
-            used = table[edge.target]
-            if used.rank > own.rank:
+            used = table.get(edge.target)
+            if used is not None and used.rank > own.rank:
                 found.append(f"{edge}: {own.name} (rank {own.rank}) may not use {used.name}")
     return found
 

@@ -159,13 +159,13 @@ def test_test_only_packages_are_not_runtime_dependencies(dev_only: str) -> None:
     assert dev_only not in _runtime()
 
 
-def test_the_library_imports_no_dev_only_package() -> None:
-    dev_only = _extra("dev") - _runtime()
+def test_the_library_imports_no_test_only_package() -> None:
+    test_only = _extra("dev") - _runtime() - _extra("bench")
     offenders = [
         f"{path.relative_to(ROOT)}:{line} imports {module}"
         for path in _sources()
         for module, line in _third_party_imports(path)
-        if _providers(module) & dev_only
+        if _providers(module) & test_only
     ]
     assert not offenders, "\n".join(offenders)
 
