@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import ast
 import re
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "sahgrasp"
@@ -103,8 +105,10 @@ def _target(module: str, name: str) -> str | None:
     return name if is_module else "__init__"
 
 
-def edges(path: Path) -> Iterator[Edge]:
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+def edges(path: Path, source: str | None = None) -> Iterator[Edge]:
+    """Imports of sahgrasp modules and of argparse in ``path`` (or in ``source``, as if there)."""
+    text = path.read_text(encoding="utf-8") if source is None else source
+    for node in ast.walk(ast.parse(text, str(path))):
         if isinstance(node, ast.Import | ast.ImportFrom):
             for module, name in _imported_names(node, path):
                 target = _target(module, name)
@@ -116,22 +120,20 @@ def sources() -> list[Path]:
     return sorted(PACKAGE.rglob("*.py"))
 
 
-def violations() -> list[str]:
+def broken_rules(path: Path, found: Iterable[Edge]) -> Iterator[str]:
+    """The imports among ``found`` that ``path``'s layer may not make, explained."""
     table = layers()
-    found = []
-    for path in sources():
-        own = table.get(module_of(path))
-        if own is None:  # reported by test_every_module_has_a_layer
+    own = table.get(module_of(path))
+    if own is None:  # reported by test_every_module_has_a_layer
+        return
+    for edge in found:
+        if edge.target == "argparse":
+            if not own.argparse:
+                yield f"{edge}: the {own.name} layer may not parse arguments"
             continue
-        for edge in edges(path):
-            if edge.target == "argparse":
-                if not own.argparse:
-                    found.append(f"{edge}: the {own.name} layer may not parse arguments")
-                continue
-            used = table.get(edge.target)
-            if used is not None and used.rank > own.rank:
-                found.append(f"{edge}: {own.name} (rank {own.rank}) may not use {used.name}")
-    return found
+        used = table.get(edge.target)
+        if used is not None and used.rank > own.rank:
+            yield f"{edge}: {own.name} (rank {own.rank}) may not use {used.name}"
 
 
 def test_the_table_is_complete_and_ordered() -> None:
@@ -155,7 +157,7 @@ def test_every_import_of_a_sahgrasp_module_names_a_module_with_a_layer() -> None
 
 
 def test_imports_point_down_the_layers() -> None:
-    found = violations()
+    found = [rule for path in sources() for rule in broken_rules(path, edges(path))]
     assert not found, f"{len(found)} layering violations:\n" + "\n".join(found)
 
 
@@ -179,3 +181,32 @@ def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
         "experiments",
         "ik",
     ]
+
+
+@pytest.mark.parametrize(
+    ("where", "source", "broken"),
+    [
+        (
+            "atlas/builder.py",
+            "from sahgrasp.hand import Hand\n",
+            ["engine (rank 1) may not use model"],
+        ),
+        (
+            "viz/x.py",
+            "def f():\n    from sahgrasp.experiments import t\n",
+            ["may not use experiments"],
+        ),
+        ("hand.py", "import argparse\n", ["the model layer may not parse arguments"]),
+        ("ik/x.py", "from ..cli import main\n", ["solvers (rank 3) may not use entry points"]),
+        ("cli/x.py", "import argparse\nfrom sahgrasp.experiments import t\n", []),
+        ("objects/x.py", "from sahgrasp.errors import SahGraspError\nimport numpy\n", []),
+    ],
+)
+def test_the_rules_catch_upward_imports_and_argparse(
+    where: str, source: str, broken: list[str]
+) -> None:
+    path = PACKAGE / where  # never written: the source is given
+    found = list(broken_rules(path, edges(path, source)))
+    assert len(found) == len(broken)
+    for message, expected in zip(found, broken, strict=True):
+        assert expected in message
