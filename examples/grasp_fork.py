@@ -1,4 +1,4 @@
-"""IK of the paper's fork grasp with the SAH (ik-initial-sequence Section 4.1, Fig. 6).
+"""IK of the paper's fork grasp with the SAH (Claret & Suárez, Section 4.1, Fig. 6).
 
 Paper: 1 initial configuration, 6 Jacobian iterations.
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from sahgrasp.viz import run_grasp_example
+from sahgrasp.experiments.ik_examples import run_grasp_example
 
 
 def main(argv: Sequence[str] | None = None) -> int:

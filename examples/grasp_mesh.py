@@ -20,10 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from sahgrasp.contacts import ContactTarget, GraspTarget
+from sahgrasp.experiments.arguments import add_html_argument
 from sahgrasp.hand import load_hand
 from sahgrasp.ik import solve_ik
 from sahgrasp.objects import HandObjectClearance, MeshSolid, load_mesh
-from sahgrasp.viz import Viewer, add_html_argument, present, show_grasp
+from sahgrasp.viz import Viewer, present, show_grasp
 
 MUG = Path(__file__).resolve().parent / "meshes" / "mug.stl"
 HEIGHTS_M = {"thumb": 0.06, "index": 0.09, "middle": 0.06, "ring": 0.03}

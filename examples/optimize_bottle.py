@@ -1,4 +1,4 @@
-"""Global grasp optimisation of the SAH holding the bottle (atlas-grasp-optimization, Fig. 10b).
+"""Global grasp optimisation of the SAH holding the bottle (atlas paper, Fig. 10b).
 
 An atlas of the relevant grasps (k = 2) from the IK's first grasp, the volume of the
 manipulability ellipsoid at every chart centre, the best and the worst grasp. Run
@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from sahgrasp.viz.atlas_examples import run_optimize_example
+from sahgrasp.experiments.atlas_examples import run_optimize_example
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,4 +1,4 @@
-"""Global grasp optimisation of the planar three-finger hand (atlas-grasp-optimization, Figs. 8-9).
+"""Global grasp optimisation of the planar three-finger hand (atlas paper, Figs. 8-9).
 
 An atlas of the relevant grasps (k = 2, r = 0.125, epsilon = 0.4 as in the paper), the three
 manipulability indices at every chart centre, and the best and worst grasps of one of them
@@ -11,11 +11,11 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 
-from sahgrasp.viz.atlas_examples import run_planar_example
+from sahgrasp.experiments.atlas_examples import run_optimize_example
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_planar_example(argv)
+    return run_optimize_example("planar", argv)
 
 
 if __name__ == "__main__":

@@ -1,16 +1,41 @@
-"""sahgrasp: precision-grasp IK and global grasp optimization for anthropomorphic hands."""
+"""sahgrasp: precision-grasp IK and global grasp optimization for anthropomorphic hands.
 
-from sahgrasp.contacts import ContactTarget, GraspTarget, load_targets, save_targets
-from sahgrasp.errors import (
-    AtlasError,
-    HandModelError,
-    InvalidConfigurationError,
-    InvalidTargetError,
-    SahGraspError,
-    SequenceFileError,
-)
-from sahgrasp.hand import Hand, HandDescription, load_hand
-from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
+The names below are loaded on first use, so that ``import sahgrasp`` (and ``sahgrasp --help``)
+stays fast: Pinocchio and coal are imported only when a hand is needed.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sahgrasp.contacts import ContactTarget, GraspTarget, load_targets, save_targets
+    from sahgrasp.errors import (
+        AtlasError,
+        HandModelError,
+        InvalidConfigurationError,
+        InvalidTargetError,
+        SahGraspError,
+        SequenceFileError,
+    )
+    from sahgrasp.hand import Hand, HandDescription, load_hand
+    from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
+
+_EXPORTS = {
+    "sahgrasp.contacts": ("ContactTarget", "GraspTarget", "load_targets", "save_targets"),
+    "sahgrasp.errors": (
+        "AtlasError",
+        "HandModelError",
+        "InvalidConfigurationError",
+        "InvalidTargetError",
+        "SahGraspError",
+        "SequenceFileError",
+    ),
+    "sahgrasp.hand": ("Hand", "HandDescription", "load_hand"),
+    "sahgrasp.ik": ("IKResult", "IKSettings", "solve_ik", "solve_many"),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "AtlasError",
@@ -31,3 +56,16 @@ __all__ = [
     "solve_ik",
     "solve_many",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module 'sahgrasp' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -102,6 +102,11 @@ class SelfCollision:
         self.data = model.createData()
         # A second set of requests computes contact witnesses, needed only to resolve collisions.
         self._witness_data = stateless_requests(pin.GeometryData(geometry_model))
+        self._witness_margin_m: float | None = None
+        self._pair_joints = [
+            (int(objects[p.first].parentJoint), int(objects[p.second].parentJoint))
+            for p in geometry_model.collisionPairs
+        ]
 
     def _link(self, obj: pin.GeometryObject) -> str:
         return str(self.model.frames[obj.parentFrame].name)
@@ -149,30 +154,37 @@ class SelfCollision:
         return float(min(r.min_distance for r in self.geometry_data.distanceResults))
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
-        """Every checked pair closer than ``margin_m`` [m] at ``q``, with coal's witnesses."""
+        """Every checked pair closer than ``margin_m`` [m] at ``q``, with coal's witnesses.
+
+        A first pass stops at the first pair within the margin, so the usual answer of the IK's
+        repair loop, "none", costs one cheap query; the witnesses are read only when needed.
+        """
         gd = self._witness_data
-        for request in gd.collisionRequests:
-            request.enable_contact = True
-            request.security_margin = margin_m
-        pin.computeCollisions(self.model, self.data, self.geometry_model, gd, q, False)
-        objects = self.geometry_model.geometryObjects
-        out = []
-        for pair, result in zip(
-            self.geometry_model.collisionPairs, gd.collisionResults, strict=True
-        ):
-            if not result.isCollision():
-                continue
-            contact = result.getContact(0)
-            normal = np.asarray(contact.normal, dtype=np.float64)
-            signed = float(contact.penetration_depth)
-            out.append(
-                Penetration(
-                    int(objects[pair.first].parentJoint),
-                    int(objects[pair.second].parentJoint),
-                    np.asarray(contact.getNearestPoint1(), dtype=np.float64),
-                    np.asarray(contact.getNearestPoint2(), dtype=np.float64),
-                    normal / max(float(np.linalg.norm(normal)), 1e-12),
-                    max(-signed, 0.0) + margin_m if signed < 0 else margin_m - signed,
-                )
-            )
-        return out
+        if margin_m != self._witness_margin_m:  # ~1 us per request: set once per margin
+            for request in gd.collisionRequests:
+                request.enable_contact = True
+                request.security_margin = margin_m
+            self._witness_margin_m = margin_m
+        model, geometry = self.model, self.geometry_model
+        if not pin.computeCollisions(model, self.data, geometry, gd, q, True):
+            return []
+        pin.computeCollisions(model, self.data, geometry, gd, q, False)
+        return [
+            _penetration(joints, result.getContact(0), margin_m)
+            for joints, result in zip(self._pair_joints, gd.collisionResults, strict=True)
+            if result.isCollision()
+        ]
+
+
+def _penetration(joints: tuple[int, int], contact: coal.Contact, margin_m: float) -> Penetration:
+    """The :class:`Penetration` of one of coal's contacts between the bodies of ``joints``."""
+    normal = np.asarray(contact.normal, dtype=np.float64)
+    signed = float(contact.penetration_depth)
+    return Penetration(
+        joints[0],
+        joints[1],
+        np.asarray(contact.getNearestPoint1(), dtype=np.float64),
+        np.asarray(contact.getNearestPoint2(), dtype=np.float64),
+        normal / max(float(np.linalg.norm(normal)), 1e-12),
+        max(-signed, 0.0) + margin_m if signed < 0 else margin_m - signed,
+    )

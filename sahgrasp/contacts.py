@@ -1,14 +1,20 @@
 """Contact targets: a point on the object and the object's outward unit normal there, per finger.
 
 A fingertip of radius ``R`` satisfies a target when the contact point on the fingertip sphere equals
-the target point and the sphere centre equals ``point + R * normal`` (conventions.md). Targets are
-given in the ``world`` frame. This module validates them and reads/writes the targets JSON format.
+the target point and the sphere centre equals ``point + R * normal``. Targets are given in the
+``world`` frame. This module validates them and reads/writes the targets JSON format
+(``docs/formats.md``), including the object a problem grasps (:class:`ObjectSpec`).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import numbers
 import os
+import re
+import reprlib
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,28 +24,64 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.errors import InvalidTargetError
-from sahgrasp.fileio import write_json_atomic
+from sahgrasp.fileio import read_json, write_json_atomic
 
 __all__ = [
     "NORMAL_TOLERANCE",
+    "QUATERNION_TOLERANCE",
     "ContactTarget",
     "GraspTarget",
+    "InvalidProblem",
+    "ObjectSpec",
     "TargetsFile",
     "load_targets",
+    "object_spec",
+    "problem_from_json",
+    "read_problems",
     "save_targets",
+    "targets_hand",
 ]
 
 NORMAL_TOLERANCE = 1e-6
-"""Largest accepted deviation of a normal's length from 1 (conventions.md)."""
+"""Largest accepted deviation of a normal's length from 1."""
+
+QUATERNION_TOLERANCE = 1e-6
+"""Largest accepted deviation of an object placement quaternion's length from 1."""
+
+_MESH_SUFFIXES = (".stl", ".obj", ".ply")
+"""Mesh files :func:`sahgrasp.objects.load_mesh` reads (checked here without importing it)."""
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
+_PREVIEW = reprlib.Repr()
+_PREVIEW.maxlevel, _PREVIEW.maxstring, _PREVIEW.maxother = 3, 60, 60
 
 
-def _vector3(value: ArrayLike, what: str) -> NDArray[np.float64]:
+def _preview(value: Any) -> str:
+    """A short repr of user data for a message, whatever its size or depth."""
+    return _PREVIEW.repr(value)
+
+
+def _clean_name(name: str) -> str:
+    """``name`` with each lone surrogate (JSON allows them, UTF-8 does not) replaced by U+FFFD."""
+    return _SURROGATE.sub("\ufffd", name)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+
+
+def _vector3(value: ArrayLike, what: str, size: int = 3, unit: str = " [m]") -> NDArray[np.float64]:
+    items = np.asarray(value).reshape(-1).tolist() if isinstance(value, np.ndarray) else value
+    if not isinstance(items, list | tuple) or not all(_is_number(v) for v in items):
+        raise InvalidTargetError(f"{what} must be {size} numbers{unit}, got {_preview(value)}")
+    if len(items) != size:
+        raise InvalidTargetError(f"{what} must have {size} components{unit}, got {len(items)}")
     try:
-        vec = np.array(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError) as exc:
-        raise InvalidTargetError(f"{what} must be 3 numbers, got {value!r}") from exc
-    if vec.shape != (3,):
-        raise InvalidTargetError(f"{what} must have 3 components [m], got {vec.size}")
+        vec = np.array(items, dtype=np.float64)
+    except OverflowError:
+        raise InvalidTargetError(
+            f"{what} holds a number too large for a float: {_preview(items)}; all must be finite"
+        ) from None
     if not np.all(np.isfinite(vec)):
         raise InvalidTargetError(f"{what} holds NaN or inf: {vec.tolist()}; all must be finite")
     vec.setflags(write=False)
@@ -62,13 +104,13 @@ class ContactTarget:
 
     def __init__(self, finger: str, point: ArrayLike, normal: ArrayLike) -> None:
         if not isinstance(finger, str) or not finger:
-            raise InvalidTargetError(f"finger must be a non-empty name, got {finger!r}")
-        point_v = _vector3(point, f"{finger} contact point")
-        normal_v = _vector3(normal, f"{finger} contact normal")
+            raise InvalidTargetError(f"finger must be a non-empty name, got {_preview(finger)}")
+        point_v = _vector3(point, f"{finger!r} contact point")
+        normal_v = _vector3(normal, f"{finger!r} contact normal")
         norm = float(np.linalg.norm(normal_v))
         if abs(norm - 1.0) > NORMAL_TOLERANCE:
             raise InvalidTargetError(
-                f"{finger} contact normal has length {norm:.9g}; it must be a unit vector "
+                f"{finger!r} contact normal has length {norm:.9g}; it must be a unit vector "
                 f"(tolerance {NORMAL_TOLERANCE:g}), normals are not normalised silently"
             )
         object.__setattr__(self, "finger", finger)
@@ -80,7 +122,7 @@ class ContactTarget:
         return self.point + radius_m * self.normal
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of conventions.md."""
+        """Return the JSON form of ``docs/formats.md``."""
         return {"finger": self.finger, "point": self.point.tolist(), "normal": self.normal.tolist()}
 
     def __eq__(self, other: object) -> bool:
@@ -97,29 +139,154 @@ class ContactTarget:
 
 
 @dataclass(frozen=True)
+class ObjectSpec:
+    """The object a problem of a targets file grasps: a catalog object or a mesh file, placed.
+
+    Attributes:
+        name: Catalog object name (:data:`sahgrasp.objects.OBJECT_NAMES`), or None for a mesh.
+        mesh: Absolute path of the mesh file (STL, OBJ, PLY; coordinates in metres), or None.
+        xyz: Position of the object frame in the world [m].
+        quat: Orientation of the object frame in the world, unit quaternion ``[x, y, z, w]``.
+    """
+
+    name: str | None
+    mesh: str | None
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)
+
+    def __str__(self) -> str:
+        return repr(self.name) if self.mesh is None else f"mesh {self.mesh}"
+
+    def key(self) -> str:
+        """A string equal for equal specs (SHA-256 of the JSON form)."""
+        text = json.dumps(self.to_dict(), sort_keys=True)
+        return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return the JSON form of ``docs/formats.md`` (the mesh path absolute)."""
+        source = {"name": self.name} if self.mesh is None else {"mesh": self.mesh}
+        return {**source, "xyz": list(self.xyz), "quat": list(self.quat)}
+
+    def placement(self) -> NDArray[np.float64]:
+        """The object's placement in the world, a 4x4 matrix."""
+        x, y, z, w = np.array(self.quat) / np.linalg.norm(self.quat)
+        T = np.eye(4)
+        T[:3, :3] = [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+        T[:3, 3] = self.xyz
+        return T
+
+    def load(self) -> Any:
+        """Build the :class:`sahgrasp.objects.GraspObject` at its placement.
+
+        Raises:
+            InvalidTargetError: Unknown catalog name.
+            MeshFileError: The mesh file cannot be read as a closed object-sized mesh.
+        """
+        from sahgrasp.objects import load_mesh, load_object
+
+        if self.mesh is None:
+            assert self.name is not None
+            return load_object(self.name, self.placement())
+        return load_mesh(self.mesh, T_world_object=self.placement())
+
+
+_OBJECT_KEYS = ("name", "mesh", "xyz", "quat")
+
+
+def object_spec(data: Any, folder: str | os.PathLike[str]) -> ObjectSpec | None:
+    """Parse a targets file's ``object`` (``docs/formats.md``); ``null`` means no object.
+
+    Args:
+        data: The JSON value.
+        folder: The targets file's folder: a relative ``mesh`` path is relative to it.
+
+    Raises:
+        InvalidTargetError: Not an object with exactly one of ``name`` (a catalog object) and
+            ``mesh`` (an existing STL, OBJ or PLY file), an unknown key, or ``xyz`` / ``quat``
+            not 3 / 4 finite numbers, the quaternion not of unit length (to 1e-6).
+    """
+    if data is None:
+        return None
+    if not isinstance(data, dict) or len({"name", "mesh"} & data.keys()) != 1:
+        raise InvalidTargetError(
+            f"'object' must be an object with either 'name' (a catalog object) or 'mesh' (a mesh "
+            f"file), and optional 'xyz' [m] and 'quat' [x, y, z, w], got {_preview(data)}"
+        )
+    unknown = sorted(str(k) for k in data.keys() - set(_OBJECT_KEYS))
+    if unknown:
+        raise InvalidTargetError(
+            f"'object' has unknown key(s) {unknown}; valid: {list(_OBJECT_KEYS)}"
+        )
+    xyz = _vector3(data.get("xyz", [0.0, 0.0, 0.0]), "object 'xyz'")
+    quat = _vector3(data.get("quat", [0.0, 0.0, 0.0, 1.0]), "object 'quat'", 4, " [x, y, z, w]")
+    norm = float(np.linalg.norm(quat))
+    if abs(norm - 1.0) > QUATERNION_TOLERANCE:
+        raise InvalidTargetError(
+            f"object 'quat' has length {norm:.9g}; it must be a unit quaternion [x, y, z, w] "
+            f"(tolerance {QUATERNION_TOLERANCE:g})"
+        )
+    placed: dict[str, Any] = {"xyz": tuple(xyz.tolist()), "quat": tuple(quat.tolist())}
+    if "name" in data:
+        return ObjectSpec(name=_catalog_name(data["name"]), mesh=None, **placed)
+    return ObjectSpec(name=None, mesh=_mesh_path(data["mesh"], Path(folder)), **placed)
+
+
+def _catalog_name(name: Any) -> str:
+    from sahgrasp.objects.catalog import OBJECT_NAMES  # heavy: only when a file names an object
+
+    if not isinstance(name, str) or name not in OBJECT_NAMES:
+        raise InvalidTargetError(
+            f"unknown object {_preview(name)}; valid names are {list(OBJECT_NAMES)}"
+        )
+    return name
+
+
+def _mesh_path(mesh: Any, folder: Path) -> str:
+    if not isinstance(mesh, str) or not mesh:
+        raise InvalidTargetError(f"object 'mesh' must be a file path, got {_preview(mesh)}")
+    path = (folder / mesh).resolve()
+    if path.suffix.lower() not in _MESH_SUFFIXES:
+        raise InvalidTargetError(
+            f"object mesh {mesh!r}: unsupported type; use one of {list(_MESH_SUFFIXES)}"
+        )
+    if not path.is_file():
+        raise InvalidTargetError(f"object mesh {mesh!r} not found (looked for {path})")
+    return str(path)
+
+
+@dataclass(frozen=True)
 class GraspTarget:
     """A precision grasp to reach: one :class:`ContactTarget` per finger, fingers all distinct.
 
     Attributes:
         name: Problem name (e.g. the object).
         contacts: The contacts, one per finger.
+        object_spec: The object grasped, as a targets file names it (None: no object).
     """
 
     name: str
     contacts: tuple[ContactTarget, ...]
+    object_spec: ObjectSpec | None = None
 
-    def __init__(self, name: str, contacts: Iterable[ContactTarget]) -> None:
+    def __init__(
+        self, name: str, contacts: Iterable[ContactTarget], object_spec: ObjectSpec | None = None
+    ) -> None:
+        name = _clean_name(str(name))
         contacts_t = tuple(contacts)
         if not contacts_t:
             raise InvalidTargetError(f"grasp {name!r} has no contacts; give one per finger")
-        fingers = [c.finger for c in contacts_t]
-        repeated = sorted({f for f in fingers if fingers.count(f) > 1})
+        repeated = sorted(f for f, n in Counter(c.finger for c in contacts_t).items() if n > 1)
         if repeated:
             raise InvalidTargetError(
                 f"grasp {name!r} names finger(s) {repeated} more than once; each finger once"
             )
-        object.__setattr__(self, "name", str(name))
+        object.__setattr__(self, "name", name)
         object.__setattr__(self, "contacts", contacts_t)
+        object.__setattr__(self, "object_spec", object_spec)
 
     @property
     def fingers(self) -> tuple[str, ...]:
@@ -150,29 +317,58 @@ class GraspTarget:
             )
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of conventions.md."""
-        return {"name": self.name, "contacts": [c.to_dict() for c in self.contacts]}
+        """Return the JSON form of ``docs/formats.md``."""
+        data: dict[str, Any] = {"name": self.name, "contacts": [c.to_dict() for c in self.contacts]}
+        if self.object_spec is not None:
+            data["object"] = self.object_spec.to_dict()
+        return data
 
     @classmethod
-    def from_dict(cls, data: Any) -> GraspTarget:
-        """Build from the JSON form of conventions.md, raising :class:`InvalidTargetError`."""
+    def from_dict(
+        cls, data: Any, folder: str | os.PathLike[str] = ".", default: ObjectSpec | None = None
+    ) -> GraspTarget:
+        """Build from the JSON form of ``docs/formats.md``, raising :class:`InvalidTargetError`.
+
+        Args:
+            data: The JSON value.
+            folder: Folder a relative object ``mesh`` path is relative to.
+            default: The object of a problem without an ``object`` key.
+        """
         if not isinstance(data, dict) or "contacts" not in data:
             raise InvalidTargetError(
-                f"a problem must be an object with 'name' and 'contacts', got {data!r:.200}"
+                f"a problem must be an object with 'name' and 'contacts', got {_preview(data)}"
             )
-        name = str(data.get("name", "unnamed"))
+        name = data.get("name", "unnamed")
+        if not isinstance(name, str):
+            raise InvalidTargetError(f"a problem's 'name' must be a string, got {_preview(name)}")
         raw = data["contacts"]
         if not isinstance(raw, list):
-            raise InvalidTargetError(f"problem {name!r}: 'contacts' must be a list")
-        contacts = []
-        for item in raw:
-            if not isinstance(item, dict) or not {"finger", "point", "normal"} <= item.keys():
-                raise InvalidTargetError(
-                    f"problem {name!r}: each contact needs 'finger', 'point' and 'normal', "
-                    f"got {item!r:.200}"
-                )
-            contacts.append(ContactTarget(item["finger"], item["point"], item["normal"]))
-        return cls(name, contacts)
+            raise InvalidTargetError(f"problem {_clean_name(name)!r}: 'contacts' must be a list")
+        contacts = [_contact_from_dict(item, name) for item in raw]
+        spec = object_spec(data["object"], folder) if "object" in data else default
+        return cls(name, contacts, spec)
+
+
+def _contact_from_dict(item: Any, problem: str) -> ContactTarget:
+    if not isinstance(item, dict) or not {"finger", "point", "normal"} <= item.keys():
+        raise InvalidTargetError(
+            f"problem {_clean_name(problem)!r}: each contact needs 'finger', 'point' and 'normal', "
+            f"got {_preview(item)}"
+        )
+    return ContactTarget(item["finger"], item["point"], item["normal"])
+
+
+@dataclass(frozen=True)
+class InvalidProblem:
+    """A problem of a targets file that failed validation: nothing to solve, only the reason.
+
+    Attributes:
+        name: The problem's name, or ``problem-<index>`` when it has none.
+        detail: Why it is invalid (the :class:`InvalidTargetError` message).
+    """
+
+    name: str
+    detail: str
 
 
 @dataclass(frozen=True)
@@ -183,31 +379,85 @@ class TargetsFile:
     problems: tuple[GraspTarget, ...] = field(default_factory=tuple)
 
 
-def load_targets(path: str | os.PathLike[str]) -> TargetsFile:
-    """Read a targets file (conventions.md, "Targets file").
+def problem_from_json(
+    raw: Any, index: int, folder: str | os.PathLike[str] = ".", default: ObjectSpec | None = None
+) -> GraspTarget | InvalidProblem:
+    """One problem of a targets file, or an :class:`InvalidProblem` with the reason.
+
+    Args:
+        raw: The problem's JSON value.
+        index: Its index in the file (from 0): a problem without a name is ``problem-<index>``.
+        folder: The targets file's folder (relative mesh paths).
+        default: The file's default object.
+    """
+    if isinstance(raw, dict) and "name" not in raw:
+        raw = {**raw, "name": f"problem-{index}"}
+    try:
+        return GraspTarget.from_dict(raw, folder, default)
+    except InvalidTargetError as exc:
+        name = raw.get("name") if isinstance(raw, dict) else None
+        shown = _clean_name(name) if isinstance(name, str) else f"problem-{index}"
+        return InvalidProblem(shown, str(exc))
+
+
+def read_problems(path: str | os.PathLike[str]) -> tuple[str, list[GraspTarget | InvalidProblem]]:
+    """Read a targets file; a problem that fails validation is kept as an :class:`InvalidProblem`.
+
+    A problem without a name is called ``problem-<index>`` (from 0, in file order). A relative
+    hand-description path in the file (a ``hand`` with a suffix, such as
+    ``hands/my_hand.json``) is resolved against the targets file's folder.
+
+    Returns:
+        The hand (``"sah"``, ``"allegro"`` or a description path) and the problems in file order.
 
     Raises:
-        InvalidTargetError: The file is missing, is not JSON, or holds an invalid target.
+        InvalidTargetError: The file is missing, a folder, not UTF-8 JSON, nested too deeply,
+            not an object with a string ``hand`` and a ``problems`` list, or its default
+            ``object`` is invalid.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise InvalidTargetError(f"cannot read targets file {path}: {exc.strerror}") from exc
-    try:
-        data = json.loads(text, parse_constant=_reject_constant)
-    except json.JSONDecodeError as exc:
-        raise InvalidTargetError(f"targets file {path} is not valid JSON: {exc}") from exc
+    data = read_json(path, "targets file", InvalidTargetError)
     if not isinstance(data, dict) or not isinstance(data.get("problems"), list):
         raise InvalidTargetError(
             f"targets file {path} must be an object with 'hand' and a 'problems' list"
         )
-    problems = tuple(GraspTarget.from_dict(p) for p in data["problems"])
-    return TargetsFile(hand=str(data.get("hand", "sah")), problems=problems)
+    hand = targets_hand(data, path)
+    default = object_spec(data.get("object"), path.parent)
+    problems = data["problems"]
+    return hand, [problem_from_json(raw, i, path.parent, default) for i, raw in enumerate(problems)]
 
 
-def _reject_constant(name: str) -> float:
-    raise InvalidTargetError(f"targets hold {name}; every number must be finite")
+def targets_hand(data: dict[str, Any], path: Path) -> str:
+    """A targets file's ``hand``, a relative description path resolved against its folder.
+
+    Raises:
+        InvalidTargetError: ``hand`` is not a non-empty string.
+    """
+    hand = data.get("hand", "sah")
+    if not isinstance(hand, str) or not hand:
+        raise InvalidTargetError(
+            f"targets file {path}: 'hand' must be 'sah', 'allegro' or a hand-description path, "
+            f"got {_preview(hand)}"
+        )
+    if Path(hand).suffix and not Path(hand).is_absolute():
+        hand = str(path.parent / hand)
+    return hand
+
+
+def load_targets(path: str | os.PathLike[str]) -> TargetsFile:
+    """Read a targets file (``docs/formats.md``, "Targets"), every problem valid.
+
+    Raises:
+        InvalidTargetError: The file cannot be read (see :func:`read_problems`) or holds an invalid
+            problem.
+    """
+    hand, problems = read_problems(path)
+    valid = []
+    for problem in problems:
+        if isinstance(problem, InvalidProblem):
+            raise InvalidTargetError(f"targets file {path}: {problem.detail}")
+        valid.append(problem)
+    return TargetsFile(hand=hand, problems=tuple(valid))
 
 
 def save_targets(path: str | os.PathLike[str], hand: str, problems: Iterable[GraspTarget]) -> None:

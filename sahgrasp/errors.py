@@ -9,12 +9,17 @@ from __future__ import annotations
 
 __all__ = [
     "AtlasError",
+    "GraspSystemError",
     "HandModelError",
     "InvalidConfigurationError",
     "InvalidSettingsError",
     "InvalidTargetError",
+    "OptimizationError",
+    "PrincipalMotionsError",
+    "QualityError",
     "SahGraspError",
     "SequenceFileError",
+    "VizError",
 ]
 
 
@@ -44,3 +49,23 @@ class SequenceFileError(SahGraspError):
 
 class AtlasError(SahGraspError):
     """The atlas problem is ill-posed: shapes disagree, start point off the manifold, bad k."""
+
+
+class GraspSystemError(SahGraspError):
+    """A feasible-grasp system is ill-posed: bad symmetry axis, ``k`` out of ``[1, t]``."""
+
+
+class PrincipalMotionsError(SahGraspError):
+    """Principal hand motions asked for more constraints than they have directions."""
+
+
+class QualityError(SahGraspError):
+    """A quality index is unknown, or a user index gives the wrong number of values or only NaN."""
+
+
+class OptimizationError(SahGraspError):
+    """A grasp optimization cannot run: unknown experiment or index, no first grasp or candidate."""
+
+
+class VizError(SahGraspError):
+    """A drawing was given malformed data (shapes, non-finite points, no finite quality value)."""

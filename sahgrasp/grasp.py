@@ -1,4 +1,4 @@
-"""The feasible-grasp system F(x) = 0 of atlas-grasp-optimization (Section II) on a sahgrasp hand.
+"""The feasible-grasp system F(x) = 0 of the atlas paper (Section II) on a sahgrasp hand.
 
 Frame: the palm (the paper's absolute frame is attached to the palm, so the wrist does not enter x).
 Variables ``x = [x_h, x_c, x_o]``:
@@ -23,11 +23,18 @@ rank, first derivatives only; the sign is kept by continuity from the first gras
 
 Dimension reduction (Section III): the PCA of sampled hand configurations gives ``E``; the ``s``
 directions of least variance, through the first grasp ``x_1``, add ``E_s^T (x_h - x_1h) = 0``
-(Eq. (13)), with ``s = t - k`` (Eq. (12)).
+(Eq. (13)), with ``s = t - k`` (Eq. (12)). :class:`SahGraspManifold` is that reduced set R as a
+:class:`~sahgrasp.optimization.GraspManifold`, with the collision checks of its chart centres: at
+each, the fingers without a contact region are first placed where they touch nothing
+(``HandObjectClearance.place_free_fingers``: the nearest configuration of their own joints clear of
+the object and of the other links; they are no part of F, so this changes neither the grasp nor its
+index), then the hand is checked for self-collision and, given the object, for hand-object
+collision (any link inside the object, the contact fingertip spheres excepted up to ``d_min``).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,12 +42,28 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import AtlasError
+from sahgrasp.errors import GraspSystemError, OptimizationError
 from sahgrasp.hand import Hand
-from sahgrasp.motions import PrincipalMotions
+from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.motions import PrincipalMotions, principal_motions
+from sahgrasp.objects import GraspObject
+from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
+from sahgrasp.optimization import ChartChecks
+from sahgrasp.quality import Manipulability, ellipsoid_indices, null_space
 
-__all__ = ["GraspSystem", "reduced_system"]
+__all__ = [
+    "MOTION_SOURCES",
+    "GraspSystem",
+    "SahGraspManifold",
+    "coordinate_scales",
+    "first_grasp_system",
+    "free_fingers",
+    "hand_motions",
+    "ik_seeds",
+    "make_sah_manifold",
+    "reduced_system",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -150,7 +173,9 @@ class GraspSystem:
             return np.eye(3)
         axis = np.asarray(symmetry_axis, dtype=np.float64)
         if axis.shape != (3,) or not np.linalg.norm(axis) > 0:
-            raise AtlasError(f"symmetry_axis must be a non-zero 3-vector, got {symmetry_axis!r}")
+            raise GraspSystemError(
+                f"symmetry_axis must be a non-zero 3-vector, got {symmetry_axis!r}"
+            )
         axis = self.T_palm_object0.rotation @ axis
         return np.linalg.svd(axis[None, :])[2][1:].T  # the plane normal to the axis
 
@@ -182,6 +207,24 @@ class GraspSystem:
         x[self.hand_rows] = self.q_first[7:][self.coordinates]
         for c in self.contacts:
             x[c.params] = c.region.nominal
+        return x
+
+    def point(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The ``x`` of a grasp ``q`` of the regions at their nominal parameters.
+
+        ``q`` has the object frame as world, as the IK solves it. The object's rotation from its
+        first orientation is expressed in the rotation basis (with a symmetry axis, its spin about
+        the axis is dropped: Newton's method onto F lets the contacts absorb it).
+        """
+        x = self.x_first.copy()
+        x[self.hand_rows] = np.asarray(q, dtype=np.float64)[7:][self.coordinates]
+        if self.free_object:
+            T = self.hand.wrist_pose(q).inverse()  # the object in the palm frame
+            T0 = self.T_palm_object0
+            start = self.pose_slice.start
+            x[start : start + 3] = T.translation - T0.translation
+            turn = pin.log3(T.rotation @ T0.rotation.T)
+            x[start + 3 : self.n] = np.linalg.lstsq(self._rotation_basis, turn, rcond=None)[0]
         return x
 
     def configuration(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -319,7 +362,7 @@ def reduced_system(
     ``x1`` is the first feasible grasp the principal motions pass through (default: the IK's).
     """
     if not 1 <= k <= system.t:
-        raise AtlasError(f"k must be between 1 and t = {system.t}, got {k}")
+        raise GraspSystemError(f"k must be between 1 and t = {system.t}, got {k}")
     Es = motions.constraints(system.t - k)
     rows = system.hand_rows
     x1h = (system.x_first if x1 is None else x1)[rows]
@@ -333,3 +376,318 @@ def reduced_system(
         return np.concatenate([system.J(x), linear])
 
     return R, JR
+
+
+# ----- the SAH grasp system as a grasp manifold -------------------------------------------------
+class SahGraspManifold:
+    """R of Eq. (11) for a sahgrasp hand: the grasp system F plus its principal-motion constraints.
+
+    The atlas works in scaled coordinates ``y`` with ``x = scales * y`` (:meth:`x_of`): with
+    :func:`coordinate_scales`, a unit of ``y`` in any direction moves the hand, the object or a
+    contact by about the same distance, so that a chart radius means the same in every direction.
+    ``F``, ``J``, :meth:`bounds`, :attr:`start`, :meth:`manipulability` and :meth:`check_charts`
+    all take ``y``.
+
+    Args:
+        system: The feasible-grasp system F.
+        motions: The principal hand motions (Section III), over ``x_h``.
+        dimension: ``k``, 1 <= k <= t.
+        start: The first grasp ``x_1`` (on F, inside the bounds) Eq. (13) passes through, in ``x``.
+        obj: The object in the frame of the contact regions: chart centres where a link is inside
+            it are no candidates and the free fingers are placed clear of it. None: only
+            self-collision is checked.
+        scales: ``x = scales * y``, (n,) positive; all ones (``y = x``) if None.
+
+    Raises:
+        GraspSystemError: ``dimension`` is not in ``[1, t]``, or ``scales`` is not n positive
+            finite numbers.
+    """
+
+    def __init__(
+        self,
+        system: GraspSystem,
+        motions: PrincipalMotions,
+        dimension: int,
+        start: FloatArray,
+        obj: GraspObject | None = None,
+        scales: ArrayLike | None = None,
+    ) -> None:
+        self.system = system
+        self.motions = motions
+        self.obj = obj
+        self._dimension = dimension
+        self.scales = np.ones(system.n) if scales is None else np.asarray(scales, np.float64)
+        if self.scales.shape != (system.n,) or not np.all(
+            np.isfinite(self.scales) & (self.scales > 0)
+        ):
+            raise GraspSystemError(f"scales must be {system.n} positive finite numbers")
+        self._start = start / self.scales
+        self._R, self._JR = reduced_system(system, motions, dimension, start)
+
+    def x_of(self, y: ArrayLike) -> FloatArray:
+        """The grasp-system coordinates ``x = scales * y`` of atlas points ``y`` (..., n)."""
+        return np.asarray(y, dtype=np.float64) * self.scales
+
+    def F(self, y: FloatArray) -> FloatArray:
+        """``R(x)`` of Eq. (11) at ``x = scales * y``."""
+        return self._R(self.x_of(y))
+
+    def J(self, y: FloatArray) -> FloatArray:
+        """Jacobian of :meth:`F` by ``y``."""
+        return self._JR(self.x_of(y)) * self.scales
+
+    @property
+    def dimension(self) -> int:
+        """``k``, the dimension of R."""
+        return self._dimension
+
+    @property
+    def t(self) -> int:
+        """Dimension of F."""
+        return self.system.t
+
+    @property
+    def start(self) -> FloatArray:
+        """The first grasp ``x_1``, in ``y``."""
+        return self._start
+
+    @property
+    def retained_variance(self) -> float:
+        """Share of the hand-motion variance the ``t - s`` kept motions explain."""
+        return self.motions.retained_variance(self.system.t - self.dimension)
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Joint limits and contact-region parameter ranges (in ``y``); the object pose is free."""
+        return self.system.lower / self.scales, self.system.upper / self.scales
+
+    def manipulability(self, y: FloatArray) -> Manipulability:
+        """Ellipsoids of object twists reachable with unit actuated joint velocity (hard fingers).
+
+        ``y`` is one grasp (n,) or a batch (..., n).
+        """
+        X = self.x_of(y)
+        points = X.reshape(-1, self.system.n)
+        C = np.array([self.system.hard_finger_constraints(p) for p in points])
+        C = C.reshape(*X.shape[:-1], *C.shape[1:])
+        a = len(self.system.actuated_rows)
+        motions = null_space(C, C.shape[-1] - C.shape[-2])
+        return ellipsoid_indices(motions[..., :a, :], motions[..., a:, :])
+
+    def check_charts(self, centres: FloatArray) -> ChartChecks:
+        """Place the free fingers at every chart centre, then check self- and object collision."""
+        system, hand = self.system, self.system.hand
+        centres = self.x_of(centres)
+        configurations = np.array([system.configuration(x) for x in centres])
+        object_collision = np.zeros(len(centres), dtype=bool)
+        if self.obj is not None:
+            checker = HandObjectClearance(hand, self.obj)
+            free = free_fingers(hand, system.patches)
+            contacts = [c.finger for c in system.contacts]
+            for i, x in enumerate(centres):
+                T = system.object_pose(x).homogeneous  # palm at the origin: palm frame = world
+                if free:
+                    configurations[i] = checker.place_free_fingers(configurations[i], free,
+                                                                   T_world_object=T).q  # fmt: skip
+                # Any penetration, not the clearance: only pieces whose bounding balls overlap a
+                # link are measured.
+                inside = checker.penetrations(configurations[i], 0.0, contacts, T_world_object=T)
+                object_collision[i] = bool(inside)
+        self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
+        return ChartChecks(configurations, self_collision, object_collision)
+
+
+def coordinate_scales(system: GraspSystem, length_m: float) -> FloatArray:
+    """``x = scales * y`` so that a unit of ``y`` moves something by about ``length_m`` [m].
+
+    Joint angles and the object's rotation vector [rad] keep scale 1: a unit turns a link of
+    ``length_m`` (about a finger's length) through ``length_m``. The object's translation [m]
+    gets ``length_m``. A contact parameter gets ``length_m / |dO/dp|``, ``|dO/dp|`` being how far
+    the contact point moves per unit of it at the regions' nominal parameters.
+
+    Raises:
+        GraspSystemError: ``length_m`` is not a positive finite length.
+    """
+    if not (np.isfinite(length_m) and length_m > 0):
+        raise GraspSystemError(f"length_m must be a positive finite length [m], got {length_m}")
+    scales = np.ones(system.n)
+    for contact in system.contacts:
+        rates = np.linalg.norm(
+            contact.region.evaluate(contact.region.nominal).point_jacobian, axis=0
+        )
+        scales[contact.params] = length_m / np.where(rates > 0, rates, length_m)
+    if system.free_object:
+        start = system.pose_slice.start
+        scales[start : start + 3] = length_m
+    return scales
+
+
+MOTION_SOURCES = ("random", "grasps")
+"""Where the principal motions come from: random hand poses, or solved grasps of the regions."""
+
+
+def hand_motions(
+    hand: Hand, system: GraspSystem, samples: int, seed: int, source: str = "random"
+) -> PrincipalMotions:
+    """PCA of hand configurations, restricted to ``x_h`` (Section III).
+
+    Args:
+        hand: The hand.
+        system: The grasp system (its touching fingers' coordinates are ``x_h``).
+        samples: Number of configurations sampled (``"grasps"``: IK problems posed).
+        seed: Seed of the samples.
+        source: ``"random"``: collision-free random hand configurations; ``"grasps"``: grasp
+            postures, the IK's solutions of the regions' grasps at uniformly random contact
+            parameters (the paper takes human grasp postures; these are the hand's own grasps of
+            this object).
+
+    Raises:
+        OptimizationError: ``source`` is unknown, or fewer than two grasps were solved.
+    """
+    rng = np.random.default_rng(seed)
+    if source == "random":
+        X = [hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)]
+    elif source == "grasps":
+        X = _grasp_postures(hand, system.patches, samples, rng)
+    else:
+        raise OptimizationError(f"unknown motion source {source!r}; valid: {MOTION_SOURCES}")
+    return principal_motions(np.array(X)[:, system.coordinates])
+
+
+def _grasp_postures(
+    hand: Hand, patches: GraspPatches, samples: int, rng: np.random.Generator
+) -> list[FloatArray]:
+    """Joint coordinates of the IK's solved grasps at random contact parameters."""
+    free = free_fingers(hand, patches)
+    postures = []
+    for _ in range(samples):
+        params = {f: rng.uniform(r.lower, r.upper) for f, r in patches.regions.items()}
+        result = solve_ik(hand, patches.target(params), free_fingers=free)
+        if result.success:
+            postures.append(result.q[7:])
+    if len(postures) < 2:
+        raise OptimizationError(
+            f"{patches.name}: the IK solved {len(postures)} of {samples} grasps; need two or more"
+        )
+    return postures
+
+
+def free_fingers(hand: Hand, patches: GraspPatches) -> tuple[str, ...]:
+    """The fingers without a contact region: no part of F, placed clear of everything."""
+    return tuple(f for f in hand.fingers if f not in patches.regions)
+
+
+def first_grasp_system(
+    hand: Hand,
+    patches: GraspPatches,
+    free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
+    obj: GraspObject | None = None,
+) -> GraspSystem:
+    """F for ``hand`` and ``patches`` around the IK's grasp at the regions' nominal parameters.
+
+    Fingers without a contact region are left free (they do not enter ``x``); given the object
+    (in the regions' frame), they are placed clear of it and of the other links
+    (``HandObjectClearance.place_free_fingers``). ``free_object`` and ``symmetry_axis`` are those
+    of :class:`~sahgrasp.grasp.GraspSystem`.
+
+    Raises:
+        OptimizationError: The IK finds no such grasp.
+    """
+    free = free_fingers(hand, patches)
+    first = solve_ik(hand, patches.target(), free_fingers=free)
+    if not first.success:
+        raise OptimizationError(f"{patches.name}: the IK found no first grasp ({first.reason})")
+    q = first.q
+    if obj is not None and free:  # the IK's world is the object frame
+        q = HandObjectClearance(hand, obj.placed(np.eye(4))).place_free_fingers(q, free).q
+    return GraspSystem(hand, patches, q, free_object, symmetry_axis)
+
+
+def make_sah_manifold(
+    hand: Hand,
+    patches: GraspPatches,
+    k: int = 2,
+    free_object: bool = True,
+    symmetry_axis: ArrayLike | None = None,
+    obj: GraspObject | None = None,
+    motion_samples: int = 2000,
+    seed: int = 0,
+    motion_source: str = "random",
+    length_scale_m: float | None = None,
+) -> SahGraspManifold:
+    """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
+
+    Args:
+        hand: The hand.
+        patches: Contact regions per finger in the object frame (fingers without one are free).
+        k: Dimension of the relevant-grasp set R.
+        free_object: Let the object pose vary (else it is fixed in the palm).
+        symmetry_axis: Axis (object frame) about which every contact region is revolved: the
+            object's spin about it, which changes nothing but the parametrisation, is left out.
+        obj: The object, in the frame of ``patches`` (see :class:`SahGraspManifold`).
+        motion_samples: Hand configurations sampled for the principal motions.
+        seed: Seed of those samples.
+        motion_source: Where they come from, one of :data:`MOTION_SOURCES` (see
+            :func:`hand_motions`).
+        length_scale_m: Scale the coordinates with :func:`coordinate_scales` at this length [m];
+            None: the atlas works in ``x`` itself (radians and metres mixed).
+
+    Raises:
+        OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds,
+            or ``motion_source`` is unknown or gives too few grasps.
+        GraspSystemError: ``k`` is not in ``[1, t]``.
+    """
+    system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
+    motions = hand_motions(hand, system, motion_samples, seed, motion_source)
+    x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
+    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m)
+    return SahGraspManifold(system, motions, k, x1, obj, scales)
+
+
+def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
+    """Seed grasps for :func:`~sahgrasp.optimization.optimize_components`, (S, n).
+
+    In the atlas's coordinates ``y``: ``x_1`` first, then the IK's solutions of the same contacts
+    (the regions' nominal parameters) from ``count`` random starts (seeds 0..count-1); problems
+    the IK did not solve are left out.
+    """
+    system = problem.system
+    hand, patches = system.hand, system.patches
+    free = free_fingers(hand, patches)
+    seeds = [problem.start]
+    for seed in range(count):
+        settings = IKSettings(init="random", seed=seed)
+        result = solve_ik(hand, patches.target(), settings, free_fingers=free)
+        if result.success:
+            seeds.append(system.point(result.q) / problem.scales)
+    return np.array(seeds)
+
+
+def _start_inside(
+    F: Callable[[FloatArray], FloatArray],
+    J: Callable[[FloatArray], FloatArray],
+    x: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    margin: float = 1e-4,
+) -> FloatArray:
+    """The first grasp moved ``margin`` inside the box and back onto ``F = 0``.
+
+    The IK leaves joints exactly at their limits, where the atlas's projection could step out of
+    the box; coordinates moved inside stay fixed while Newton corrects the others, until all are
+    inside.
+    """
+    inside = x.copy()
+    free = np.ones(x.size, dtype=bool)
+    for _ in range(10):
+        clipped = np.clip(inside, lower + margin, upper - margin)
+        free &= clipped == inside
+        inside = clipped
+        for _ in range(20):
+            residual = F(inside)
+            if np.linalg.norm(residual) < 1e-12:
+                break
+            inside[free] += np.linalg.lstsq(J(inside)[:, free], -residual, rcond=None)[0]
+        if np.all((inside >= lower + margin) & (inside <= upper - margin)):
+            return inside
+    raise OptimizationError("the first grasp cannot be moved inside the joint and region bounds")

@@ -34,7 +34,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.collision import SelfCollision
+from sahgrasp.collision import Penetration, SelfCollision
 from sahgrasp.errors import HandModelError, InvalidConfigurationError
 from sahgrasp.hand_checks import (
     check_name,
@@ -53,6 +53,7 @@ __all__ = [
     "FingerSpec",
     "Hand",
     "HandDescription",
+    "HandState",
     "allegro_description",
     "load_hand",
     "sah_description",
@@ -66,6 +67,8 @@ _FINITE_WEIGHT = 1e-10
 """Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
 q_i (at most 1.8e298 each), nor fall into the slow subnormal range for joint-sized values."""
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_WRIST_NQ = 7
+"""Entries of ``q`` the free-flyer wrist takes (position, then quaternion)."""
 
 
 @dataclass(frozen=True)
@@ -410,6 +413,46 @@ class ContactJacobians:
         return -_skew_batch(self.state.normals) @ self.angular
 
 
+@dataclass(frozen=True)
+class HandState:
+    """Immutable kinematic snapshot of a hand at one configuration (every array is read-only).
+
+    Unlike Pinocchio's shared ``hand.data``, a snapshot cannot be overwritten by a later query,
+    so it can be kept, compared and passed between modules without call-order dependencies.
+
+    Attributes:
+        q: The configuration (a read-only copy).
+        contacts: Contact points, sphere centres and normals (world frame).
+        jacobians: Their Jacobians w.r.t. ``v``; None when not requested.
+        world_jacobian: Pinocchio's stack of every joint's motion subspace in the world frame,
+            shape (6, nvExtended) (linear part first, about the world origin; one column per
+            joint, mimic joints included); None without Jacobians.
+    """
+
+    q: NDArray[np.float64]
+    contacts: ContactState
+    jacobians: ContactJacobians | None
+    world_jacobian: NDArray[np.float64] | None
+    _supports: NDArray[np.float64] = field(repr=False)
+    _reduce: NDArray[np.float64] = field(repr=False)
+
+    def point_jacobian(self, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Jacobian (3, nv) [m/rad] of a world point ``point`` [m] fixed to ``joint``'s body.
+
+        Joint 0 is the world: its Jacobian is zero.
+
+        Raises:
+            InvalidConfigurationError: The snapshot was taken without Jacobians.
+        """
+        if self.world_jacobian is None:
+            raise InvalidConfigurationError(
+                "this hand state has no Jacobians; take it with hand.state(q, jacobians=True)"
+            )
+        J = self.world_jacobian
+        # v_p = v_o + omega x p = J_lin - [p]x J_ang, on the joints that move the body.
+        return np.asarray(((J[:3] - _skew(point) @ J[3:]) * self._supports[joint]) @ self._reduce)
+
+
 class Hand:
     """A hand: Pinocchio model/data, coal self-collision, and the contact queries of the papers.
 
@@ -432,8 +475,14 @@ class Hand:
         self.data = model.createData()
         self._q_shape = (model.nq,)
         self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
-        self._jacobian_frames = self._contact_frames + self._tip_frames
         self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
+        self._jacobian_frames = self._contact_frames + self._tip_frames
+        # Frames of Hand.contact_stack, (contact, fingertip-sphere centre) per finger.
+        self._stack_frames = [
+            f for pair in zip(self._contact_frames, self._tip_frames, strict=True) for f in pair
+        ]
+        self._stack_selector = np.array([[0.0, 0.0, 0.0, 1.0], [-self.radius_m, 0.0, 0.0, 1.0]])
+        self._supports, self._reduce = _support_masks(model)
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -569,12 +618,12 @@ class Hand:
     @cached_property
     def lower(self) -> NDArray[np.float64]:
         """Lower limits of ``q[7:]`` [rad]."""
-        return np.array(self.model.lowerPositionLimit[7:], dtype=np.float64)
+        return np.array(self.model.lowerPositionLimit[_WRIST_NQ:], dtype=np.float64)
 
     @cached_property
     def upper(self) -> NDArray[np.float64]:
         """Upper limits of ``q[7:]`` [rad]."""
-        return np.array(self.model.upperPositionLimit[7:], dtype=np.float64)
+        return np.array(self.model.upperPositionLimit[_WRIST_NQ:], dtype=np.float64)
 
     def check_q(self, q: ArrayLike) -> NDArray[np.float64]:
         """Return ``q`` as a float array, or raise if its size is wrong or it holds NaN/inf."""
@@ -591,7 +640,7 @@ class Hand:
 
     def within_limits(self, q: NDArray[np.float64], tol: float = 1e-9) -> bool:
         """True if every joint coordinate is within its limits (mimic joints follow)."""
-        joints = q[7:]
+        joints = self.finger_part(q)
         return bool(np.all(joints >= self.lower - tol) and np.all(joints <= self.upper + tol))
 
     def configuration(
@@ -608,23 +657,33 @@ class Hand:
         """
         q = np.empty(self.nq)
         pose = pin.SE3.Identity() if T_world_palm is None else T_world_palm
-        q[:7] = pin.SE3ToXYZQUAT(pose)
+        self.wrist_part(q)[:] = pin.SE3ToXYZQUAT(pose)
         if coordinates is None or isinstance(coordinates, Mapping):
-            q[7:] = 0.5 * (self.lower + self.upper)
+            self.finger_part(q)[:] = 0.5 * (self.lower + self.upper)
             for name, value in (coordinates or {}).items():
                 q[7 + self.coordinate_index(name)] = float(value)
         else:
-            q[7:] = np.asarray(coordinates, dtype=np.float64)
+            self.finger_part(q)[:] = np.asarray(coordinates, dtype=np.float64)
         return self.check_q(q)
+
+    @staticmethod
+    def wrist_part(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The wrist part of ``q``: position [m] and quaternion ``[x, y, z, w]`` (a view, 7)."""
+        return q[:_WRIST_NQ]
+
+    @staticmethod
+    def finger_part(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The joint coordinates of ``q`` [rad], virtual contact joints included (a view)."""
+        return q[_WRIST_NQ:]
 
     @staticmethod
     def wrist_pose(q: NDArray[np.float64]) -> pin.SE3:
         """Palm pose ``T_world_palm`` encoded in ``q``."""
-        return pin.XYZQUATToSE3(q[:7])
+        return pin.XYZQUATToSE3(q[:_WRIST_NQ])
 
     def joint_values(self, q: NDArray[np.float64]) -> dict[str, float]:
         """Every URDF joint angle [rad] by name, mimic joints included (virtual ones excluded)."""
-        coords = dict(zip(self.coordinate_names, q[7:].tolist(), strict=True))
+        coords = dict(zip(self.coordinate_names, self.finger_part(q).tolist(), strict=True))
         out = {n: coords[n] for n in self.joint_names}
         for mimic, (leader, scale, offset) in self.mimic_joints.items():
             out[mimic] = scale * coords[leader] + offset
@@ -686,6 +745,72 @@ class Hand:
         # ndarray.dot dispatches faster than the @ operator.
         return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
 
+    def contact_stack(
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
+    ) -> NDArray[np.float64]:
+        """Contact points and sphere centres as one vector ``(p_i, r_i)`` per finger [m].
+
+        The solvers' hot path: one forward-kinematics pass and one product, shape (6 k,) for the
+        ``k`` fingers (indices into :attr:`fingers`; all if None).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.forwardKinematics(self.model, self.data, self._finite(q))
+        return self._stack(fingers)
+
+    def contact_stack_jacobian(
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`contact_stack` and its Jacobian w.r.t. ``v``, shape (6 k, nv) [m/rad].
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        J = self.contact_jacobian(q, fingers)  # its joint pass leaves the placements too
+        return self._stack(fingers), J
+
+    def contact_jacobian(
+        self, q: NDArray[np.float64], fingers: list[int] | None = None
+    ) -> NDArray[np.float64]:
+        """The Jacobian of :meth:`contact_stack_jacobian` alone, for a caller that has the stack.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        model, data = self.model, self.data
+        pin.computeJointJacobians(model, data, self._finite(q))
+        frames = self._stack_frames if fingers is None else self._stack_frames_of(fingers)
+        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in frames])
+        return J[:, :3].reshape(-1, self.model.nv)
+
+    def _stack_frames_of(self, fingers: list[int]) -> list[int]:
+        return [f for i in fingers for f in self._stack_frames[2 * i : 2 * i + 2]]
+
+    def _stack(self, fingers: list[int] | None) -> NDArray[np.float64]:
+        """(6 k,) points and centres of ``fingers`` (joint placements up to date)."""
+        model, data = self.model, self.data
+        frames = (
+            self._contact_frames if fingers is None else [self._contact_frames[i] for i in fingers]
+        )
+        H = np.array([pin.updateFramePlacement(model, data, f).homogeneous for f in frames])
+        # Rows of H^T: normal, ..., origin = contact point; centre = point - R normal.
+        return np.asarray((self._stack_selector @ H.transpose(0, 2, 1)[:, :, :3]).ravel())
+
+    def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
+        """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        q = np.array(self._finite(q))
+        if not jacobians:
+            pin.forwardKinematics(self.model, self.data, q)
+            return _frozen(HandState(q, self._state(), None, None, self._supports, self._reduce))
+        jac = self._jacobians(q)
+        J = np.array(self.data.J)
+        return _frozen(HandState(q, jac.state, jac, J, self._supports, self._reduce))
+
     def contact_jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
         """Contact state and its Jacobians w.r.t. ``v`` (see :class:`ContactJacobians`).
 
@@ -694,8 +819,12 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
+        return self._jacobians(self._finite(q))
+
+    def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
+        # Frame by frame: for this (F, 3, nv) layout faster than the folded data.J product.
         model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, self._finite(q))
+        pin.computeJointJacobians(model, data, q)
         J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
         F = len(self.fingers)
         return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
@@ -736,6 +865,14 @@ class Hand:
         """
         return self.collision.in_collision(self._finite(q))
 
+    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+        """Pairs of hand bodies closer than ``margin_m`` [m] at ``q``, with their witnesses.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        return self.collision.penetrations(self._finite(q), margin_m)
+
     def min_distance(self, q: NDArray[np.float64]) -> float:
         """Smallest signed distance [m] between checked pairs of hand bodies at ``q``.
 
@@ -762,6 +899,53 @@ class Hand:
         fingers = len(self.joint_names)
         virtual = len(self.virtual_joint_names)
         return {"wrist": 6, "fingers": fingers, "virtual": virtual, "total": 6 + fingers + virtual}
+
+
+_SKEW_BASIS = np.array(
+    [
+        [0, 0, 0, 0, 0, -1, 0, 1, 0],
+        [0, 0, 1, 0, 0, 0, -1, 0, 0],
+        [0, -1, 0, 1, 0, 0, 0, 0, 0],
+    ],
+    dtype=np.float64,
+)
+"""``p @ _SKEW_BASIS`` is the flattened cross-product matrix ``[p]x`` of the row vector ``p``."""
+
+
+def _skew(p: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.asarray((p @ _SKEW_BASIS).reshape(3, 3))
+
+
+def _support_masks(model: pin.Model) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Masks of the columns of ``data.J`` that move each joint's body, and ``data.J`` -> ``v``.
+
+    Pinocchio's ``data.J`` has one column per joint degree of freedom, mimic joints included
+    (``nvExtended`` columns); ``v`` has only the independent ones. Returns the masks, shape
+    (njoints, nvExtended), 1 where the column moves the joint's body, and the matrix
+    (nvExtended, nv) folding a mimic joint's column into its leader's, times the multiplier.
+    """
+    masks = np.zeros((model.njoints, model.nvExtended))
+    reduce = np.zeros((model.nvExtended, model.nv))
+    for j in range(1, model.njoints):
+        joint = model.joints[j]
+        ext, width = joint.idx_vExtended, max(joint.nv, 1)
+        scale = joint.extract().scaling if joint.shortname() == "JointModelMimic" else 1.0
+        reduce[ext : ext + width, joint.idx_v : joint.idx_v + width] += scale * np.eye(width)
+        for k in model.supports[j][1:]:
+            first = model.joints[k].idx_vExtended
+            masks[j, first : first + max(model.joints[k].nv, 1)] = 1.0
+    return masks, reduce
+
+
+def _frozen(state: HandState) -> HandState:
+    """``state`` with every array made read-only (a snapshot cannot be changed in place)."""
+    arrays = [state.q, *vars(state.contacts).values(), state.world_jacobian]
+    if state.jacobians is not None:
+        arrays += [state.jacobians.points, state.jacobians.centres, state.jacobians.angular]
+    for array in arrays:
+        if array is not None:
+            array.flags.writeable = False
+    return state
 
 
 def _skew_batch(v: NDArray[np.float64]) -> NDArray[np.float64]:

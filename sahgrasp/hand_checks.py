@@ -12,7 +12,6 @@ in the file. Messages show a rejected value with ``repr`` so that nothing reache
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -24,6 +23,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, cast
 
+from sahgrasp import fileio
 from sahgrasp.errors import HandModelError
 
 __all__ = [
@@ -160,24 +160,7 @@ def read_json(path: Path, what: str) -> Any:
     Raises:
         HandModelError: Unreadable, not UTF-8 (binary, UTF-16), not JSON, or nested too deeply.
     """
-    where = f"{what} {shown(path)}"
-    try:
-        raw = path.read_bytes()
-    except OSError as exc:
-        raise HandModelError(f"cannot read {where}: {exc.strerror}") from exc
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise HandModelError(
-            f"{where} is not UTF-8 text (byte {exc.start} is {raw[exc.start]:#04x}): a binary "
-            "or UTF-16 file? Save it as UTF-8 JSON"
-        ) from None
-    try:
-        return json.loads(text)
-    except RecursionError:
-        raise HandModelError(f"{where} is nested too deeply to be a hand description") from None
-    except ValueError as exc:
-        raise HandModelError(f"{where} is not valid JSON: {exc}") from None
+    return fileio.read_json(path, what, HandModelError)
 
 
 def check_urdf(data: bytes, where: str) -> str:

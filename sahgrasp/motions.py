@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import AtlasError
+from sahgrasp.errors import PrincipalMotionsError
 
 __all__ = ["PrincipalMotions", "principal_motions"]
 
@@ -39,11 +39,11 @@ class PrincipalMotions:
         """``E_s^T``: the ``s`` directions of least variance, as rows, shape (s, h) (Eq. (10)).
 
         Raises:
-            AtlasError: ``s`` is not in ``[0, h)``.
+            PrincipalMotionsError: ``s`` is not in ``[0, h)``.
         """
         h = len(self.variances)
         if not 0 <= s < h:
-            raise AtlasError(f"s = t - k must satisfy 0 <= s < h = {h}, got s = {s}")
+            raise PrincipalMotionsError(f"s = t - k must satisfy 0 <= s < h = {h}, got s = {s}")
         return self.directions[:, h - s :].T
 
     def retained_variance(self, s: int) -> float:

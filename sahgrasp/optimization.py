@@ -1,18 +1,23 @@
-"""Global grasp optimization (atlas-grasp-optimization, Algorithm 1) on a sahgrasp hand.
+"""Global grasp optimization (the atlas paper, Algorithm 1) on any grasp manifold.
 
-``GraspOptimization(F, X_h, x_1, Q, t, k, r, epsilon)``: principal hand motions from sampled hand
-configurations, ``R = F + E_s^T (x_h - x_1h)`` with ``s = t - k``, an atlas of ``R`` from the first
-grasp (found with the IK), and a quality index at every chart centre. The fingertip contact regions
-are box bounds of the atlas.
+Rosales, Porta and Ros, "Global optimization of robotic grasps", Robotics: Science and Systems,
+2011: ``GraspOptimization(F, X_h, x_1, Q, t, k, r, epsilon)`` builds an atlas of the relevant-grasp
+set ``R`` (the feasible grasps F reduced by ``s = t - k`` principal-motion constraints, Eq. (11))
+from a first grasp ``x_1`` and evaluates a quality index at every chart centre.
+
+One protocol, :class:`GraspManifold`, says what the optimization needs of a problem: ``F`` and
+``J`` of ``R``, its box bounds, the start point, the dimension ``k``, the manipulability ellipsoid
+at chart centres and the collision checks of chart centres. The planar hand
+(:class:`sahgrasp.planar.PlanarGraspProblem`) and the SAH grasp system with its principal motions
+(:class:`sahgrasp.grasp.SahGraspManifold`) implement it; :func:`optimize` runs Algorithm 1 on
+either and returns one :class:`OptimizationResult`.
 
 Collisions (Section IV: "collisions could be considered as well ... returning the best collision
-free grasp"): at every chart centre scored, the fingers without a contact region are first placed
-where they touch nothing (``HandObjectClearance.place_free_fingers``: the nearest configuration of
-their own joints clear of the object and of the other links; they are no part of F, so this
-changes neither the grasp nor its index), then the hand is checked for self-collision and, given
-the object, for hand-object collision (any link inside the object, the contact fingertip spheres
-excepted up to ``d_min``). Colliding chart centres are no candidates: the optimum returned is the
-best collision-free grasp, and the best over all charts is kept beside it.
+free grasp"): the problem checks every chart centre (:meth:`GraspManifold.check_charts`; the SAH
+places its free fingers first). Colliding chart centres are no candidates: the optimum returned is
+the best collision-free grasp, and the best over all charts is kept beside it.
+
+This module knows no hand: it imports neither Pinocchio nor the IK.
 """
 
 from __future__ import annotations
@@ -20,358 +25,338 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
-from sahgrasp.errors import AtlasError
-from sahgrasp.grasp import GraspSystem, reduced_system
-from sahgrasp.hand import Hand, load_hand
-from sahgrasp.ik import solve_ik
-from sahgrasp.motions import PrincipalMotions, principal_motions
-from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
-from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.errors import OptimizationError
+from sahgrasp.progress import ProgressCallback
 from sahgrasp.quality import (
     INDICES,
-    SINGULAR_THRESHOLDS,
+    IndexEvaluation,
     Manipulability,
-    ellipsoid_indices,
-    null_space,
+    evaluate_index,
 )
 
 __all__ = [
-    "EXPERIMENTS",
-    "Experiment",
-    "GraspOptimizationResult",
-    "first_grasp_system",
-    "free_fingers",
-    "hand_motions",
-    "optimize_grasp",
-    "run_experiment",
+    "ChartChecks",
+    "ComponentSearch",
+    "GraspManifold",
+    "IndexFunction",
+    "OptimizationResult",
+    "OptimizationSettings",
+    "optimize",
+    "optimize_components",
 ]
+
+FloatArray = NDArray[np.float64]
+
+IndexFunction = Callable[[FloatArray], ArrayLike]
+"""A user quality index: chart centres (N, n) -> N values, larger is better (NaN: undefined).
+
+The centres are in the problem's coordinates (a scaled :class:`~sahgrasp.grasp.SahGraspManifold`
+maps them back with ``x_of``)."""
 
 
 @dataclass(frozen=True)
-class GraspOptimizationResult:
-    """Outcome of :func:`optimize_grasp`.
+class ChartChecks:
+    """Per chart centre: the configuration to show (free fingers placed) and its collisions.
 
     Attributes:
-        system: The feasible-grasp system F.
+        configurations: The problem's configuration at each centre, (N, ...) (the SAH: the hand
+            configuration with the palm at the origin; the planar hand: the centre itself).
+        self_collision: Centres where the hand collides with itself, (N,).
+        object_collision: Centres where a link is inside the object, (N,).
+    """
+
+    configurations: FloatArray
+    self_collision: NDArray[np.bool_]
+    object_collision: NDArray[np.bool_]
+
+    @classmethod
+    def none(cls, centres: FloatArray) -> ChartChecks:
+        """No collision anywhere; the centres are the configurations."""
+        clear = np.zeros(len(centres), dtype=bool)
+        return cls(centres, clear, clear.copy())
+
+
+class GraspManifold(Protocol):
+    """What Algorithm 1 needs of a grasp problem: the relevant-grasp set ``R`` (Eq. (11)).
+
+    ``F``, ``J`` and :meth:`manipulability` take one point (n,) or, where the problem allows it,
+    a batch (..., n).
+    """
+
+    @property
+    def dimension(self) -> int:
+        """``k``, the dimension of R (Eq. (12))."""
+        ...
+
+    @property
+    def t(self) -> int:
+        """Dimension of the feasible-grasp manifold F (``s = t - k`` motion constraints)."""
+        ...
+
+    @property
+    def start(self) -> FloatArray:
+        """The first grasp ``x_1`` on R, (n,), inside the bounds."""
+        ...
+
+    def F(self, x: FloatArray) -> FloatArray:
+        """``R(x)``: the grasp equations plus the principal-motion constraints, (m,)."""
+        ...
+
+    def J(self, x: FloatArray) -> FloatArray:
+        """Jacobian of :meth:`F`, (m, n)."""
+        ...
+
+    def bounds(self) -> tuple[FloatArray, FloatArray]:
+        """Lower and upper box bounds on ``x`` (joint limits, contact regions), (n,) each."""
+        ...
+
+    def manipulability(self, x: FloatArray) -> Manipulability:
+        """Manipulability ellipsoids at the grasps ``x`` (..., n)."""
+        ...
+
+    def check_charts(self, centres: FloatArray) -> ChartChecks:
+        """Configurations and collisions at the chart centres (N, n)."""
+        ...
+
+
+@dataclass(frozen=True)
+class OptimizationSettings:
+    """Settings of :func:`optimize`.
+
+    Attributes:
+        radius: Chart radius ``r`` (in the units of ``x``).
+        epsilon: Threshold of Eqs. (17)-(18).
+        index: Manipulability index to maximise (one of :data:`~sahgrasp.quality.INDICES`);
+            ignored when ``index_fn`` is given.
+        index_fn: A user quality index instead of ``index`` (see :data:`IndexFunction`).
+        max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
+        progress: Hears of every new chart (:class:`~sahgrasp.progress.ProgressCallback`).
+
+    Raises:
+        OptimizationError: ``index`` is unknown and no ``index_fn`` is given.
+    """
+
+    radius: float
+    epsilon: float
+    index: str = "volume"
+    index_fn: IndexFunction | None = None
+    max_charts: int = 20_000
+    progress: ProgressCallback | None = None
+
+    def __post_init__(self) -> None:
+        if self.index_fn is None and self.index not in INDICES:
+            raise OptimizationError(
+                f"unknown index {self.index!r}; valid: {', '.join(INDICES)} or an index_fn"
+            )
+
+    @property
+    def index_name(self) -> str:
+        """The index's name: ``"user"`` for an ``index_fn``."""
+        return "user" if self.index_fn is not None else self.index
+
+    def atlas_settings(self) -> AtlasSettings:
+        """The atlas settings (start tolerance 1e-4: the IK's first grasp is that accurate)."""
+        return AtlasSettings(
+            radius=self.radius, epsilon=self.epsilon, max_charts=self.max_charts, start_tol=1e-4
+        )
+
+
+@dataclass(frozen=True)
+class OptimizationResult:
+    """Outcome of :func:`optimize`.
+
+    Attributes:
+        problem: The grasp manifold.
         atlas: The atlas of R.
-        index: Name of the quality index (``"user"`` for a user ``index_fn``).
-        values: Index per chart (NaN where the chart centre is not a valid grasp).
+        settings: The settings.
+        all_values: Index per chart, colliding charts included (NaN: undefined).
         valid: Chart centres without collision (self and hand-object).
         best: Chart with the largest index among valid ones.
         worst: Chart with the smallest index among valid ones.
-        all_values: Index per chart, colliding charts included.
         best_overall: Chart with the largest index over all charts (``best`` if that is valid).
-        configurations: Hand configuration per chart (palm at the origin), free fingers placed.
-        self_collision: Chart centres where the hand collides with itself.
-        object_collision: Chart centres where a link is inside the object (all False without
-            an object).
-        obj: The object (in its own frame), or None when only self-collision is checked.
-        retained_variance: Share of the hand-motion variance the kept motions explain.
-        atlas_seconds: Atlas build time [s].
-        quality_seconds: Index evaluation time (with the validity checks) [s].
-        motions: The principal hand motions (Section III).
-        start: The first grasp ``x_1`` the atlas starts from and Eq. (13) passes through.
-        settings: The atlas settings.
+        checks: Configurations (free fingers placed) and collisions per chart.
+        quality: Manipulability ellipsoid per chart (None with a user ``index_fn``).
+        quality_seconds: Index evaluation time, with the collision checks [s].
     """
 
-    system: GraspSystem
+    problem: GraspManifold
     atlas: Atlas
-    index: str
-    values: NDArray[np.float64]
+    settings: OptimizationSettings
+    all_values: FloatArray
     valid: NDArray[np.bool_]
     best: int
     worst: int
-    retained_variance: float
-    atlas_seconds: float
-    quality_seconds: float
-    motions: PrincipalMotions
-    start: NDArray[np.float64]
-    settings: AtlasSettings
-    all_values: NDArray[np.float64]
     best_overall: int
-    configurations: NDArray[np.float64]
-    self_collision: NDArray[np.bool_]
-    object_collision: NDArray[np.bool_]
-    obj: GraspObject | None
+    checks: ChartChecks
+    quality: Manipulability | None
+    quality_seconds: float
 
-    def reduced_system(self) -> tuple[Any, Any]:
-        """``R`` and its Jacobian (Eq. (11)) whose solution set the atlas covers."""
-        return reduced_system(self.system, self.motions, self.atlas.dim, self.start)
+    @property
+    def index(self) -> str:
+        """Name of the quality index (``"user"`` for a user ``index_fn``)."""
+        return self.settings.index_name
 
-    def summary(self) -> dict[str, Any]:
-        """JSON-able summary (charts, dimensions, times, best and worst grasps)."""
+    @property
+    def values(self) -> FloatArray:
+        """Index per chart, NaN where the chart centre collides."""
+        return np.where(self.valid, self.all_values, np.nan)
 
-        def grasp(i: int) -> dict[str, Any]:
-            threshold = SINGULAR_THRESHOLDS.get(self.index)
-            value = float(self.all_values[i])
-            return {"chart": i, "value": value,
-                    "singular": None if threshold is None else bool(value < threshold),
-                    "collision_free": bool(self.valid[i]),
-                    "joints": self.system.hand.joint_values(self.configurations[i]),
-                    "x": self.atlas.centres[i].tolist()}  # fmt: skip
+    @property
+    def atlas_seconds(self) -> float:
+        """Atlas build time [s]."""
+        return self.atlas.build_seconds
 
-        return {
-            "problem": self.system.patches.name,
-            "charts": self.atlas.n_charts,
-            "complete": self.atlas.complete,
-            "n": self.system.n,
-            "t": self.system.t,
-            "k": self.atlas.dim,
-            "s": self.system.t - self.atlas.dim,
-            "r": self.atlas.radius,
-            "epsilon": self.atlas.epsilon,
-            "index": self.index,
-            "valid_charts": int(self.valid.sum()),
-            "colliding_charts": int((~self.valid).sum()),
-            "self_collision_charts": int(self.self_collision.sum()),
-            "object_collision_charts": int(self.object_collision.sum()),
-            "retained_variance": self.retained_variance,
-            "atlas_seconds": self.atlas_seconds,
-            "quality_seconds": self.quality_seconds,
-            "best": grasp(self.best),
-            "worst": grasp(self.worst),
-            "best_overall": grasp(self.best_overall),
-        }
+    @property
+    def configurations(self) -> FloatArray:
+        """Configuration per chart, free fingers placed."""
+        return self.checks.configurations
+
+    def ranked_by(self, index: str) -> IndexEvaluation:
+        """Values, best and worst valid charts by a built-in index of the same ellipsoids.
+
+        Raises:
+            OptimizationError: A user ``index_fn`` was optimised (no ellipsoids).
+            QualityError: ``index`` is unknown.
+        """
+        return evaluate_index(self.atlas, _ellipsoid_index(self.quality, index), True, self.valid)
 
 
-def hand_motions(hand: Hand, system: GraspSystem, samples: int, seed: int) -> PrincipalMotions:
-    """PCA of collision-free random hand configurations, restricted to ``x_h`` (Section III)."""
-    rng = np.random.default_rng(seed)
-    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
-    return principal_motions(X[:, system.coordinates])
-
-
-def free_fingers(hand: Hand, patches: GraspPatches) -> tuple[str, ...]:
-    """The fingers without a contact region: no part of F, placed clear of everything."""
-    return tuple(f for f in hand.fingers if f not in patches.regions)
-
-
-def first_grasp_system(
-    hand: Hand,
-    patches: GraspPatches,
-    free_object: bool = True,
-    symmetry_axis: ArrayLike | None = None,
-    obj: GraspObject | None = None,
-) -> GraspSystem:
-    """F for ``hand`` and ``patches`` around the IK's grasp at the regions' nominal parameters.
-
-    Fingers without a contact region are left free (they do not enter ``x``); given the object
-    (in the regions' frame), they are placed clear of it and of the other links
-    (``HandObjectClearance.place_free_fingers``). ``free_object`` and ``symmetry_axis`` are those
-    of :class:`~sahgrasp.grasp.GraspSystem`.
+def _ellipsoid_index(quality: Manipulability | None, index: str) -> IndexFunction:
+    """The values of built-in ``index`` of the ellipsoids already computed, as an index function.
 
     Raises:
-        AtlasError: The IK finds no such grasp.
+        OptimizationError: No ellipsoids (a user ``index_fn`` was optimised).
     """
-    free = free_fingers(hand, patches)
-    first = solve_ik(hand, patches.target(), free_fingers=free)
-    if not first.success:
-        raise AtlasError(f"{patches.name}: the IK found no first grasp ({first.reason})")
-    q = first.q
-    if obj is not None and free:  # the IK's world is the object frame
-        q = HandObjectClearance(hand, obj.placed(np.eye(4))).place_free_fingers(q, free).q
-    return GraspSystem(hand, patches, q, free_object, symmetry_axis)
+    if quality is None:
+        raise OptimizationError("a user index_fn was optimised: no ellipsoids to rank by")
+    values = quality.index(index)
+    return lambda _centres: values
 
 
-def optimize_grasp(
-    hand: Hand,
-    patches: GraspPatches,
-    k: int = 2,
-    radius: float = 0.1,
-    epsilon: float = 0.5,
-    index: str = "volume",
-    free_object: bool = True,
-    symmetry_axis: ArrayLike | None = None,
-    max_charts: int = 20_000,
-    motion_samples: int = 2000,
-    seed: int = 0,
-    progress: bool = False,
-    index_fn: Callable[[GraspSystem, NDArray[np.float64]], float] | None = None,
-    obj: GraspObject | None = None,
-) -> GraspOptimizationResult:
-    """Algorithm 1 of the atlas paper for ``hand`` and the object's contact ``patches``.
+def optimize(
+    problem: GraspManifold, settings: OptimizationSettings, start: ArrayLike | None = None
+) -> OptimizationResult:
+    """Algorithm 1: atlas of R from ``problem.start``, then the index at every chart centre.
 
     Args:
-        hand: The hand.
-        patches: Contact regions per finger in the object frame (fingers without one are free).
-        k: Dimension of the relevant-grasp set R.
-        radius: Chart radius ``r`` (x mixes radians and metres; see docs/atlas.md).
-        epsilon: Threshold of Eqs. (17)-(18).
-        index: Manipulability index (``inverse_condition``, ``volume``, ``min_semiaxis``).
-        free_object: Let the object pose vary (else it is fixed in the palm).
-        symmetry_axis: Axis (object frame) about which every contact region is revolved: the
-            object's spin about it, which changes nothing but the parametrisation, is left out.
-        max_charts: Cap on the atlas size.
-        motion_samples: Hand configurations sampled for the principal motions.
-        seed: Seed of those samples.
-        progress: Show the atlas progress bar.
-        index_fn: A user quality index ``f(system, x) -> float`` instead of ``index``; larger
-            is better.
-        obj: The object, in the frame of ``patches``: chart centres where a link is inside it
-            (contact fingertips excepted up to ``d_min``) are no candidates, and the free
-            fingers are placed clear of it. None: only self-collision is checked.
+        problem: The grasp manifold.
+        settings: Chart radius, epsilon, index, cap, progress.
+        start: A point of R to start from instead of ``problem.start`` (n,): the atlas covers
+            the connected component of R holding it.
 
     Raises:
-        AtlasError: ``index`` is unknown (and no ``index_fn`` given), the IK finds no first grasp,
-            ``k`` is not in ``[1, t]``, or no chart centre is collision-free.
+        AtlasError: The atlas settings are out of range, or the start is not on R.
+        OptimizationError: No chart centre is collision-free.
+        QualityError: A user ``index_fn`` gives the wrong number of values or only NaN.
     """
-    if index_fn is None and index not in INDICES:
-        raise AtlasError(f"unknown index {index!r}; valid: {list(INDICES)} or a callable")
-    system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
-    motions = hand_motions(hand, system, motion_samples, seed)
-    x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
-    R, JR = reduced_system(system, motions, k, x1)
-    settings = AtlasSettings(radius=radius, epsilon=epsilon, max_charts=max_charts,
-                             start_tol=1e-4, progress=progress)  # fmt: skip
-    start = time.perf_counter()
-    atlas = build_atlas(R, JR, x1, k, settings, system.lower, system.upper)
-    atlas_seconds = time.perf_counter() - start
-    start = time.perf_counter()
-    checks = _check_charts(system, atlas, obj)
-    values = _evaluate(system, atlas, index, index_fn)
-    quality_seconds = time.perf_counter() - start
-    valid = ~(checks.self_collision | checks.object_collision)
-    candidates = np.flatnonzero(valid)
-    if not candidates.size:
-        raise AtlasError(
-            f"{patches.name}: no chart centre is a collision-free grasp "
-            f"({int(checks.self_collision.sum())} of {atlas.n_charts} self-colliding, "
-            f"{int(checks.object_collision.sum())} inside the object)"
-        )
-    best = int(candidates[np.argmax(values[candidates])])
-    worst = int(candidates[np.argmin(values[candidates])])
-    return GraspOptimizationResult(
-        system, atlas, "user" if index_fn else index, np.where(valid, values, np.nan), valid,
-        best, worst, motions.retained_variance(system.t - k), atlas_seconds, quality_seconds,
-        motions, x1, settings, values, int(np.argmax(values)), checks.configurations,
-        checks.self_collision, checks.object_collision, obj,
+    lower, upper = problem.bounds()
+    x0 = problem.start if start is None else np.asarray(start, dtype=np.float64)
+    atlas = build_atlas(
+        problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
+        lower, upper, settings.progress,
     )  # fmt: skip
-
-
-def _start_inside(
-    F: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-    J: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-    x: NDArray[np.float64],
-    lower: NDArray[np.float64],
-    upper: NDArray[np.float64],
-    margin: float = 1e-4,
-) -> NDArray[np.float64]:
-    """The first grasp moved ``margin`` inside the box and back onto ``F = 0``.
-
-    The IK leaves joints exactly at their limits, where the atlas's projection could step out of
-    the box; coordinates moved inside stay fixed while Newton corrects the others, until all are
-    inside.
-    """
-    inside = x.copy()
-    free = np.ones(x.size, dtype=bool)
-    for _ in range(10):
-        clipped = np.clip(inside, lower + margin, upper - margin)
-        free &= clipped == inside
-        inside = clipped
-        for _ in range(20):
-            residual = F(inside)
-            if np.linalg.norm(residual) < 1e-12:
-                break
-            inside[free] += np.linalg.lstsq(J(inside)[:, free], -residual, rcond=None)[0]
-        if np.all((inside >= lower + margin) & (inside <= upper - margin)):
-            return inside
-    raise AtlasError("the first grasp cannot be moved inside the joint and region bounds")
-
-
-def _manipulability(system: GraspSystem, x: NDArray[np.float64]) -> Manipulability:
-    """Ellipsoid of object twists reachable with unit actuated joint velocity (hard fingers)."""
-    C = system.hard_finger_constraints(x)
-    a = len(system.actuated_rows)
-    motions = null_space(C, C.shape[1] - C.shape[0])
-    return ellipsoid_indices(motions[:a], motions[a:])
-
-
-@dataclass(frozen=True)
-class _ChartChecks:
-    """Per chart centre: the hand configuration (free fingers placed) and its collisions."""
-
-    configurations: NDArray[np.float64]
-    self_collision: NDArray[np.bool_]
-    object_collision: NDArray[np.bool_]
-
-
-def _check_charts(system: GraspSystem, atlas: Atlas, obj: GraspObject | None) -> _ChartChecks:
-    """Place the free fingers at every chart centre, then check self- and object collision."""
-    hand = system.hand
-    configurations = np.array([system.configuration(x) for x in atlas.centres])
-    object_collision = np.zeros(atlas.n_charts, dtype=bool)
-    if obj is not None:
-        checker = HandObjectClearance(hand, obj)
-        free = free_fingers(hand, system.patches)
-        contacts = [c.finger for c in system.contacts]
-        for i, x in enumerate(atlas.centres):
-            T = system.object_pose(x).homogeneous  # palm at the origin: palm frame = world
-            if free:
-                configurations[i] = checker.place_free_fingers(configurations[i], free,
-                                                               T_world_object=T).q  # fmt: skip
-            # Any penetration, not the clearance: only pieces whose bounding balls overlap a
-            # link are measured.
-            inside = checker.penetrations(configurations[i], 0.0, contacts, T_world_object=T)
-            object_collision[i] = bool(inside)
-    self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
-    return _ChartChecks(configurations, self_collision, object_collision)
+    return _evaluate(problem, atlas, settings)
 
 
 def _evaluate(
-    system: GraspSystem,
-    atlas: Atlas,
-    index: str,
-    index_fn: Callable[[GraspSystem, NDArray[np.float64]], float] | None,
-) -> NDArray[np.float64]:
-    """The quality index at every chart centre (the free fingers do not enter it)."""
-    if index_fn is not None:
-        return np.array([index_fn(system, x) for x in atlas.centres], dtype=np.float64)
-    return np.array([_manipulability(system, x).index(index) for x in atlas.centres])
+    problem: GraspManifold, atlas: Atlas, settings: OptimizationSettings
+) -> OptimizationResult:
+    """Lines 14-21 of Algorithm 1: checks, then the index at every centre, best and worst."""
+    begin = time.perf_counter()
+    checks = problem.check_charts(atlas.centres)
+    valid = ~(checks.self_collision | checks.object_collision)
+    if not valid.any():
+        raise OptimizationError(
+            f"no chart centre is a collision-free grasp ({int(checks.self_collision.sum())} of "
+            f"{atlas.n_charts} self-colliding, {int(checks.object_collision.sum())} inside the "
+            "object)"
+        )
+    quality = None if settings.index_fn else problem.manipulability(atlas.centres)
+    index_fn = settings.index_fn or _ellipsoid_index(quality, settings.index)
+    evaluation = evaluate_index(atlas, index_fn, candidates=valid)
+    return OptimizationResult(
+        problem, atlas, settings, evaluation.values, valid, evaluation.best, evaluation.worst,
+        evaluation.best_overall, checks, quality, time.perf_counter() - begin,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
-class Experiment:
-    """One of the atlas paper's SAH experiments (Section V).
+class ComponentSearch:
+    """Algorithm 1 run once per connected component of R met by a set of seed grasps.
 
     Attributes:
-        patches: Builds the object's contact regions.
-        object: Builds the object, in the regions' frame.
-        free_object: Whether the object pose varies.
-        symmetry_axis: Axis of revolution shared by every contact region (object frame), if any.
+        components: One optimization per component, in the order their first seed came.
+        seed_components: Per seed, the component it fell in; None when it could not be brought
+            onto R inside the bounds.
     """
 
-    patches: Callable[[], GraspPatches]
-    object: Callable[[], GraspObject]
-    free_object: bool = True
-    symmetry_axis: tuple[float, float, float] | None = None
+    components: tuple[OptimizationResult, ...]
+    seed_components: tuple[int | None, ...]
+
+    @property
+    def best(self) -> tuple[int, int]:
+        """Component and chart of the best valid grasp over every component."""
+        values = [result.all_values[result.best] for result in self.components]
+        component = int(np.argmax(values))
+        return component, self.components[component].best
 
 
-EXPERIMENTS = {
-    # The thumb's fixed point breaks the can's symmetry.
-    "can": Experiment(can_patches, lambda: load_object("can")),
-    "bottle": Experiment(
-        bottle_patches, lambda: load_object("bottle"), symmetry_axis=(0.0, 0.0, 1.0)
-    ),
-}
-"""The SAH + can (Fig. 10a) and SAH + oil bottle (Fig. 10b) experiments, by name."""
+def optimize_components(
+    problem: GraspManifold, settings: OptimizationSettings, seeds: ArrayLike
+) -> ComponentSearch:
+    """Seed Algorithm 1 from several grasps; one atlas per connected component of R they reach.
+
+    Each seed is moved onto R (Newton's method, minimum-norm steps); a seed within one chart
+    radius of a chart centre of an atlas already built lies in that atlas's component (components
+    closer than ``r`` to each other count as one), any other starts a new atlas.
+
+    Args:
+        problem: The grasp manifold.
+        settings: As for :func:`optimize`.
+        seeds: Grasps near R, (S, n), e.g. IK solutions of the same contacts from other starts.
+
+    Raises:
+        OptimizationError: ``seeds`` is not (S, n), or no seed reaches R inside the bounds.
+    """
+    X = np.asarray(seeds, dtype=np.float64)
+    n = problem.start.size
+    if X.ndim != 2 or X.shape[1] != n or not len(X):
+        raise OptimizationError(f"seeds must be an (S, {n}) array with S >= 1, got {X.shape}")
+    components: list[OptimizationResult] = []
+    owners: list[int | None] = []
+    for seed in X:
+        x = _onto(problem, seed)
+        owner = None if x is None else _component_of(components, x)
+        if x is not None and owner is None:
+            components.append(optimize(problem, settings, start=x))
+            owner = len(components) - 1
+        owners.append(owner)
+    if not components:
+        raise OptimizationError(f"none of the {len(X)} seeds could be brought onto R in bounds")
+    return ComponentSearch(tuple(components), tuple(owners))
 
 
-def run_experiment(
-    name: str, hand: str = "sah", k: int = 2, radius: float = 0.1, epsilon: float = 0.5,
-    index: str = "volume", max_charts: int = 20_000, progress: bool = False,
-) -> GraspOptimizationResult:  # fmt: skip
-    """Run the SAH + can or SAH + oil bottle experiment of Section V (object collisions checked)."""
-    if name not in EXPERIMENTS:
-        raise AtlasError(f"unknown experiment {name!r}; valid: {sorted(EXPERIMENTS)}")
-    experiment = EXPERIMENTS[name]
-    return optimize_grasp(
-        load_hand(hand), experiment.patches(), k=k, radius=radius, epsilon=epsilon, index=index,
-        free_object=experiment.free_object, symmetry_axis=experiment.symmetry_axis,
-        max_charts=max_charts, progress=progress, obj=experiment.object(),
-    )  # fmt: skip
+def _onto(problem: GraspManifold, x: FloatArray, tol: float = 1e-10) -> FloatArray | None:
+    """``x`` moved onto ``F = 0`` by minimum-norm Newton steps; None on failure or out of bounds."""
+    lower, upper = problem.bounds()
+    for _ in range(30):
+        residual = problem.F(x)
+        if np.linalg.norm(residual) <= tol:
+            return x if np.all((x >= lower) & (x <= upper)) else None
+        x = x - np.linalg.lstsq(problem.J(x), residual, rcond=None)[0]
+    return None
+
+
+def _component_of(components: list[OptimizationResult], x: FloatArray) -> int | None:
+    """The first component whose atlas has a chart centre within one radius of ``x``."""
+    for i, result in enumerate(components):
+        atlas = result.atlas
+        if np.min(np.linalg.norm(atlas.centres - x, axis=1)) <= atlas.radius:
+            return i
+    return None

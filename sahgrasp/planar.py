@@ -1,4 +1,4 @@
-"""The planar three-finger hand of the atlas paper (Fig. 8, Eqs. (19)-(25)) and its optimisation.
+"""The planar three-finger hand of the atlas paper (Fig. 8, Eqs. (19)-(25)) as a grasp manifold.
 
 Configuration ``x`` (n = 19), in this order:
 
@@ -22,9 +22,11 @@ vector ``v`` is ``v x dv / |v|^2``. Principal hand motions come from a PCA of ra
 vectors (Section III), and Eq. (13) reads ``E_s^T (theta(x_h) - theta(x_1,h)) = 0``: in the
 unit-vector coordinates themselves the least-variance directions are the radial ones (normal to the
 unit circles), which would make Eq. (13) tangent to F at ``x_1``. ``s = t - k`` such equations
-(Eq. (12)) reduce F to the k-manifold R of Eq. (11), which the atlas covers (Section IV). The
-manipulability indices (:mod:`sahgrasp.quality`) are evaluated at every chart centre with the
-tangent space of F, the actuated joint rates and the object twist ``(vx, vy, omega)``.
+(Eq. (12)) reduce F to the k-manifold R of Eq. (11), which the atlas covers (Section IV).
+:class:`PlanarGraspProblem` is a :class:`~sahgrasp.optimization.GraspManifold`:
+:func:`sahgrasp.optimization.optimize` runs Algorithm 1 on it. Its manipulability indices
+(:mod:`sahgrasp.quality`) come from the tangent space of F, the actuated joint rates and the object
+twist ``(vx, vy, omega)``.
 
 Geometry (``DEFAULT_HAND``, SI units): fingers based at x = -0.08, 0 and 0.08 m on the palm (the
 x axis), the outer ones with phalanges of 0.07 m and 0.035 m, the middle one of 0.035 m and
@@ -39,33 +41,22 @@ with r = 0.125 and epsilon = 0.4.
 from __future__ import annotations
 
 import functools
-import time
-from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
-from sahgrasp.errors import AtlasError
-from sahgrasp.fileio import write_json_atomic
+from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
-from sahgrasp.quality import INDICES, Manipulability, manipulability, null_space
+from sahgrasp.optimization import ChartChecks
+from sahgrasp.quality import Manipulability, manipulability, null_space
 
 __all__ = [
     "DEFAULT_HAND",
-    "Extremum",
     "PlanarGraspProblem",
     "PlanarHand",
-    "PlanarResult",
-    "build_planar_atlas",
     "make_planar_problem",
-    "optimize_planar",
-    "plot_atlas",
     "random_hand_configurations",
-    "run_planar",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -246,9 +237,19 @@ class PlanarGraspProblem:
     synergy: FloatArray
 
     @property
-    def k(self) -> int:
-        """Dimension of R: ``k = t - s`` (Eq. (12))."""
+    def dimension(self) -> int:
+        """Dimension ``k`` of R: ``k = t - s`` (Eq. (12))."""
         return T_DIM - self.synergy.shape[1]
+
+    @property
+    def t(self) -> int:
+        """Dimension of F: 19 variables, 16 equations."""
+        return T_DIM
+
+    @property
+    def start(self) -> FloatArray:
+        """The initial grasp ``x_1``, where the atlas starts."""
+        return self.x1
 
     def grasp_residual(self, x: ArrayLike) -> FloatArray:
         """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8).
@@ -292,14 +293,14 @@ class PlanarGraspProblem:
         jac[..., where] = values
         return jac.reshape(*x.shape[:-1], 16, N_VARS)
 
-    def residual(self, x: ArrayLike) -> FloatArray:
+    def F(self, x: ArrayLike) -> FloatArray:
         """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s)."""
         x = np.asarray(x, dtype=np.float64)
         motion = self.joint_motion(x) @ self.synergy  # Eq. (13): E_s^T (theta - theta_1) = 0
         return np.concatenate((self.grasp_residual(x), motion), axis=-1)
 
-    def jacobian(self, x: ArrayLike) -> FloatArray:
-        """Jacobian of :meth:`residual`, (..., 16 + s, 19)."""
+    def J(self, x: ArrayLike) -> FloatArray:
+        """Jacobian of :meth:`F`, (..., 16 + s, 19)."""
         x = np.asarray(x, dtype=np.float64)
         motion = np.zeros((*x.shape[:-1], self.synergy.shape[1], N_VARS))
         motion[..., :12] = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
@@ -354,6 +355,10 @@ class PlanarGraspProblem:
         tangent = null_space(self.grasp_jacobian(x), T_DIM)
         return manipulability(tangent, self.joint_jacobian(x), self.object_jacobian(x))
 
+    def check_charts(self, centres: FloatArray) -> ChartChecks:
+        """The planar hand has no collision model: every chart centre is a candidate."""
+        return ChartChecks.none(centres)
+
 
 def make_planar_problem(
     k: int = 2,
@@ -372,251 +377,11 @@ def make_planar_problem(
         seed: Seed of the random configurations.
 
     Raises:
-        AtlasError: ``k`` is not 1, 2 or 3.
+        GraspSystemError: ``k`` is not 1, 2 or 3.
     """
     if k not in (1, 2, 3):
-        raise AtlasError(f"k must be 1, 2 or 3 (t = {T_DIM}), got {k}")
+        raise GraspSystemError(f"k must be 1, 2 or 3 (t = {T_DIM}), got {k}")
     rng = np.random.default_rng(seed)
     motions = principal_motions(random_hand_configurations(hand, rng, samples, spread))
     synergy = motions.constraints(T_DIM - k).T  # s = t - k least-variance motions, Eq. (12)
     return PlanarGraspProblem(hand=hand, x1=hand.initial_grasp(), synergy=synergy)
-
-
-@dataclass(frozen=True)
-class Extremum:
-    """The best or worst chart for one index.
-
-    Attributes:
-        chart: Index of the chart in the atlas.
-        value: Index value at its centre.
-        configuration: The chart centre ``x`` (19,).
-    """
-
-    chart: int
-    value: float
-    configuration: FloatArray
-
-
-@dataclass(frozen=True)
-class PlanarResult:
-    """Outcome of :func:`optimize_planar` (Algorithm 1 on the planar hand).
-
-    Attributes:
-        problem: The grasp problem.
-        atlas: Atlas of R.
-        quality: Manipulability ellipsoid at every chart centre.
-        atlas_seconds: Time to build the atlas [s].
-        quality_seconds: Time to evaluate the three indices at every chart [s].
-        best: Per index name (:data:`~sahgrasp.quality.INDICES`), the chart with the largest value.
-        worst: Per index name, the chart with the smallest value.
-    """
-
-    problem: PlanarGraspProblem
-    atlas: Atlas
-    quality: Manipulability
-    atlas_seconds: float
-    quality_seconds: float
-    best: Mapping[str, Extremum]
-    worst: Mapping[str, Extremum]
-
-    @property
-    def charts(self) -> int:
-        """Number of charts."""
-        return self.atlas.n_charts
-
-    @property
-    def t(self) -> int:
-        """Dimension of F."""
-        return T_DIM
-
-    @property
-    def k(self) -> int:
-        """Dimension of R."""
-        return self.problem.k
-
-
-def build_planar_atlas(
-    problem: PlanarGraspProblem,
-    radius: float = 0.125,
-    epsilon: float = 0.4,
-    start: ArrayLike | None = None,
-    progress: bool = False,
-) -> Atlas:
-    """Atlas of R (Eq. (11)) from ``start`` (default ``x_1``), bounded by the contact arcs.
-
-    Args:
-        problem: The grasp problem.
-        radius: Chart radius ``r``.
-        epsilon: Threshold of Eqs. (17)-(18).
-        start: A point of R to start from, (19,); another one than ``x_1`` covers the same
-            connected component.
-        progress: Show a progress bar.
-    """
-    lower, upper = problem.bounds()
-    x0 = problem.x1 if start is None else np.asarray(start, dtype=np.float64)
-    settings = AtlasSettings(radius=radius, epsilon=epsilon, progress=progress)
-    return build_atlas(problem.residual, problem.jacobian, x0, problem.k, settings, lower, upper)
-
-
-def _extremum(atlas: Atlas, values: FloatArray, best: bool) -> Extremum:
-    chart = int(np.nanargmax(values) if best else np.nanargmin(values))
-    return Extremum(chart, float(values[chart]), atlas.centres[chart].copy())
-
-
-def optimize_planar(
-    problem: PlanarGraspProblem | None = None,
-    radius: float = 0.125,
-    epsilon: float = 0.4,
-    start: ArrayLike | None = None,
-    progress: bool = False,
-) -> PlanarResult:
-    """Algorithm 1: atlas of R, then the three manipulability indices at every chart centre.
-
-    Args:
-        problem: The grasp problem; :func:`make_planar_problem` () if None.
-        radius: Chart radius ``r`` (the paper: 0.125).
-        epsilon: Threshold of Eqs. (17)-(18) (the paper: 0.4).
-        start: Start point on R, default ``x_1``.
-        progress: Show a progress bar.
-    """
-    problem = problem or make_planar_problem()
-    atlas = build_planar_atlas(problem, radius, epsilon, start, progress)
-    begin = time.perf_counter()
-    quality = problem.manipulability(atlas.centres)
-    best = {name: _extremum(atlas, quality.index(name), best=True) for name in INDICES}
-    worst = {name: _extremum(atlas, quality.index(name), best=False) for name in INDICES}
-    seconds = time.perf_counter() - begin
-    return PlanarResult(problem, atlas, quality, atlas.build_seconds, seconds, best, worst)
-
-
-def _describe(problem: PlanarGraspProblem, extremum: Extremum) -> dict[str, Any]:
-    """JSON-able description of a grasp (SI units, angles in radians)."""
-    x = extremum.configuration
-    return {
-        "chart": extremum.chart,
-        "value": extremum.value,
-        "configuration": {
-            "joint_angles_rad": problem.joint_angles(x).tolist(),
-            "object_position_m": x[_TO].tolist(),
-            "object_angle_rad": float(np.arctan2(x[14], x[15])),
-            "contact_params_rad": x[_U].tolist(),
-            "x": x.tolist(),
-        },
-    }
-
-
-def _projection(points: FloatArray) -> FloatArray:
-    """The first two principal components of ``points`` (N, n) -> (N, 2)."""
-    centred = points - points.mean(axis=0)
-    vt = np.linalg.svd(centred, full_matrices=False)[2]
-    return centred @ vt[:2].T
-
-
-def _draw_grasp(ax: Any, hand: PlanarHand, x: FloatArray, title: str) -> None:
-    """The hand (blue), the object's circles (black) and contact arcs (red) at ``x``."""
-    v = x[_V].reshape(3, 2, 2)
-    joints = hand.anchors[:, None, :] + np.cumsum(hand.phalanges[:, :, None] * v, axis=1)
-    for anchor, (knuckle, tip) in zip(hand.anchors, joints, strict=True):
-        ax.plot(*np.array([anchor, knuckle, tip]).T, "-o", color="tab:blue", markersize=3)
-    s, c = x[14], x[15]
-    centres = x[_TO] + c * hand.centres + s * _perp(hand.centres)
-    for centre, radius, arc in zip(centres, hand.radii, hand.arcs, strict=True):
-        full = np.linspace(0.0, 2.0 * np.pi, 90)
-        ax.plot(*(centre + radius * _unit(full)).T, color="black", linewidth=0.8)
-        contact_arc = _unit(np.linspace(arc[0], arc[1], 30))
-        ax.plot(*(centre + radius * contact_arc).T, color="tab:red", linewidth=2)
-    ax.plot(*np.array([hand.anchors[0], hand.anchors[-1]]).T, color="black", linewidth=4)
-    ax.set_title(title)
-    ax.set_aspect("equal")
-
-
-def plot_atlas(result: PlanarResult, path: str | Path, index: str = "volume") -> None:
-    """Fig. 9: chart centres coloured by each index (green large, red small, black singular).
-
-    Top row: the centres on their first two principal components, one panel per index; the best
-    chart of each index is a star, the worst a cross. Bottom row: the best and worst grasps of
-    ``index``. Written as a PNG with the Agg renderer (no display needed).
-    """
-    from matplotlib import colormaps
-    from matplotlib.figure import Figure
-
-    xy = _projection(result.atlas.centres)
-    fig = Figure(figsize=(15, 9), layout="constrained")
-    grid = fig.add_gridspec(2, 6)
-    titles = ("(a) inverse condition number", "(b) volume", "(c) smallest semi-axis")
-    top = [fig.add_subplot(grid[0, 2 * i : 2 * i + 2]) for i in range(3)]
-    for ax, name, title in zip(top, INDICES, titles, strict=True):
-        values, singular = result.quality.index(name), result.quality.singular(name)
-        fine = xy[~singular]
-        ax.scatter(fine[:, 0], fine[:, 1], c=values[~singular], cmap=colormaps["RdYlGn"], s=12)
-        ax.scatter(xy[singular, 0], xy[singular, 1], c="black", s=12)
-        ax.plot(*xy[result.best[name].chart], marker="*", color="blue", markersize=16)
-        ax.plot(*xy[result.worst[name].chart], marker="X", color="blue", markersize=12)
-        ax.set_title(f"{title}: {int(singular.sum())} singular of {result.charts}")
-        ax.set_xlabel("principal component 1")
-        ax.set_ylabel("principal component 2")
-    for column, (which, extremum) in enumerate(
-        (("best", result.best[index]), ("worst", result.worst[index]))
-    ):
-        ax = fig.add_subplot(grid[1, 3 * column : 3 * column + 3])
-        title = f"{which} {index}: chart {extremum.chart}, {extremum.value:.3g}"
-        _draw_grasp(ax, result.problem.hand, extremum.configuration, title)
-    fig.savefig(Path(path), dpi=90)
-
-
-def run_planar(
-    k: int = 2,
-    r: float = 0.125,
-    eps: float = 0.4,
-    index: str = "volume",
-    json_out: str | None = None,
-    plot_out: str | None = None,
-) -> dict[str, Any]:
-    """The planar experiment of Section V, summarised for the ``sahgrasp atlas planar`` command.
-
-    Args:
-        k: Dimension of R (``s = 3 - k`` principal-motion constraints).
-        r: Chart radius.
-        eps: Threshold of Eqs. (17)-(18).
-        index: The index whose best and worst grasps head the summary (see ``INDICES``).
-        json_out: Write the summary there as JSON.
-        plot_out: Write the Fig. 9 plot there as PNG.
-
-    Returns:
-        JSON-able summary: ``charts``, ``t``, ``k``, ``atlas_seconds``, ``quality_seconds``,
-        ``best`` and ``worst`` (chart, value, configuration) of ``index``, and per index the same
-        plus the number of singular charts.
-
-    Raises:
-        AtlasError: ``index`` is not one of ``INDICES`` or ``k`` is not 1, 2 or 3.
-    """
-    if index not in INDICES:
-        raise AtlasError(f"unknown index {index!r}; valid: {', '.join(INDICES)}")
-    result = optimize_planar(make_planar_problem(k), r, eps)
-    problem = result.problem
-    summary: dict[str, Any] = {
-        "charts": result.charts,
-        "t": result.t,
-        "k": result.k,
-        "radius": r,
-        "epsilon": eps,
-        "complete": result.atlas.complete,
-        "atlas_seconds": result.atlas_seconds,
-        "quality_seconds": result.quality_seconds,
-        "index": index,
-        "best": _describe(problem, result.best[index]),
-        "worst": _describe(problem, result.worst[index]),
-        "indices": {
-            name: {
-                "best": _describe(problem, result.best[name]),
-                "worst": _describe(problem, result.worst[name]),
-                "singular_charts": int(result.quality.singular(name).sum()),
-            }
-            for name in INDICES
-        },
-    }
-    if json_out is not None:
-        write_json_atomic(json_out, summary)
-    if plot_out is not None:
-        plot_atlas(result, plot_out, index)
-    return summary

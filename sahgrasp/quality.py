@@ -12,7 +12,8 @@ the index falls below 1e-3, 1e-4 and 1e-3 respectively.
 
 Everything here is vectorised over leading axes (one entry per chart). ``evaluate_index``
 evaluates any index, built-in or user-supplied, at the centres of an atlas and picks the best and
-worst charts.
+worst charts among the candidates; ``principal_projection`` gives the chart centres' coordinates on
+their principal axes, to plot them.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import AtlasError
+from sahgrasp.errors import QualityError
 
 __all__ = [
     "INDICES",
@@ -37,6 +38,7 @@ __all__ = [
     "evaluate_index",
     "manipulability",
     "null_space",
+    "principal_projection",
     "semi_axes",
 ]
 
@@ -72,7 +74,9 @@ class Manipulability:
     def index(self, name: str) -> FloatArray:
         """The index called ``name`` (one of :data:`INDICES`)."""
         if name not in INDICES:
-            raise AtlasError(f"unknown manipulability index {name!r}; valid: {', '.join(INDICES)}")
+            raise QualityError(
+                f"unknown manipulability index {name!r}; valid: {', '.join(INDICES)}"
+            )
         values: FloatArray = getattr(self, name)
         return values
 
@@ -133,7 +137,7 @@ def _velocity_map(rows_or_matrix: ArrayLike, tangent: FloatArray) -> FloatArray:
     m = np.asarray(rows_or_matrix)
     if np.issubdtype(m.dtype, np.integer):
         if m.ndim != 1:
-            raise AtlasError(f"coordinate rows must be a 1-D integer array, got shape {m.shape}")
+            raise QualityError(f"coordinate rows must be a 1-D integer array, got shape {m.shape}")
         return tangent[..., m, :]
     return np.asarray(m, dtype=np.float64) @ tangent
 
@@ -170,19 +174,25 @@ class IndexEvaluation:
 
     Attributes:
         values: Index value per chart, shape (N,); NaN where the index is undefined.
-        best: Chart with the largest value.
-        worst: Chart with the smallest value.
+        best: Candidate chart with the largest value.
+        worst: Candidate chart with the smallest value.
+        best_overall: Chart with the largest value over all charts (``best`` when that one is a
+            candidate).
         seconds: Wall time of the evaluation [s].
     """
 
     values: FloatArray
     best: int
     worst: int
+    best_overall: int
     seconds: float
 
 
 def evaluate_index(
-    atlas: ChartCentres, index_fn: Callable[[FloatArray], ArrayLike], vectorised: bool = True
+    atlas: ChartCentres,
+    index_fn: Callable[[FloatArray], ArrayLike],
+    vectorised: bool = True,
+    candidates: ArrayLike | None = None,
 ) -> IndexEvaluation:
     """Evaluate a quality index at the centre of every chart (Algorithm 1, lines 14-21).
 
@@ -191,12 +201,15 @@ def evaluate_index(
         index_fn: With ``vectorised``, maps the centres (N, n) to N values; otherwise maps one
             centre (n,) to one value. Larger is better.
         vectorised: Whether ``index_fn`` takes all centres at once.
+        candidates: Per chart, whether it may be the best or worst (e.g. collision-free),
+            (N,) booleans; all charts if None.
 
     Returns:
-        The values with the best (largest) and worst (smallest) chart.
+        The values with the best (largest) and worst (smallest) candidate chart.
 
     Raises:
-        AtlasError: ``index_fn`` returned the wrong number of values, or only NaN.
+        QualityError: ``index_fn`` returned the wrong number of values, or only NaN, or no
+            candidate has a value.
     """
     start = time.perf_counter()
     if vectorised:
@@ -205,12 +218,31 @@ def evaluate_index(
         values = np.array([float(np.asarray(index_fn(x))) for x in atlas.centres])
     charts = len(atlas.centres)
     if values.shape != (charts,):
-        raise AtlasError(f"index_fn gave {values.size} values for {charts} charts")
+        raise QualityError(f"index_fn gave {values.size} values for {charts} charts")
     if np.isnan(values).all():
-        raise AtlasError("index_fn gave NaN at every chart")
+        raise QualityError("index_fn gave NaN at every chart")
+    allowed = np.ones(charts, dtype=bool) if candidates is None else np.asarray(candidates, bool)
+    if allowed.shape != (charts,):
+        raise QualityError(f"candidates must be {charts} booleans, got shape {allowed.shape}")
+    scored = np.flatnonzero(allowed & ~np.isnan(values))
+    if not scored.size:
+        raise QualityError(f"no candidate chart has an index value ({allowed.sum()} candidates)")
     return IndexEvaluation(
         values=values,
-        best=int(np.nanargmax(values)),
-        worst=int(np.nanargmin(values)),
+        best=int(scored[np.argmax(values[scored])]),
+        worst=int(scored[np.argmin(values[scored])]),
+        best_overall=int(np.nanargmax(values)),
         seconds=time.perf_counter() - start,
     )
+
+
+def principal_projection(points: ArrayLike, dims: int = 2) -> FloatArray:
+    """Coordinates (N, dims) of points (N, n) on their first ``dims`` principal axes, centred.
+
+    How chart centres of a high-dimensional ``x`` are plotted (Figs. 9-10 of the atlas paper).
+    """
+    centred = np.asarray(points, dtype=np.float64)
+    centred = centred - centred.mean(axis=0)
+    vt = np.linalg.svd(centred, full_matrices=False)[2]
+    projected: FloatArray = centred @ vt[:dims].T
+    return projected

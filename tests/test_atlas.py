@@ -2,14 +2,21 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from dataclasses import fields
 from math import gamma, pi
+from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas, project
+from sahgrasp.atlas.polytope import Polytope
 from sahgrasp.errors import AtlasError
+
+REPOSITORY = Path(__file__).resolve().parents[1]
 
 
 def sphere_f(x: np.ndarray) -> np.ndarray:
@@ -138,8 +145,29 @@ def test_max_charts_leaves_an_open_frontier() -> None:
     settings = AtlasSettings(radius=0.1, max_charts=50)
     atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
     assert atlas.n_charts == 50
-    assert not atlas.complete
+    assert not atlas.complete and atlas.stop_reason == "max_charts"
     assert atlas.open.any()
+
+
+def test_a_finished_atlas_says_complete() -> None:
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+    assert atlas.complete and atlas.stop_reason == "complete"
+
+
+def test_progress_hears_of_every_chart() -> None:
+    heard: list[tuple[str, int, int | None]] = []
+    settings = AtlasSettings(radius=0.2, max_charts=30)
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings,
+                        progress=lambda *report: heard.append(report))  # fmt: skip
+    assert [done for _, done, _ in heard] == list(range(1, atlas.n_charts + 1))
+    assert {(stage, total) for stage, _, total in heard} == {("atlas charts", 30)}
+
+
+def test_progress_setting_draws_a_bar_on_stderr(capsys: pytest.CaptureFixture[str]) -> None:
+    settings = AtlasSettings(radius=0.5, progress=True)
+    build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
+    captured = capsys.readouterr()
+    assert captured.out == "" and "atlas charts" in captured.err
 
 
 def test_start_point_is_projected_onto_the_manifold() -> None:
@@ -190,3 +218,53 @@ def test_bad_bounds_and_settings_raise_atlas_error() -> None:
         AtlasSettings(epsilon=1.5)
     with pytest.raises(AtlasError, match="radius"):
         AtlasSettings(radius=-0.1)
+
+
+def assert_same_atlas(a: Atlas, b: Atlas) -> None:
+    for field in fields(Atlas):
+        if field.name != "build_seconds":
+            assert np.array_equal(getattr(a, field.name), getattr(b, field.name)), field.name
+
+
+@pytest.mark.parametrize(("n", "r"), [(3, 0.2), (4, 0.4)])
+def test_the_same_input_gives_the_same_atlas(n: int, r: float) -> None:
+    build = lambda: build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, AtlasSettings(radius=r))  # noqa: E731
+    assert_same_atlas(build(), build())
+
+
+def test_bounded_atlas_is_deterministic_and_its_records_agree() -> None:
+    settings = AtlasSettings(radius=0.2)
+    build = lambda: build_atlas(sphere_f, sphere_j, [0, 0, 1.0], 2, settings, lower=[-2, -2, 0.3])  # noqa: E731
+    atlas = build()
+    assert_same_atlas(atlas, build())
+    assert atlas.boundary.any() and not atlas.boundary.all() and atlas.complete
+    assert atlas.parents[0] == -1 and (atlas.parents[1:] < np.arange(1, atlas.n_charts)).all()
+    assert (atlas.edges[:, 0] < atlas.edges[:, 1]).all()
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    r, k = 0.1, 3
+    u = rng.normal(size=(20, k))
+    u *= (rng.uniform(0.5, 2.0, 20) * r / np.linalg.norm(u, axis=1))[:, None]
+    planes, offsets = u.tolist(), (0.5 * np.einsum("ij,ij->i", u, u)).tolist()
+    at_once = Polytope.from_planes(k, r, planes, offsets)
+    one_by_one = Polytope.cube(k, r)
+    for a, b in zip(planes, offsets, strict=True):
+        one_by_one.cut(a, b, 1e-9 * r)
+    gap, _ = cKDTree(at_once.verts).query(one_by_one.verts)
+    assert len(at_once.verts) == len(one_by_one.verts) and gap.max() <= 1e-12
+    assert at_once.reach2 == pytest.approx(one_by_one.reach2)
+
+
+def test_import_loads_neither_pinocchio_nor_tqdm() -> None:
+    code = (
+        "import sys, sahgrasp.atlas; "
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('pinocchio', 'tqdm')))"
+    )
+    env = {"PYTHONPATH": str(REPOSITORY), "PATH": ""}
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
+    )
+    assert done.stdout.strip() == "[]"

@@ -12,8 +12,9 @@ import pytest
 from numpy.typing import NDArray
 from PIL import Image
 
+from sahgrasp.experiments.ik_examples import show_examples, solve_example
 from sahgrasp.hand import Hand
-from sahgrasp.viz import Viewer, show_examples, solve_example
+from sahgrasp.viz import Viewer
 from sahgrasp.viz.screenshot import find_chromium, screenshot
 
 ARTIFACTS = Path(__file__).parent / "artifacts"

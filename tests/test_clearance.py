@@ -9,6 +9,8 @@ import pytest
 
 from sahgrasp.collision import CollisionPair
 from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
+from sahgrasp.experiments.ik_examples import solve_example
+from sahgrasp.experiments.setups import SAH_EXPERIMENTS, run_experiment
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
 from sahgrasp.objects import (
@@ -20,8 +22,6 @@ from sahgrasp.objects import (
     placement,
 )
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.optimization import EXPERIMENTS, run_experiment
-from sahgrasp.viz.paper_examples import solve_example
 
 CUBE_M = 0.004
 
@@ -213,10 +213,10 @@ def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
     assert max(depths.values()) <= TOLERANCE_M, sorted(depths.items(), key=lambda kv: -kv[1])[:3]
 
 
-@pytest.mark.parametrize("name", sorted(EXPERIMENTS))
+@pytest.mark.parametrize("name", sorted(SAH_EXPERIMENTS))
 def test_experiment_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
     result = run_experiment(name)  # as examples/optimize_<name>.py runs it
-    system, obj = result.system, EXPERIMENTS[name].object()
+    system, obj = result.problem.system, SAH_EXPERIMENTS[name].object()
     contacts = {c.finger for c in system.contacts}
     assert result.valid[result.best] and result.valid[result.worst]
     for chart in np.flatnonzero(result.valid):
@@ -238,3 +238,70 @@ def test_without_an_object_free_fingers_clear_the_other_links(sah: Hand) -> None
     placed = checker.place_free_fingers(q, ["ring"])
     assert placed.clear and not ring_pairs(placed.q)
     assert placed.q[7 + middle] == sah.upper[middle]  # the other fingers stay
+
+
+# ----- the broad phase against every (link, piece) pair ---------------------------------------
+def _every_pair(hand: Hand, obj: GraspObject, q: np.ndarray) -> np.ndarray:
+    """Signed distance of every (hand geometry, object piece) pair, with coal alone: (G, P)."""
+    _, placements = _geometry_world(hand, q)
+    geometries = hand.collision.geometry_model.geometryObjects
+    request = coal.DistanceRequest()
+    request.enable_signed_distance = True
+    shapes = obj.collision_shapes()
+    out = np.empty((len(placements), len(shapes)))
+    for g, (geometry, M) in enumerate(zip(geometries, placements, strict=True)):
+        at_link = coal.Transform3s(M.rotation, M.translation)
+        for i, s in enumerate(shapes):
+            out[g, i] = coal.distance(
+                s.geometry, s.transform(obj.T_world_object), geometry.geometry, at_link,
+                request, coal.DistanceResult(),
+            )  # fmt: skip
+    return out
+
+
+@pytest.fixture(scope="module")
+def near_grasps(sah: Hand) -> list[tuple[GraspObject, np.ndarray]]:
+    """The coffee cup's paper grasp and nearby configurations: links touch, enter, clear it."""
+    from sahgrasp.objects import paper_grasp
+
+    cup = load_object("coffee_cup")
+    q0 = solve_ik(sah, paper_grasp("coffee_cup"), obstacle=cup).q
+    rng = np.random.default_rng(3)
+    configurations = [q0]
+    for scale in (0.05, 0.15, 0.3):
+        q = q0.copy()
+        q[7:] = np.clip(q[7:] + rng.normal(0.0, scale, len(q) - 7), sah.lower, sah.upper)
+        configurations.append(q)
+    return [(cup, q) for q in configurations]
+
+
+def test_broad_phase_misses_no_pair(
+    sah: Hand, near_grasps: list[tuple[GraspObject, np.ndarray]]
+) -> None:
+    """Penetrations and clearances equal a search over every (link, piece) pair with coal."""
+    contacts = ("thumb", "index")
+    tips = {f.tip_link for f in sah.description.fingers if f.name in contacts}
+    for obj, q in near_grasps:
+        checker = HandObjectClearance(sah, obj)
+        pairs = _every_pair(sah, obj, q)
+        nearest = pairs.min(axis=1)
+        thresholds = np.array([-1.5e-3 if link in tips else 2e-3 for link in checker.links])
+        found = sorted(
+            (p.joint_b, round(p.depth_m, 9)) for p in checker.penetrations(q, 2e-3, contacts)
+        )
+        joints = [int(g.parentJoint) for g in sah.collision.geometry_model.geometryObjects]
+        expected = sorted(
+            (joints[g], round(float(thresholds[g] - d), 9))
+            for g, i in zip(*np.nonzero(pairs < thresholds[:, None]), strict=True)
+            for d in [pairs[g, i]]
+        )
+        assert found == expected
+        full = checker.clearance(q, contacts)
+        assert full.links_m == pytest.approx(
+            dict(zip(checker.links, nearest, strict=True)), abs=1e-9
+        )
+        counted = [d for d, t in zip(nearest, thresholds, strict=True) if not (t < 0 <= d - t)]
+        assert full.distance_m == pytest.approx(min(counted), abs=1e-9)
+        closest = checker.clearance(q, contacts, all_links=False)
+        assert (closest.distance_m, closest.link) == (full.distance_m, full.link)
+        assert all(full.links_m[link] == d for link, d in closest.links_m.items())

@@ -4,8 +4,12 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
+import signal
 import subprocess
 import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
@@ -49,7 +53,8 @@ def run_main(name: str, args: list[str], tmp_path: Path) -> str:
 
 def test_every_script_is_tested_and_listed_in_the_readme() -> None:
     scripts = {p.stem for p in EXAMPLES.glob("*.py")}
-    assert scripts == {f"grasp_{g}" for g in GRASPS} | set(SMALL_ATLAS)
+    mesh = {"grasp_mesh"}  # run by tests/test_meshes.py
+    assert scripts == {f"grasp_{g}" for g in GRASPS} | set(SMALL_ATLAS) | mesh
     readme = (EXAMPLES / "README.md").read_text(encoding="utf-8")
     for name in scripts:
         assert f"{name}.py" in readme
@@ -79,6 +84,57 @@ def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     assert "fork" in done.stdout and out.stat().st_size > 100_000
+
+
+def until(condition: Callable[[], bool], timeout_s: float = 60.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.1)
+    return condition()
+
+
+def meshcat_servers(pid: int) -> list[psutil.Process]:
+    found = []
+    try:
+        kids = psutil.Process(pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+    for kid in kids:
+        try:
+            if any("meshcat_server" in part for part in kid.cmdline()):
+                found.append(kid)
+        except psutil.Error:  # ended, or a zombie (the stand-in browser)
+            continue
+    return found
+
+
+def gone(process: psutil.Process) -> bool:
+    try:
+        return process.status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_on_a_live_example_stops_its_server(signum: int, tmp_path: Path) -> None:
+    env = {**os.environ, "PYTHONPATH": str(EXAMPLES.parent), "BROWSER": "true"}  # no real browser
+    script = subprocess.Popen(
+        [sys.executable, str(EXAMPLES / "grasp_fork.py"), "--inits", "2"],
+        stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        env=env, cwd=tmp_path,
+    )  # fmt: skip
+    try:
+        assert until(lambda: bool(meshcat_servers(script.pid))), "no live server started"
+        (server,) = meshcat_servers(script.pid)
+        assert until(lambda: bool(server.net_connections()))  # serving: the script waits for Enter
+        script.send_signal(signum)
+        assert until(lambda: script.poll() is not None) and script.returncode == -signum
+        assert until(lambda: gone(server)), "the meshcat server outlived the example"
+    finally:
+        script.kill()
+        script.communicate(timeout=10)
 
 
 def test_demo_writes_every_grasp_into_one_scene(

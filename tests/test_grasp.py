@@ -8,13 +8,18 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.errors import AtlasError
-from sahgrasp.grasp import GraspSystem, reduced_system
+from sahgrasp.errors import GraspSystemError, OptimizationError, PrincipalMotionsError
+from sahgrasp.grasp import (
+    GraspSystem,
+    coordinate_scales,
+    first_grasp_system,
+    hand_motions,
+    reduced_system,
+)
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings
 from sahgrasp.motions import principal_motions
 from sahgrasp.objects import bottle_patches, can_patches
-from sahgrasp.optimization import first_grasp_system
 
 EXPECTED_T = {"can": 11, "bottle": 12, "bottle-spinless": 11}  # 16 + params + pose - 15
 PATCHES = {"can": can_patches, "bottle": bottle_patches, "bottle-spinless": bottle_patches}
@@ -57,7 +62,7 @@ def test_spinning_the_bottle_moves_nothing(sah: Hand) -> None:
     for contact in system.contacts:
         dx[contact.params.start] = -1.0  # u: the angle about the axis
     assert np.allclose(system.J(system.x_first) @ dx, 0.0, atol=1e-12)
-    with pytest.raises(AtlasError, match="symmetry_axis"):
+    with pytest.raises(GraspSystemError, match="symmetry_axis"):
         GraspSystem(sah, system.patches, system.q_first, True, symmetry_axis=(0.0, 0.0))
 
 
@@ -150,10 +155,10 @@ def test_reduced_system(system: GraspSystem, sah: Hand) -> None:
         assert np.allclose(R(system.x_first)[system.m :], 0.0)
         assert np.linalg.matrix_rank(JR(system.x_first)) == system.m + s  # R has dimension k
     for k in (0, system.t + 1):
-        with pytest.raises(AtlasError, match="k must"):
+        with pytest.raises(GraspSystemError, match="k must"):
             reduced_system(system, motions, k)
     few = principal_motions(rng.normal(size=(50, 2)))  # h = 2 <= s = t - 1
-    with pytest.raises(AtlasError, match="s = t - k"):
+    with pytest.raises(PrincipalMotionsError, match="s = t - k"):
         reduced_system(system, few, 1)
 
 
@@ -172,7 +177,7 @@ def test_principal_motions_ordering_and_orthonormality() -> None:
     assert motions.constraints(0).shape == (0, 4)
     assert motions.retained_variance(0) == pytest.approx(1.0)
     assert motions.retained_variance(3) == pytest.approx(variances[0] / variances.sum())
-    with pytest.raises(AtlasError, match="s = t - k"):
+    with pytest.raises(PrincipalMotionsError, match="s = t - k"):
         motions.constraints(4)
 
 
@@ -188,3 +193,30 @@ def test_the_free_finger_is_no_part_of_f(sah: Hand) -> None:
     x = perturbed(system, seed=3)
     assert np.array_equal(other.x_first, system.x_first)
     assert np.array_equal(other.F(x), system.F(x)) and np.array_equal(other.J(x), system.J(x))
+
+
+def test_principal_motions_from_grasp_postures(sah: Hand) -> None:
+    """Solved grasps of the bottle's regions vary along fewer motions than random hand poses."""
+    system = first_grasp_system(sah, bottle_patches(), symmetry_axis=AXIS)
+    grasps = hand_motions(sah, system, 30, seed=1, source="grasps")
+    random = hand_motions(sah, system, 300, seed=1, source="random")
+    h = len(system.coordinates)
+    assert grasps.directions.shape == (h, h)
+    s = system.t - 2  # k = 2: the motions kept are h - s
+    assert grasps.retained_variance(s) > random.retained_variance(s) + 0.1
+    with pytest.raises(OptimizationError, match="unknown motion source 'human'"):
+        hand_motions(sah, system, 10, seed=1, source="human")
+
+
+def test_coordinate_scales_make_every_direction_move_alike(sah: Hand) -> None:
+    system = first_grasp_system(sah, can_patches())
+    scales = coordinate_scales(system, 0.1)
+    assert np.all(scales[system.hand_rows] == 1.0)  # joint angles [rad]
+    pose = system.pose_slice.start
+    assert np.all(scales[pose : pose + 3] == 0.1) and np.all(scales[pose + 3 :] == 1.0)
+    for contact in system.contacts:  # a unit of y moves the contact by 0.1 m
+        jet = contact.region.evaluate(contact.region.nominal)
+        moved = np.linalg.norm(jet.point_jacobian * scales[contact.params], axis=0)
+        assert np.allclose(moved[moved > 0], 0.1)
+    with pytest.raises(GraspSystemError, match="length_m"):
+        coordinate_scales(system, 0.0)

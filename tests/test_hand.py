@@ -1,9 +1,6 @@
 import importlib.util
 import json
 import math
-import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import Any
 
@@ -12,7 +9,7 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
-from sahgrasp.errors import HandModelError, InvalidConfigurationError
+from sahgrasp.errors import HandModelError, InvalidConfigurationError, InvalidSettingsError
 from sahgrasp.hand import Hand, HandDescription, load_hand, sah_description
 
 DEG = math.pi / 180
@@ -528,20 +525,57 @@ def test_generator_reproduces_the_shipped_urdf() -> None:
     assert generator.urdf() == (root / "urdf/sah_right.urdf").read_text(encoding="utf-8")
 
 
-_CLI = "import sys; from sahgrasp.cli import main; sys.exit(main())"
+@pytest.mark.parametrize("calls", [0, -1, True])
+def test_bench_kinematics_refuses_non_positive_calls(calls: int) -> None:
+    from sahgrasp.bench.kinematics import run
+
+    with pytest.raises(InvalidSettingsError, match="calls must be a positive integer"):
+        run(calls=calls)
 
 
-@pytest.mark.parametrize("calls", ["0", "-1"])
-def test_bench_kinematics_refuses_non_positive_calls(calls: str) -> None:
-    root = Path(__file__).resolve().parents[1]
-    run = subprocess.run(
-        [sys.executable, "-c", _CLI, "bench", "kinematics", "--calls", calls],
-        capture_output=True,
-        text=True,
-        env={**os.environ, "PYTHONPATH": str(root)},
-        timeout=120,
-    )
-    assert run.returncode == 2, run.stderr
-    assert run.stderr.strip() == (
-        f"sahgrasp: error: calls must be a positive integer, got {calls}"
-    ), run.stderr
+def test_state_is_an_immutable_snapshot(any_hand: Hand) -> None:
+    rng = np.random.default_rng(21)
+    q = any_hand.random_configuration(rng)
+    state = any_hand.state(q, jacobians=True)
+    points = state.contacts.points.copy()
+    any_hand.contact_state(any_hand.random_configuration(rng))  # another query in between
+    np.testing.assert_array_equal(state.contacts.points, points)
+    with pytest.raises(ValueError, match="read-only"):
+        state.contacts.points[0, 0] = 1.0
+    assert state.jacobians is not None
+    with pytest.raises(ValueError, match="read-only"):
+        state.jacobians.points[0, 0, 0] = 1.0
+    assert any_hand.state(q).jacobians is None
+
+
+def test_stack_jacobian_and_point_jacobian_match_finite_differences(any_hand: Hand) -> None:
+    rng = np.random.default_rng(22)
+    q = any_hand.random_configuration(rng)
+    stack, J = any_hand.contact_stack_jacobian(q)
+    state = any_hand.state(q, jacobians=True)
+    np.testing.assert_allclose(stack.reshape(-1, 2, 3)[:, 0], state.contacts.points, atol=1e-15)
+    np.testing.assert_allclose(stack.reshape(-1, 2, 3)[:, 1], state.contacts.centres, atol=1e-15)
+    np.testing.assert_allclose(any_hand.contact_jacobian(q), J, atol=1e-15)
+    v, eps = rng.normal(size=any_hand.nv), 1e-7
+    moved = any_hand.integrate(q, eps * v)
+    fd = (any_hand.contact_stack(moved) - stack) / eps
+    np.testing.assert_allclose(fd, J @ v, atol=1e-5)
+    # A point on the last joint's body moves with it; the world (joint 0) does not move.
+    joint, point = any_hand.model.njoints - 1, state.contacts.points[-1]
+    np.testing.assert_allclose(state.point_jacobian(joint, point), J[-6:-3], atol=1e-12)
+    assert not state.point_jacobian(0, point).any()
+    with pytest.raises(InvalidConfigurationError, match="no Jacobians"):
+        any_hand.state(q).point_jacobian(joint, point)
+
+
+def test_wrist_and_finger_parts_split_q(sah: Hand) -> None:
+    q = sah.random_configuration(np.random.default_rng(23))
+    np.testing.assert_array_equal(np.concatenate([sah.wrist_part(q), sah.finger_part(q)]), q)
+    assert sah.finger_part(q).shape == (len(sah.coordinate_names),)
+
+
+def test_penetrations_refuse_non_finite_q(sah: Hand) -> None:
+    q = sah.configuration()
+    q[9] = np.nan
+    with pytest.raises(InvalidConfigurationError, match="NaN"):
+        sah.penetrations(q, 1e-3)

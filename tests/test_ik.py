@@ -143,7 +143,7 @@ def test_invalid_targets_raise(sah: Hand) -> None:
         ("seed", -1, "seed must be an integer >= 0"),
         ("seed", True, "seed must be an integer"),
         ("max_iterations", 0, "max_iterations must be an integer >= 1"),
-        ("init", "grid", r"init must be one of \['sequence', 'random'\]"),
+        ("init", "grid", r"init must be one of \['sequence', 'random', 'learned'\]"),
         ("method", "magic", r"method must be one of \['auto', 'paper'\]"),
         ("d_min_m", float("nan"), "d_min_m must be a finite number > 0"),
         ("alpha", float("inf"), "alpha must be a finite number > 0"),
@@ -274,6 +274,19 @@ def test_three_finger_can_grasp_keeps_the_free_finger_out(sah: Hand) -> None:
     _independent_check(sah, target, entry, 1.5e-3)
     # The free ring finger has no contact: its fingertip may not enter the can either.
     _assert_outside(sah, _object_distances(sah, entry, pieces), ("thumb", "index", "middle"))
+
+
+def test_free_finger_is_returned_placed_clear_of_the_other_links(sah: Hand) -> None:
+    from sahgrasp.objects.clearance import HandObjectClearance
+
+    for problem in random_problems(sah, 10, seed=7):
+        target = GraspTarget(problem.name, [c for c in problem.contacts if c.finger != "ring"])
+        result = solve_ik(sah, target, free_fingers=("ring",))
+        assert result.success
+        # Already placed: placing again leaves it where it is, and it is clear.
+        again = HandObjectClearance(sah, None).place_free_fingers(result.q, ("ring",))
+        assert again.clear
+        np.testing.assert_array_equal(again.q, result.q)
 
 
 @pytest.mark.parametrize("method", ["auto", "paper"])

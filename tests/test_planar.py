@@ -5,24 +5,30 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
-from sahgrasp.errors import AtlasError
-from sahgrasp.planar import (
-    DEFAULT_HAND,
-    PlanarResult,
-    make_planar_problem,
-    optimize_planar,
-    run_planar,
-)
+from sahgrasp.errors import AtlasError, GraspSystemError, OptimizationError
+from sahgrasp.experiments.plotting import plot_planar
+from sahgrasp.experiments.report import summary
+from sahgrasp.experiments.setups import run_experiment
+from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.planar import DEFAULT_HAND, PlanarGraspProblem, make_planar_problem
 from sahgrasp.quality import INDICES
+
+PAPER = OptimizationSettings(radius=0.125, epsilon=0.4)
 
 
 @pytest.fixture(scope="module")
-def result() -> PlanarResult:
-    return optimize_planar()
+def result() -> OptimizationResult:
+    return optimize(make_planar_problem(), PAPER)
+
+
+def planar(result: OptimizationResult) -> PlanarGraspProblem:
+    assert isinstance(result.problem, PlanarGraspProblem)
+    return result.problem
 
 
 def central_differences(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
@@ -32,9 +38,9 @@ def central_differences(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray) ->
 
 def test_initial_grasp_is_feasible_and_f_has_dimension_three() -> None:
     problem = make_planar_problem()
-    assert np.abs(problem.residual(problem.x1)).max() <= 1e-12
+    assert np.abs(problem.F(problem.x1)).max() <= 1e-12
     assert np.linalg.matrix_rank(problem.grasp_jacobian(problem.x1)) == 16  # t = 19 - 16
-    assert np.linalg.matrix_rank(problem.jacobian(problem.x1)) == 17  # k = 19 - 17
+    assert np.linalg.matrix_rank(problem.J(problem.x1)) == 17  # k = 19 - 17
     lower, upper = problem.bounds()
     assert (problem.x1 >= lower).all() and (problem.x1 <= upper).all()
     assert np.isfinite(lower[:12]).any() and np.isfinite(lower[16:]).all()  # joints and arcs
@@ -44,7 +50,7 @@ def test_jacobians_match_central_differences() -> None:
     problem = make_planar_problem()
     rng = np.random.default_rng(0)
     for x in problem.x1 + 0.1 * rng.normal(size=(3, 19)):  # off the manifold too
-        assert np.allclose(problem.jacobian(x), central_differences(problem.residual, x), atol=1e-8)
+        assert np.allclose(problem.J(x), central_differences(problem.F, x), atol=1e-8)
         joints = central_differences(problem.joint_motion, x)
         assert np.allclose(problem.joint_jacobian(x), joints, atol=1e-8)
 
@@ -52,8 +58,8 @@ def test_jacobians_match_central_differences() -> None:
 def test_batched_evaluation_matches_single() -> None:
     problem = make_planar_problem()
     X = problem.x1 + 0.05 * np.random.default_rng(1).normal(size=(4, 19))
-    assert np.allclose(problem.residual(X)[2], problem.residual(X[2]))
-    assert np.allclose(problem.jacobian(X)[3], problem.jacobian(X[3]))
+    assert np.allclose(problem.F(X)[2], problem.F(X[2]))
+    assert np.allclose(problem.J(X)[3], problem.J(X[3]))
 
 
 def test_object_jacobian_gives_the_object_twist() -> None:
@@ -74,42 +80,75 @@ def test_joint_angles_of_the_initial_posture() -> None:
     assert np.allclose(problem.joint_angles(problem.x1), expected)
 
 
-def test_atlas_covers_r_like_the_paper(result: PlanarResult) -> None:
-    assert (result.t, result.k) == (3, 2)
+def test_atlas_covers_r_like_the_paper(result: OptimizationResult) -> None:
+    problem = planar(result)
+    assert (problem.t, problem.dimension, result.atlas.dim) == (3, 2, 2)
     assert result.atlas.complete
-    assert 600 <= result.charts <= 1000  # the paper: about 750 with r = 0.125, epsilon = 0.4
-    residual = result.problem.residual(result.atlas.centres)
+    assert 600 <= result.atlas.n_charts <= 1000  # the paper: about 750, r = 0.125, eps = 0.4
+    residual = problem.F(result.atlas.centres)
     assert np.abs(residual).max() <= 1e-8
-    lower, upper = result.problem.bounds()
+    lower, upper = problem.bounds()
     assert (result.atlas.centres >= lower).all() and (result.atlas.centres <= upper).all()
+    assert result.valid.all() and np.array_equal(result.configurations, result.atlas.centres)
 
 
-def test_best_grasp_is_a_local_maximum(result: PlanarResult) -> None:
+def test_best_grasp_is_a_local_maximum(result: OptimizationResult) -> None:
+    assert result.quality is not None and result.index == "volume"
     for name in INDICES:
+        ranked = result.ranked_by(name)
         values = result.quality.index(name)
-        best = result.best[name].chart
-        assert values[best] == result.best[name].value == values.max()
-        assert (values[result.atlas.neighbours(best)] <= values[best]).all()
-        assert result.worst[name].value == values.min()
+        assert np.array_equal(ranked.values, values)
+        assert values[ranked.best] == values.max() and values[ranked.worst] == values.min()
+        assert (values[result.atlas.neighbours(ranked.best)] <= values[ranked.best]).all()
+    volume = result.ranked_by("volume")
+    assert (result.best, result.worst) == (volume.best, volume.worst)
+    assert result.best_overall == result.best  # nothing collides
     assert result.quality.singular("volume").any()  # fully stretched fingers (Fig. 9)
 
 
-def test_best_value_does_not_depend_on_the_start(result: PlanarResult) -> None:
+def test_best_value_does_not_depend_on_the_start(result: OptimizationResult) -> None:
+    problem = planar(result)
     centres = result.atlas.centres
-    far = int(np.argmax(np.linalg.norm(centres - result.problem.x1, axis=1)))
-    again = optimize_planar(result.problem, start=centres[far])
-    assert again.atlas.complete
+    far = int(np.argmax(np.linalg.norm(centres - problem.x1, axis=1)))
+    again = optimize(problem, PAPER, start=centres[far])
+    assert again.atlas.complete and np.array_equal(again.atlas.centres[0], centres[far])
     for name in INDICES:
-        assert again.best[name].value == pytest.approx(result.best[name].value, rel=0.02)
+        ours, theirs = result.ranked_by(name), again.ranked_by(name)
+        assert theirs.values[theirs.best] == pytest.approx(ours.values[ours.best], rel=0.02)
 
 
-def test_run_planar_writes_json_and_plot(tmp_path: Path) -> None:
-    summary = run_planar(json_out=str(tmp_path / "p.json"), plot_out=str(tmp_path / "p.png"))
-    for key in ("charts", "t", "k", "atlas_seconds", "quality_seconds", "best", "worst"):
-        assert key in summary
-    assert json.loads((tmp_path / "p.json").read_text()) == summary
+def test_summary_and_plot(result: OptimizationResult, tmp_path: Path) -> None:
+    out = json.loads(json.dumps(summary("planar", result)))
+    assert (out["charts"], out["t"], out["k"], out["s"]) == (result.atlas.n_charts, 3, 2, 1)
+    best = out["best"]["configuration"]
+    assert len(best["joint_angles_rad"]) == 6 and len(out["best"]["x"]) == 19
+    assert (out["stop_reason"], out["complete"], out["colliding_charts"]) == ("complete", True, 0)
+    assert set(out["indices"]) == set(INDICES)
+    plot_planar(result, tmp_path / "p.png")
     assert (tmp_path / "p.png").read_bytes()[:4] == b"\x89PNG"
-    best = summary["best"]["configuration"]
-    assert len(best["joint_angles_rad"]) == 6 and len(best["x"]) == 19
-    with pytest.raises(AtlasError, match="valid"):
-        run_planar(index="dexterity")
+
+
+def test_a_tiny_radius_stops_at_max_charts_and_says_so() -> None:
+    heard: list[int] = []
+    result = run_experiment(
+        "planar", radius=1e-4, max_charts=50, progress=lambda _s, done, _t: heard.append(done)
+    )
+    out = summary("planar", result)
+    assert out["charts"] == 50 and out["max_charts"] == 50
+    assert (out["stop_reason"], out["complete"]) == ("max_charts", False)
+    assert heard[-1] == 50
+
+
+@pytest.mark.parametrize(
+    ("options", "error", "match"),
+    [
+        ({"radius": 0.0}, AtlasError, "radius"),
+        ({"epsilon": 0.0}, AtlasError, "epsilon"),
+        ({"max_charts": 0}, AtlasError, "max_charts"),
+        ({"index": "dexterity"}, OptimizationError, "unknown index 'dexterity'; valid"),
+        ({"k": 4}, GraspSystemError, "k must be 1, 2 or 3"),
+    ],
+)
+def test_bad_settings_are_refused(options: dict[str, Any], error: type, match: str) -> None:
+    with pytest.raises(error, match=match):
+        run_experiment("planar", **options)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sahgrasp.atlas import AtlasSettings, build_atlas
-from sahgrasp.errors import AtlasError
+from sahgrasp.errors import QualityError
 from sahgrasp.quality import (
     INDICES,
     SINGULAR_THRESHOLDS,
@@ -14,6 +14,7 @@ from sahgrasp.quality import (
     evaluate_index,
     manipulability,
     null_space,
+    principal_projection,
     semi_axes,
 )
 
@@ -59,7 +60,7 @@ def test_thresholds_of_the_paper() -> None:
     assert not m.singular("volume") and not m.singular("inverse_condition")
     m = ellipsoid_indices(np.eye(2), np.diag([1.0, 5e-4]))
     assert m.singular("inverse_condition") and m.singular("min_semiaxis")
-    with pytest.raises(AtlasError, match="valid"):
+    with pytest.raises(QualityError, match="valid"):
         m.index("dexterity")
 
 
@@ -74,7 +75,7 @@ def test_rows_or_matrices_of_a_tangent_basis_and_batches() -> None:
     assert np.allclose(by_rows.semi_axes, by_matrix.semi_axes)
     single = manipulability(T[2], actuated, obj)
     assert np.allclose(single.volume, by_rows.volume[2])
-    with pytest.raises(AtlasError, match="1-D"):
+    with pytest.raises(QualityError, match="1-D"):
         manipulability(T, actuated[None, :], obj)
 
 
@@ -104,7 +105,30 @@ def test_evaluate_index_accepts_user_callables() -> None:
     assert atlas.centres[height.worst, 2] == height.values.min()
     scalar = evaluate_index(atlas, lambda x: -x[0], vectorised=False)
     assert atlas.centres[scalar.best, 0] == atlas.centres[:, 0].min()
-    with pytest.raises(AtlasError, match="values for"):
+    with pytest.raises(QualityError, match="values for"):
         evaluate_index(atlas, lambda X: X[:3, 0])
-    with pytest.raises(AtlasError, match="NaN"):
+    with pytest.raises(QualityError, match="NaN"):
         evaluate_index(atlas, lambda X: np.full(len(X), np.nan))
+
+
+def test_evaluate_index_ranks_candidates_only() -> None:
+    atlas = sphere_atlas()
+    north = atlas.centres[:, 2] > 0.5
+    ranked = evaluate_index(atlas, lambda X: -X[:, 2], candidates=~north)
+    assert ranked.best_overall == int(np.argmin(atlas.centres[:, 2]))
+    assert not north[ranked.best] and not north[ranked.worst]
+    assert ranked.values[ranked.worst] == ranked.values[~north].min()
+    with pytest.raises(QualityError, match="no candidate chart"):
+        evaluate_index(atlas, lambda X: X[:, 2], candidates=np.zeros(atlas.n_charts, bool))
+    with pytest.raises(QualityError, match="candidates must be"):
+        evaluate_index(atlas, lambda X: X[:, 2], candidates=[True])
+
+
+def test_principal_projection_keeps_the_widest_directions() -> None:
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(500, 3)) * [0.01, 2.0, 1.0] + [5.0, 0.0, 0.0]
+    xy = principal_projection(points)
+    assert xy.shape == (500, 2)
+    assert np.allclose(xy.mean(axis=0), 0.0)
+    assert abs(np.corrcoef(xy[:, 0], points[:, 1])[0, 1]) > 0.99  # the widest axis first
+    assert abs(np.corrcoef(xy[:, 1], points[:, 2])[0, 1]) > 0.99

@@ -21,6 +21,7 @@ import pytest
 
 from sahgrasp.cli import sequence as sequence_cli
 from sahgrasp.errors import InvalidSettingsError, SequenceFileError
+from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, Sequence, pose_basis
 from sahgrasp.sequence import (
@@ -31,7 +32,7 @@ from sahgrasp.sequence import (
     search_sequence,
     solve_chunk,
 )
-from sahgrasp.sequence.folder import LOCK_NAME, locked_folder, write_bytes
+from sahgrasp.sequence.folder import LOCK_NAME, locked_folder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -407,7 +408,7 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(
 
     monkeypatch.setattr(os, "replace", fail)
     with pytest.raises(OSError, match="disk full"):
-        write_bytes(path, b"new")
+        write_bytes_atomic(path, b"new")
     assert [p.name for p in tmp_path.iterdir()] == ["round-001.json"]
     assert path.read_text() == "old"
 

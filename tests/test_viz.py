@@ -2,6 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -10,9 +17,16 @@ import psutil
 import pytest
 
 from sahgrasp.contacts import ContactTarget, GraspTarget
+from sahgrasp.errors import VizError
+from sahgrasp.experiments.ik_examples import (
+    EXAMPLE_NAMES,
+    format_report,
+    show_examples,
+    solve_example,
+)
 from sahgrasp.hand import Hand
 from sahgrasp.ik import random_problem, solve_ik
-from sahgrasp.objects import load_object, paper_grasp
+from sahgrasp.objects import load_object, paper_grasp, transform_points
 from sahgrasp.viz import (
     CAMERA_FOV_DEG,
     ChartGrasp,
@@ -20,7 +34,8 @@ from sahgrasp.viz import (
     RecordingWindow,
     Viewer,
     display_points,
-    format_report,
+    frame_grasp,
+    grasp_points,
     hex_color,
     present,
     quality_colors,
@@ -29,9 +44,12 @@ from sahgrasp.viz import (
     show_atlas_grasps,
     show_contacts,
     show_grasp,
-    solve_example,
     visual_model,
 )
+from sahgrasp.viz.hand_view import visual_corners
+from sahgrasp.viz.screenshot import ScreenshotError, screenshot
+from sahgrasp.viz.screenshot import main as screenshot_main
+from sahgrasp.viz.viewer import ViewerError
 
 
 def by_path(html: str, kind: str) -> dict[str, dict[str, Any]]:
@@ -87,6 +105,91 @@ def test_live_viewer_server_is_gone_after_an_error() -> None:
     assert pid is not None and not psutil.pid_exists(pid)
 
 
+ROOT = Path(__file__).resolve().parent.parent
+LIVE_SCRIPT = """
+import signal, sys, time
+from sahgrasp.viz.viewer import Viewer
+if sys.argv[1] == "own-handler":
+    signal.signal(signal.SIGTERM, lambda *_: (print("own handler", flush=True), sys.exit(3)))
+viewer = Viewer(live=True)
+print(viewer.server_pid, flush=True)
+time.sleep(120)
+"""
+
+
+def gone(pid: int) -> bool:
+    try:
+        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return True
+
+
+def until(condition: Callable[[], bool], timeout_s: float = 20.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.1)
+    return condition()
+
+
+def listening(pid: int) -> set[str]:
+    return {c.laddr.ip for c in psutil.Process(pid).net_connections() if c.status == "LISTEN"}
+
+
+@pytest.mark.parametrize(
+    ("signum", "mode", "code"),
+    [
+        (signal.SIGTERM, "plain", -signal.SIGTERM),
+        (signal.SIGHUP, "plain", -signal.SIGHUP),
+        (signal.SIGKILL, "plain", -signal.SIGKILL),
+        (signal.SIGTERM, "own-handler", 3),
+    ],
+)
+def test_a_signalled_script_leaves_no_meshcat_server(signum: int, mode: str, code: int) -> None:
+    script = subprocess.Popen(
+        [sys.executable, "-c", LIVE_SCRIPT, mode], stdout=subprocess.PIPE, text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+    try:
+        assert script.stdout is not None
+        lines = iter(script.stdout.readline, "")
+        server = int(next(line for line in lines if line.strip().isdigit()))
+        assert listening(server) == {"127.0.0.1"}  # zmq and web ports, this machine only
+        script.send_signal(signum)
+        assert until(lambda: script.poll() is not None), "the script did not end"
+        assert until(lambda: gone(server)), "the meshcat server outlived the script"
+        assert script.returncode == code
+        if mode == "own-handler":
+            assert "own handler" in script.stdout.read()
+    finally:
+        script.kill()
+        script.communicate(timeout=10)
+
+
+def test_live_viewer_puts_back_the_signal_handlers() -> None:
+    before = {sig: signal.getsignal(sig) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    with Viewer(live=True) as viewer:
+        assert signal.getsignal(signal.SIGTERM) == viewer._on_signal
+    assert {sig: signal.getsignal(sig) for sig in before} == before
+
+
+def test_an_ignored_signal_stays_ignored() -> None:
+    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # as under nohup
+    try:
+        with Viewer(live=True) as viewer:
+            assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) == viewer._on_signal
+        assert signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+
+
+def test_live_viewer_on_a_bad_host_is_a_typed_error() -> None:
+    with pytest.raises(ViewerError, match=r"did not start on host '256\.1\.1\.1'"):
+        Viewer(live=True, host="256.1.1.1")
+
+
 def test_offline_viewer_cannot_open_a_browser() -> None:
     with Viewer() as viewer, pytest.raises(RuntimeError, match="save_html"):
         viewer.open()
@@ -126,6 +229,70 @@ def test_frame_holds_every_point_in_the_field_of_view() -> None:
     depth = rel[:, 1]  # looking along +y
     half = np.tan(np.radians(0.5 * CAMERA_FOV_DEG))
     assert np.all(np.abs(rel[:, 0]) <= depth * half) and np.all(np.abs(rel[:, 2]) <= depth * half)
+
+
+def camera_eye(html: str) -> np.ndarray:
+    """The camera position (world frame) of an exported scene framed by ``look_at``."""
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    (position,) = [c for c in scene_commands(html) if c.get("property") == "position"]
+    x, z, minus_y = position["value"]
+    return centre + np.array([x, -minus_y, z])
+
+
+def in_view(points: np.ndarray, eye: np.ndarray, centre: np.ndarray, aspect: float) -> bool:
+    """Every point inside the field of view of a camera at ``eye`` looking at ``centre``."""
+    forward = (centre - eye) / np.linalg.norm(centre - eye)
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    rel = points - eye
+    depth = rel @ forward
+    tan_v = np.tan(np.radians(0.5 * CAMERA_FOV_DEG))
+    return bool(np.all(np.abs(rel @ up) <= depth * tan_v)
+                and np.all(np.abs(rel @ right) <= depth * tan_v * aspect))  # fmt: skip
+
+
+def test_visual_corners_bound_every_visual_geometry(sah: Hand) -> None:
+    q = sah.configuration()
+    corners = visual_corners(sah, q)
+    assert corners.shape == (8 * visual_model(sah).ngeoms, 3)
+    with Viewer() as viewer:
+        placements = HandView(viewer, sah, "h", q).placements(q)
+    palm = corners[:8]  # a box: its corners lie at its half-diagonal from its placement
+    assert np.allclose(palm.mean(axis=0), placements[0][:3, 3])
+    assert np.allclose(np.linalg.norm(palm - placements[0][:3, 3], axis=1),
+                       np.linalg.norm([0.03285, 0.06, 0.065]))  # fmt: skip
+
+
+def test_frame_grasp_looks_at_the_inside_of_the_hand_with_all_in_view(sah: Hand) -> None:
+    can, target = load_object("can"), paper_grasp("can")
+    result = solve_ik(sah, target)
+    with Viewer() as viewer:
+        show_grasp(viewer, "g", sah, result.q, can, target)
+        frame_grasp(viewer, sah, result.q, target, can)
+        html = viewer.html()
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    contacts = np.mean([c.point for c in target.contacts], axis=0)
+    outward = contacts - result.q[:3]
+    assert (eye - contacts)[:2] @ outward[:2] > 0  # beyond the contacts, seen from the wrist
+    assert eye[2] > centre[2]  # from above
+    assert in_view(grasp_points(sah, result.q, can), eye, centre, aspect=1.0)
+
+
+def test_a_row_of_examples_fits_a_1280x800_window(sah: Hand) -> None:
+    examples = [solve_example(sah, name) for name in EXAMPLE_NAMES]
+    with Viewer() as viewer:
+        show_examples(viewer, sah, examples)
+        html = viewer.html()
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    placed = [
+        transform_points(transform(by_path(html, "set_transform")[f"/meshcat/grasps/{ex.name}"]),
+                         grasp_points(sah, ex.result.q, ex.obj))
+        for ex in examples
+    ]  # fmt: skip
+    assert in_view(np.concatenate(placed), eye, centre, aspect=1280 / 800)
 
 
 # ----- colours --------------------------------------------------------------------------------
@@ -231,7 +398,7 @@ def test_display_points_fit_the_atlas_size(dim: int) -> None:
     assert np.allclose(shown.mean(axis=0), 0.0, atol=1e-12)
     if dim == 2:
         assert np.allclose(shown[:, 2], 0.0)
-    with pytest.raises(ValueError, match="finite"):
+    with pytest.raises(VizError, match="finite"):
         display_points(np.zeros((0, 3)))
 
 
@@ -247,7 +414,7 @@ def test_atlas_points_coloured_by_quality_best_and_worst_marked() -> None:
     assert cloud["object"]["type"] == "Points"
     best = transform(by_path(html, "set_transform")["/meshcat/atlas/best"])
     assert np.allclose(best[:3, 3], plot.positions_m[29])
-    with Viewer() as viewer, pytest.raises(ValueError, match="values of shape"):
+    with Viewer() as viewer, pytest.raises(VizError, match="values of shape"):
         show_atlas(viewer, "atlas", points, values[:5], 0.05)
 
 
@@ -276,8 +443,96 @@ def test_example_report_beside_the_paper(sah: Hand) -> None:
     assert example.result.history is not None
 
 
+def test_example_report_columns_stay_aligned_on_a_long_reason(sah: Hand) -> None:
+    solved = solve_example(sah, "fork")
+    failed = dataclasses.replace(
+        solved, name="can", result=dataclasses.replace(solved.result, success=False,
+                                                        reason="no_progress"),
+    )  # fmt: skip
+    header, *rows = format_report([solved, failed]).splitlines()
+    assert rows[1].split()[1:3] == ["no", "(no_progress)"]
+    for title in ("inits (paper)", "iterations (paper)"):  # text: left-aligned
+        start = header.index(title)
+        for row in rows:
+            assert row[start - 2 : start] == "  " and row[start] != " ", (title, row)
+    end = header.index("time [ms]") + len("time [ms]")  # numbers: right-aligned
+    assert all(row[end - 1] != " " and row[end : end + 2] == "  " for row in rows)
+    assert len({len(line) for line in (header, *rows)}) == 1
+
+
 def test_present_writes_html_without_a_server(tmp_path: Path) -> None:
     before = {p.pid for p in psutil.Process().children(recursive=True)}
     present(lambda v: v.meshcat["x"].set_transform(np.eye(4)), str(tmp_path / "x.html"))
     assert (tmp_path / "x.html").stat().st_size > 100_000  # meshcat's viewer is inlined
     assert {p.pid for p in psutil.Process().children(recursive=True)} == before
+
+
+# ----- screenshots ----------------------------------------------------------------------------
+def fake_chromium(folder: Path, body: str) -> str:
+    """An executable standing in for Chromium: a shell script running ``body``."""
+    path = folder / "fake-chromium"
+    path.write_text(f"#!/bin/sh\n{body}\n")
+    path.chmod(0o755)
+    return str(path)
+
+
+WRITE_SHOT = 'for a in "$@"; do case "$a" in --screenshot=*) printf PNG > "${a#*=}";; esac; done'
+
+
+def processes_running(executable: str) -> list[psutil.Process]:
+    found = []
+    for proc in psutil.process_iter(["cmdline", "status"]):
+        cmdline = proc.info["cmdline"] or []
+        if any(executable in part for part in cmdline) and proc.info["status"] != "zombie":
+            found.append(proc)
+    return found
+
+
+@pytest.fixture
+def page(tmp_path: Path) -> Path:
+    html = tmp_path / "scene.html"
+    html.write_text("<html></html>")
+    return html
+
+
+def test_a_hanging_chromium_is_killed_whole_retried_then_one_error(
+    tmp_path: Path, page: Path
+) -> None:
+    chromium = fake_chromium(tmp_path, "sleep 300 &\nsleep 300")  # a child in its group too
+    with pytest.raises(ScreenshotError, match=r"failed 2 times.*hung.*install Chromium"):
+        screenshot(page, tmp_path / "out.png", timeout_s=0.5, attempts=2, chromium=chromium)
+    assert processes_running(chromium) == []
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_a_failing_chromium_reports_its_exit_code_and_last_line(tmp_path: Path, page: Path) -> None:
+    chromium = fake_chromium(tmp_path, "echo 'first' >&2\necho 'GPU process died' >&2\nexit 3")
+    with pytest.raises(ScreenshotError, match=r"exit code 3 \(GPU process died\)"):
+        screenshot(page, tmp_path / "out.png", attempts=1, chromium=chromium)
+
+
+def test_an_image_written_before_chromium_hangs_on_exit_is_kept(tmp_path: Path, page: Path) -> None:
+    chromium = fake_chromium(tmp_path, f"{WRITE_SHOT}\nsleep 300")
+    out = screenshot(page, tmp_path / "sub" / "out.png", timeout_s=30, chromium=chromium)
+    assert out.read_bytes() == b"PNG"
+    assert processes_running(chromium) == []
+
+
+def test_no_chromium_is_one_typed_error_and_one_line(
+    tmp_path: Path, page: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.setenv("PATH", str(tmp_path))
+    with pytest.raises(ScreenshotError, match=r"no Chromium found.*apt-get install -y chromium"):
+        screenshot(page, tmp_path / "out.png")
+    assert screenshot_main([str(page), str(tmp_path / "out.png")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("screenshot: error: no Chromium found")
+
+
+def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None:
+    with pytest.raises(ScreenshotError, match="not a file"):
+        screenshot(tmp_path / "missing.html", tmp_path / "out.png")
+    with pytest.raises(ScreenshotError, match="attempts >= 1"):
+        screenshot(page, tmp_path / "out.png", attempts=0)
+    with pytest.raises(SystemExit):
+        screenshot_main([str(page), str(tmp_path / "out.png"), "--size", "12x"])

@@ -1,8 +1,10 @@
 """Atlas benchmark: spheres S^2 and S^3, the planar hand (Fig. 8) and the SAH (Fig. 10).
 
-Baselines are CuikSuite's (C) times quoted in the issue; the targets are chart counts within 10% of
-``Vol / r^k`` and times within 3x of the baselines, and for the planar hand an atlas in <= 0.1 s
-and the three indices over all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
+The sphere references are CuikSuite's (the authors' C code, with a k-d tree neighbour index) chart
+counts and times, measured on an idle 2-core machine in the same run as this engine: the targets
+are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` (S^2 <= 0.06 s,
+S^3 <= 5 s). For the planar hand the targets are an atlas in <= 0.1 s and the three indices over
+all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
 compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
 k = 2, is 10x that rate. Each case reports its best wall time over ``repeats`` builds and the CPU
 time of that build (steadier on a shared machine).
@@ -10,26 +12,31 @@ time of that build (steadier on a shared machine).
 
 from __future__ import annotations
 
+import functools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from math import gamma, pi
 from typing import Any
 
 import numpy as np
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.bench.report import progress_reporter
+from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.fileio import write_json_atomic
-from sahgrasp.optimization import run_experiment
-from sahgrasp.planar import build_planar_atlas, make_planar_problem
+from sahgrasp.planar import make_planar_problem
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "run"]
 
 BASELINES: dict[str, dict[str, float]] = {
-    "S2": {"charts": 1181, "seconds": 0.04},
-    "S3": {"charts": 19100, "seconds": 6.4},
+    "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
+    "S3": {"charts": 18802, "fastest": 4.2, "slowest": 5.5, "seconds": 5.0},
     "planar": {"charts": 750, "seconds": 0.1, "quality_seconds": 0.1},
 }
-"""CuikSuite's chart counts and times for r = 0.1 (spheres) and the paper's planar figures."""
+"""References and target times [s], r = 0.1 (spheres): CuikSuite's charts and its fastest and
+slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's."""
 
 SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
     ("can", 2): {"t": 8, "charts": 4800, "seconds": 140.0},
@@ -49,7 +56,6 @@ SAH_CASES: tuple[tuple[str, int, float, bool], ...] = (
 
 _SAH_SPEEDUP = 10.0  # target chart rate over the paper's (SAH can, k = 2)
 _SAH_MAX_CHARTS = 20_000
-_TIME_FACTOR = 3.0  # allowed slowdown over the C baseline
 _COUNT_TOLERANCE = 0.10  # allowed relative deviation of the chart count from Vol / r^k
 
 
@@ -92,16 +98,22 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
         "cpu_seconds": cpu,
         "charts_per_second": atlas.n_charts / seconds,
         "baseline_charts": baseline["charts"],
-        "baseline_seconds": baseline["seconds"],
-        "time_ratio": seconds / baseline["seconds"],
+        "baseline_seconds": [baseline["fastest"], baseline["slowest"]],
+        "target_seconds": baseline["seconds"],
         "count_ok": abs(atlas.n_charts / expected - 1.0) <= _COUNT_TOLERANCE,
-        "time_ok": seconds <= _TIME_FACTOR * baseline["seconds"],
+        "time_ok": seconds <= baseline["seconds"],
     }
 
 
 def _planar_row(repeats: int) -> dict[str, Any]:
     problem = make_planar_problem()
-    atlas, seconds, cpu = _best_build(lambda: build_planar_atlas(problem), repeats)
+    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
+    atlas, seconds, cpu = _best_build(
+        lambda: build_atlas(
+            problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds()
+        ),
+        repeats,
+    )
     quality_seconds = float("inf")
     for _ in range(repeats):
         start = time.perf_counter()
@@ -126,19 +138,19 @@ def _planar_row(repeats: int) -> dict[str, Any]:
 def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
     """Algorithm 1 once (IK, principal motions, atlas, index), then the atlas timed again."""
     result = run_experiment(name, k=k, radius=radius, max_charts=_SAH_MAX_CHARTS)
-    R, JR = result.reduced_system()
-    lower, upper = result.system.lower, result.system.upper
+    p = result.problem
+    atlas_settings = result.settings.atlas_settings()
     atlas, seconds, cpu = _best_build(
-        lambda: build_atlas(R, JR, result.start, k, result.settings, lower, upper), repeats
+        lambda: build_atlas(p.F, p.J, p.start, k, atlas_settings, *p.bounds()), repeats
     )
     paper = SAH_PAPER[name, k]
     rate, paper_rate = atlas.n_charts / seconds, paper["charts"] / paper["seconds"]
     return {
         "k": k,
-        "t": result.system.t,
-        "n": result.system.n,
+        "t": p.t,
+        "n": result.atlas.ambient_dim,
         "radius": radius,
-        "epsilon": result.settings.epsilon,
+        "epsilon": atlas_settings.epsilon,
         "charts": atlas.n_charts,
         "complete": atlas.complete,
         "seconds": seconds,
@@ -156,29 +168,63 @@ def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
     }
 
 
-def run(out_json: str | None = None, repeats: int = 5) -> dict[str, Any]:
-    """Run every case and return (and optionally write) the JSON summary.
+def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
+    """Case name -> the function measuring it, in the order they run."""
+    cases: dict[str, Callable[[], dict[str, Any]]] = {
+        "S2": lambda: _sphere_row("S2", 3, 0.1, repeats),
+        "S3": lambda: _sphere_row("S3", 4, 0.1, repeats),
+        "planar": lambda: _planar_row(repeats),
+    }
+    for name, k, radius, again in SAH_CASES:
+        cases[f"sah_{name}_k{k}_r{radius:g}"] = functools.partial(
+            _sah_row, name, k, radius, repeats if again else 1
+        )
+    return cases
+
+
+def run(
+    out_json: str | None = None,
+    repeats: int = 3,
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
+    cases: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """Run the cases and return (and optionally write) the JSON summary.
 
     Args:
         out_json: Write the summary there.
-        repeats: Builds per case for S^2, the planar hand and the SAH cases marked for repeats
-            (S^3 and the bottle with k = 3 are built once).
+        repeats: Builds per case for the spheres, the planar hand and the SAH cases marked for
+            repeats (the bottle with k = 3 is built once); each case reports its fastest.
+        quiet: No progress bar on stderr.
+        progress: Hears of every finished case (stage ``"bench atlas: cases"``) instead of the
+            bar.
+        cases: Names of the cases to run (``S2``, ``S3``, ``planar``, ``sah_can_k2_r0.1``, ...);
+            all if None.
+
+    Raises:
+        InvalidSettingsError: ``repeats`` < 1, or an unknown case name.
     """
-    sah = {
-        f"sah_{name}_k{k}_r{radius:g}": _sah_row(name, k, radius, repeats if again else 1)
-        for name, k, radius, again in SAH_CASES
-    }
+    if repeats < 1:
+        raise InvalidSettingsError(f"repeats must be >= 1, got {repeats}")
+    measures = _cases(repeats)
+    unknown = sorted(set(cases or ()) - set(measures))
+    if unknown:
+        raise InvalidSettingsError(f"unknown case(s) {unknown}; valid: {', '.join(measures)}")
+    if cases is not None:
+        measures = {name: measures[name] for name in measures if name in cases}
+    rows: dict[str, dict[str, Any]] = {}
+    with progress_reporter(progress, quiet) as report:
+        for name, measure in measures.items():
+            if report is not None:
+                report("bench atlas: cases", len(rows), len(measures))
+            rows[name] = measure()
+        if report is not None:
+            report("bench atlas: cases", len(rows), len(measures))
     summary = {
         "benchmark": "atlas",
-        "time_factor": _TIME_FACTOR,
         "count_tolerance": _COUNT_TOLERANCE,
         "sah_speedup_target": _SAH_SPEEDUP,
-        "cases": {
-            "S2": _sphere_row("S2", 3, 0.1, repeats),
-            "S3": _sphere_row("S3", 4, 0.1, 1),
-            "planar": _planar_row(repeats),
-            **sah,
-        },
+        "cases": rows,
     }
     if out_json is not None:
         write_json_atomic(out_json, summary)

@@ -1,7 +1,8 @@
 """``sahgrasp bench ik``: success and time of Algorithm 1 against the number of initial poses.
 
 On the same problems, from the same initial configurations and with the same acceptance test, it
-runs ``method=paper`` and ``method=auto`` each with ``init=sequence`` and ``init=random``, the
+runs ``method=auto`` with ``init=learned`` (the database's nearest grasps first, then the
+sequence), ``method=paper`` and ``method=auto`` each with ``init=sequence`` and ``init=random``, the
 peers of :mod:`sahgrasp.bench.peers` with ``init=sequence``, and, when the hand's sequence comes
 from the offline search, ``method=auto`` with the paper's Table 1 lambdas on the same PCA basis.
 Because Algorithm 1 tries its initial configurations in order, one run with ``i_max = 12``
@@ -13,6 +14,8 @@ budget.
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import replace
@@ -20,9 +23,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
+from sahgrasp.bench.peers import PEERS, available_peers
+from sahgrasp.bench.report import progress_reporter
 from sahgrasp.contacts import load_targets
+from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import (
     PAPER_TABLE1_LAMBDAS,
@@ -31,11 +36,14 @@ from sahgrasp.ik import (
     default_sequence,
     random_problems,
 )
-from sahgrasp.ik.solver import run_algorithm1, solve_ik
+from sahgrasp.ik.learned import default_database
+from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["run", "summarize"]
 
-RUNS: tuple[tuple[str, str], ...] = (
+RUNS: tuple[tuple[Method, Init], ...] = (
+    ("auto", "learned"),
     ("auto", "sequence"),
     ("auto", "random"),
     ("paper", "sequence"),
@@ -65,6 +73,10 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
         "mean_time_ms": float(times_ms.mean()),
         "p95_time_ms": float(np.percentile(times_ms, 95)),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
+        # All in: the whole solve's time (starts, collision checks) per Jacobian iteration.
+        "us_per_iteration": float(
+            times_ms.sum() * 1e3 / max(sum(r.iterations for r in results), 1)
+        ),
         "by_inits": by_inits,
         "solved_times_ms": sorted(
             float(t) for r, t in zip(results, times_ms, strict=True) if r.success
@@ -84,8 +96,6 @@ def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
         auto = IKSettings(seed=seed)
         solvers["auto/paper-table1"] = lambda t: solve_ik(hand, t, auto, table1)
     if peers:
-        from sahgrasp.bench.peers import PEERS
-
         auto = IKSettings(seed=seed)
         for name in peers:
             solvers[f"peer:{name}/sequence"] = lambda t, fn=PEERS[name]: run_algorithm1(
@@ -102,12 +112,16 @@ def run(
     peers: Sequence[str] = ("scipy", "pink"),
     peer_problems: int | None = 200,
     plot: str | None = None,
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
 ) -> dict[str, Any]:
     """Run the benchmark; returns the JSON document (and writes the figure to ``plot``).
 
     Every configuration solves problem ``i`` right after the others, so that a change in machine
     load affects them alike; peers, slower, see only the first ``peer_problems`` problems, and the
-    ``auto/sequence`` statistics on that subset are reported beside them.
+    ``auto/sequence`` statistics on that subset are reported beside them. A peer whose package is
+    not installed is skipped with one line on stderr naming the ``bench`` extra; the document's
+    ``skipped_peers`` says why.
 
     Args:
         hand: Hand name or description path.
@@ -117,19 +131,40 @@ def run(
         peers: Peer solvers to run (``scipy``, ``pink``).
         peer_problems: Peers run on the first this-many problems (None = all).
         plot: PNG path for the Fig. 9 reproduction.
+        quiet: No progress bar on stderr.
+        progress: Hears of every problem solved (stage ``"bench ik: problems"``) instead of the
+            bar.
+
+    Raises:
+        InvalidSettingsError: An unknown peer name, or ``problems`` or ``peer_problems`` < 1.
     """
+    if problems < 1 or (peer_problems is not None and peer_problems < 1):
+        raise InvalidSettingsError(
+            f"problems and peer_problems must be >= 1 (peer_problems may be None for all); got "
+            f"{problems} and {peer_problems}"
+        )
+    peers, skipped = available_peers(peers)
+    for name, reason in skipped.items():
+        print(f"bench ik: skipping peer {name}: {reason}", file=sys.stderr)
     model = load_hand(hand)
     problem_set = (
         list(load_targets(targets).problems) if targets else random_problems(model, problems, seed)
     )
     default_sequence(model)  # built before timing
+    learned = default_database(model)
+    if learned is not None:
+        learned.tree  # noqa: B018 -- the k-d tree is built before timing
     solvers = _solvers(model, seed, peers)
     subset = len(problem_set) if peer_problems is None else peer_problems
     results: dict[str, list[IKResult]] = {label: [] for label in solvers}
-    for i, target in enumerate(tqdm(problem_set, desc="bench ik", unit="problem")):
-        for label, solve in solvers.items():
-            if i < subset or not label.startswith("peer:"):
-                results[label].append(solve(target))
+    load_before = os.getloadavg()
+    with progress_reporter(progress, quiet) as report:
+        for i, target in enumerate(problem_set):
+            for label, solve in solvers.items():
+                if i < subset or not label.startswith("peer:"):
+                    results[label].append(solve(target))
+            if report is not None:
+                report("bench ik: problems", i + 1, len(problem_set))
     max_inits = IKSettings().max_inits
     runs = {label: summarize(rs, max_inits) for label, rs in results.items()}
     if peers:
@@ -142,7 +177,11 @@ def run(
         "seed": seed,
         "problems": len(problem_set),
         "peer_problems": min(subset, len(problem_set)),
+        "skipped_peers": skipped,
         "runs": runs,
+        # The machine may be shared: its 1-min load average (and cores) beside the timings.
+        "load_average": {"before": load_before[0], "after": os.getloadavg()[0]},
+        "cores": os.cpu_count(),
         "created_unix_s": time.time(),
     }
     if plot:

@@ -63,6 +63,10 @@ def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
 
     fk, fk_raw = _per_call_us((lambda: hand.contact_state(q), raw_fk), calls)
     jac, jac_raw = _per_call_us((lambda: hand.contact_jacobians(q), raw_jacobians), calls)
+    # The IK's hot path: the flat (p_i, r_i) vector and its Jacobian, against the same floors.
+    stack, stack_jac = _per_call_us(
+        (lambda: hand.contact_stack(q), lambda: hand.contact_stack_jacobian(q)), calls
+    )
     return {
         "nv": hand.nv,
         "contact_state_us": fk,
@@ -71,6 +75,10 @@ def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
         "contact_jacobians_us": jac,
         "raw_jacobians_us": jac_raw,
         "contact_jacobians_ratio": jac / jac_raw,
+        "contact_stack_us": stack,
+        "contact_stack_ratio": stack / fk_raw,
+        "contact_stack_jacobian_us": stack_jac,
+        "contact_stack_jacobian_ratio": stack_jac / jac_raw,
     }
 
 

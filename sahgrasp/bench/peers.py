@@ -12,16 +12,24 @@ test (Eq. (9), limits, self-collision) in :func:`sahgrasp.ik.solver.run_algorith
 
 from __future__ import annotations
 
+import importlib
+from collections.abc import Sequence
+
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand
 from sahgrasp.ik.initial import hang_from_thumb
 from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings
 
-__all__ = ["PEERS", "pink_attempt", "scipy_attempt"]
+__all__ = ["BENCH_EXTRA", "PEERS", "PEER_MODULES", "available_peers", "pink_attempt",
+           "scipy_attempt"]  # fmt: skip
+
+BENCH_EXTRA = 'pip install -e ".[bench]"'
+"""How to install the optional peers (the ``bench`` extra of the package)."""
 
 
 def _finish(
@@ -91,3 +99,39 @@ def pink_attempt(
 
 PEERS = {"scipy": scipy_attempt, "pink": pink_attempt}
 """Peer name -> inner solver."""
+
+PEER_MODULES: dict[str, tuple[str, ...]] = {
+    "scipy": ("scipy.optimize",),
+    "pink": ("pink", "qpsolvers", "quadprog"),
+}
+"""Peer name -> the modules it imports (pink's QP goes through qpsolvers to quadprog)."""
+
+
+def _missing_module(modules: Sequence[str]) -> str | None:
+    """The first of ``modules`` that cannot be imported, or None."""
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except ImportError:
+            return module
+    return None
+
+
+def available_peers(names: Sequence[str]) -> tuple[list[str], dict[str, str]]:
+    """Split peer names into those that can run and those skipped, with the reason why.
+
+    Raises:
+        InvalidSettingsError: A name is not one of :data:`PEERS`.
+    """
+    unknown = [name for name in names if name not in PEERS]
+    if unknown:
+        raise InvalidSettingsError(f"unknown peer(s) {unknown}; valid: {', '.join(PEERS)}")
+    ready: list[str] = []
+    skipped: dict[str, str] = {}
+    for name in dict.fromkeys(names):  # each once, in order
+        missing = _missing_module(PEER_MODULES[name])
+        if missing is None:
+            ready.append(name)
+        else:
+            skipped[name] = f"module {missing!r} is not installed; install it with {BENCH_EXTRA}"
+    return ready, skipped

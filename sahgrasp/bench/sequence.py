@@ -20,6 +20,7 @@ from typing import Any
 
 from sahgrasp.hand import HandDescription, load_hand
 from sahgrasp.ik import IKSettings, worker_hand
+from sahgrasp.ik.solver import Method
 from sahgrasp.sequence import SearchSettings, open_executor, search_sequence
 
 __all__ = ["extrapolate", "run"]
@@ -70,7 +71,7 @@ def run(
     problems: int = 60,
     rounds: int = 2,
     seed: int = 0,
-    method: str = "auto",
+    method: Method = "auto",
     workers: Sequence[int] = (1, 2),
     cluster_workers: int = 16,
 ) -> dict[str, Any]:

@@ -1,4 +1,7 @@
-"""``sahgrasp bench NAME``: run a benchmark and write its JSON."""
+"""``sahgrasp bench NAME``: run a benchmark, print its summary table and write its JSON.
+
+With ``--json -`` the JSON document alone goes to stdout (progress stays on stderr).
+"""
 
 from __future__ import annotations
 
@@ -6,49 +9,157 @@ import argparse
 import importlib
 from typing import Any
 
-from sahgrasp.cli.common import emit_json
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    add_json_argument,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    nonnegative_int,
+    output_file,
+    positive_int,
+)
 
 __all__ = ["add_parser", "run"]
+
+_NOT_OPTIONS = ("command", "bench", "json", "run")
+"""Namespace entries that are not keyword arguments of the benchmark's ``run``."""
+
+
+def _add_quiet(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress bars on stderr")
+
+
+def _kinematics(benches: Any) -> None:
+    k = add_command(benches, "kinematics", "contact queries vs raw Pinocchio calls")
+    k.add_argument("--calls", type=positive_int, default=20_000, help="timed calls per query")
+    add_json_argument(k, "the timings")
+
+
+def _ik(benches: Any) -> None:
+    ik = add_command(benches, "ik", "Algorithm 1: success and time vs initial poses, with peers")
+    ik.add_argument("--hand", default="sah", help=HAND_HELP)
+    ik.add_argument("--problems", type=positive_int, default=1000, help="random feasible problems")
+    ik.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the problems (>= 0)")
+    ik.add_argument("--targets", default=None, help="targets file instead of random problems")
+    ik.add_argument(
+        "--peers",
+        nargs="*",
+        default=["scipy", "pink"],
+        choices=["scipy", "pink"],
+        help="peer solvers to compare with (pink needs the [bench] extra)",
+    )
+    ik.add_argument(
+        "--peer-problems", type=positive_int, default=200, help="problems the peers solve"
+    )
+    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure, PNG")
+    _add_quiet(ik)
+    add_json_argument(ik, "the results")
+
+
+def _atlas(benches: Any) -> None:
+    atlas = add_command(benches, "atlas", "atlas on spheres and the planar hand vs CuikSuite")
+    atlas.add_argument(
+        "--repeats", type=positive_int, default=3, help="builds per timed case (best of)"
+    )
+    atlas.add_argument(
+        "--cases", nargs="+", default=None, metavar="CASE", help="run only these cases (all)"
+    )
+    _add_quiet(atlas)
+    add_json_argument(atlas, "the timings")
+
+
+def _sequence(benches: Any) -> None:
+    seq = add_command(benches, "sequence", "offline search: 1 vs 2 workers, cluster estimate")
+    seq.add_argument("--hand", default="sah", help=HAND_HELP)
+    seq.add_argument("--grid", type=positive_int, default=5, help="N values per lambda (>= 2)")
+    seq.add_argument("--problems", type=positive_int, default=60, help="M problems per round")
+    seq.add_argument("--rounds", type=positive_int, default=2, help="rounds of the search")
+    seq.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the problems (>= 0)")
+    seq.add_argument("--method", choices=("auto", "paper"), default="auto", help="IK method")
+    seq.add_argument(
+        "--workers", type=positive_int, nargs="+", default=[1, 2], help="worker counts to time"
+    )
+    seq.add_argument(
+        "--cluster-workers", type=positive_int, default=16, help="workers of the estimate"
+    )
+    add_json_argument(seq, "the timings")
+
+
+def _grasps(benches: Any) -> None:
+    grasps = add_command(
+        benches, "grasps", "contact sets sampled on objects, solved without and with the object"
+    )
+    grasps.add_argument(
+        "--problems-per-object", type=positive_int, default=200, help="contact sets per object"
+    )
+    grasps.add_argument(
+        "--seed", type=nonnegative_int, default=7305411, help="seed of the contact sets (>= 0)"
+    )
+    grasps.add_argument("--workers", type=positive_int, default=1, help="IK processes")
+    grasps.add_argument(
+        "--objects", nargs="*", default=None, metavar="NAME", help="catalog objects (all)"
+    )
+    grasps.add_argument(
+        "--mesh", dest="meshes", action="append", default=[], metavar="PATH",
+        help="a mesh file (STL, OBJ, PLY) as one more object; repeat for more",
+    )  # fmt: skip
+    grasps.add_argument(
+        "--without-object", dest="with_object", action="store_false",
+        help="solve without the object only (no second, collision-aware run)",
+    )  # fmt: skip
+    grasps.add_argument(
+        "--targets-out", default=None, metavar="OUT", help="write the contact sets as targets"
+    )
+    _add_quiet(grasps)
+    add_json_argument(grasps, "the results")
+
+
+def _solve(benches: Any) -> None:
+    solve = add_command(benches, "solve", "sahgrasp solve at scale: problems/s, peak memory")
+    solve.add_argument("--problems", type=positive_int, default=10_000, help="random problems")
+    solve.add_argument(
+        "--lines", type=nonnegative_int, default=1_000_000, help="lines, mostly invalid (0: none)"
+    )
+    solve.add_argument("--seed", type=nonnegative_int, default=9090, help="seed of the problems")
+    solve.add_argument(
+        "--dask",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also run on a Dask LocalCluster of 2 workers",
+    )
+    add_json_argument(solve, "the timings")
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
-    p = sub.add_parser("bench", help="run a benchmark, write JSON")
-    benches = p.add_subparsers(dest="bench", required=True)
-    k = benches.add_parser("kinematics", help="contact queries vs raw Pinocchio")
-    k.add_argument("--calls", type=int, default=20_000)
-    k.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    k.set_defaults(run=run)
-    ik = benches.add_parser("ik", help="Algorithm 1: success/time vs initial poses, with peers")
-    ik.add_argument("--hand", default="sah")
-    ik.add_argument("--problems", type=int, default=1000)
-    ik.add_argument("--seed", type=int, default=0)
-    ik.add_argument("--targets", default=None, help="targets file instead of random problems")
-    ik.add_argument("--peers", nargs="*", default=["scipy", "pink"], choices=["scipy", "pink"])
-    ik.add_argument("--peer-problems", type=int, default=200)
-    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure")
-    ik.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    ik.set_defaults(run=run)
-    atlas = benches.add_parser("atlas", help="atlas on spheres and the planar hand vs CuikSuite")
-    atlas.add_argument("--repeats", type=int, default=5)
-    atlas.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    atlas.set_defaults(run=run)
-    seq = benches.add_parser("sequence", help="offline search: 1 vs 2 workers, cluster estimate")
-    seq.add_argument("--hand", default="sah")
-    seq.add_argument("--grid", type=int, default=5)
-    seq.add_argument("--problems", type=int, default=60)
-    seq.add_argument("--rounds", type=int, default=2)
-    seq.add_argument("--seed", type=int, default=0)
-    seq.add_argument("--method", choices=("auto", "paper"), default="auto")
-    seq.add_argument("--workers", type=int, nargs="+", default=[1, 2])
-    seq.add_argument("--cluster-workers", type=int, default=16)
-    seq.add_argument("--json", default=None, metavar="OUT", help="write JSON to OUT")
-    seq.set_defaults(run=run)
+    p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
+    benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
+    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve):
+        add(benches)
+    p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp bench``."""
+    options = {k: v for k, v in vars(args).items() if k not in _NOT_OPTIONS}
+    if options.get("objects") is None:
+        options.pop("objects", None)
+    check_outputs(
+        [args.json, options.get("plot"), options.get("targets_out")],
+        inputs=[options.get("targets"), *options.get("meshes", ())],
+    )
+    check_json_inputs(options.get("hand"))
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")
-    options = {k: v for k, v in vars(args).items() if k not in ("command", "bench", "json", "run")}
-    emit_json(module.run(**options), args.json)
+    with output_file(options.get("plot")) as plot:
+        if plot is not None:
+            options["plot"] = plot
+        data = module.run(**options)
+    if args.json != "-":
+        from sahgrasp.bench.report import summary_table
+
+        print(summary_table(data))
+    if args.json is not None:
+        emit_json(data, args.json)
     return 0

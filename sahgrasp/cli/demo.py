@@ -9,19 +9,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from tqdm import tqdm
-
-from sahgrasp.hand import load_hand
-from sahgrasp.viz import (
-    EXAMPLE_NAMES,
-    Viewer,
-    add_html_argument,
-    add_ik_arguments,
-    format_report,
-    ik_settings,
-    show_examples,
-    solve_example,
-)
+from sahgrasp.cli.common import add_command, check_json_inputs, check_outputs
+from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings
 
 __all__ = ["DEFAULT_HTML", "add_parser", "run"]
 
@@ -31,16 +20,29 @@ DEFAULT_HTML = "sahgrasp_demo.html"
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
-    p = sub.add_parser(
-        "demo", help="solve the paper's example grasps and write them as one HTML scene"
-    )
+    p = add_command(sub, "demo", "solve the IK paper's example grasps, show them in one HTML scene")
     add_ik_arguments(p)
-    add_html_argument(p, default=DEFAULT_HTML)
+    p.add_argument(
+        "--html", default=DEFAULT_HTML, metavar="OUT", help="write the scene to this HTML file"
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp demo``; returns 0 if every grasp was solved, 1 otherwise."""
+    check_outputs([args.html], inputs=[args.hand])
+    check_json_inputs(args.hand)
+    from tqdm import tqdm
+
+    from sahgrasp.experiments.ik_examples import (
+        EXAMPLE_NAMES,
+        format_report,
+        show_examples,
+        solve_example,
+    )
+    from sahgrasp.hand import load_hand
+    from sahgrasp.viz import Viewer
+
     hand = load_hand(args.hand)
     settings = ik_settings(args)
     examples = [
@@ -48,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         for name in tqdm(EXAMPLE_NAMES, desc="solving", unit="grasp")
     ]
     print(format_report(examples))
-    print("(paper: ik-initial-sequence Section 4.1, d_min = 1.5 mm; times are ours)")
+    print("(paper: Claret & Suárez, Section 4.1, d_min = 1.5 mm; times are ours)")
     with Viewer(title="sahgrasp demo") as viewer:
         show_examples(viewer, hand, examples)
         out = viewer.save_html(args.html)

@@ -4,20 +4,35 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sahgrasp.cli.common import emit_json
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    printable,
+)
+
+if TYPE_CHECKING:
+    from sahgrasp.hand import Hand
 
 __all__ = ["add_parser", "describe", "run"]
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
-    p = sub.add_parser("info", help="describe a hand model")
-    p.add_argument("--hand", default="sah", help="sah, allegro, or a hand-description JSON path")
-    p.add_argument("--json", nargs="?", const="-", default=None, metavar="OUT",
-                   help="print JSON (or write it to OUT)")  # fmt: skip
+    p = add_command(sub, "info", "describe a hand model")
+    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument(
+        "--json",
+        nargs="?",
+        const="-",
+        default=None,
+        metavar="OUT",
+        help="print the description as JSON on stdout (or write it to OUT)",
+    )
     p.set_defaults(run=run)
 
 
@@ -52,30 +67,39 @@ def describe(hand: Hand) -> dict[str, Any]:
     }
 
 
+def _say(line: str) -> None:
+    """Print a line; names from a user's hand description could hold terminal escapes."""
+    print(printable(line))
+
+
 def _print_text(info: dict[str, Any]) -> None:
     deg = 180.0 / math.pi
     dof = info["dof"]
-    print(f"hand {info['hand']}  ({info['urdf']})")
-    print(f"DoF: wrist {dof['wrist']} + fingers {dof['fingers']} + virtual {dof['virtual']}"
-          f" = {dof['total']}")  # fmt: skip
-    print(f"fingertip radius: {info['fingertip_radius_m'] * 1000:.1f} mm")
+    _say(f"hand {info['hand']}  ({info['urdf']})")
+    _say(f"DoF: wrist {dof['wrist']} + fingers {dof['fingers']} + virtual {dof['virtual']}"
+         f" = {dof['total']}")  # fmt: skip
+    _say(f"fingertip radius: {info['fingertip_radius_m'] * 1000:.1f} mm")
     region = info["contact_region_rad"]
-    print(
+    _say(
         "contact region: pitch {:.0f}..{:.0f} deg, yaw {:.0f}..{:.0f} deg".format(
             *(v * deg for v in region["pitch"] + region["yaw"])
         )
     )
-    print("fingers: " + ", ".join(f"{n} ({v['tip_link']})" for n, v in info["fingers"].items()))
-    print("joints [deg]:")
+    _say("fingers: " + ", ".join(f"{n} ({v['tip_link']})" for n, v in info["fingers"].items()))
+    _say("joints [deg]:")
     for name, lim in {**info["joints"], **info["virtual_joints"]}.items():
-        print(f"  {name:22s} {lim['lower'] * deg:8.2f} .. {lim['upper'] * deg:8.2f}")
+        _say(f"  {name:22s} {lim['lower'] * deg:8.2f} .. {lim['upper'] * deg:8.2f}")
     for name, m in info["mimic"].items():
-        print(f"  {name:22s} = {m['multiplier']:g} * {m['leader']} + {m['offset']:g}")
-    print(f"self-collision pairs checked: {info['self_collision_pairs']}")
+        _say(f"  {name:22s} = {m['multiplier']:g} * {m['leader']} + {m['offset']:g}")
+    _say(f"self-collision pairs checked: {info['self_collision_pairs']}")
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp info``."""
+    from sahgrasp.hand import load_hand
+
+    check_outputs([args.json], inputs=[args.hand])
+    check_json_inputs(args.hand)
     info = describe(load_hand(args.hand))
     if args.json is None:
         _print_text(info)

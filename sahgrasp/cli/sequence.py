@@ -3,44 +3,87 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import shlex
+from typing import TYPE_CHECKING, Any
 
-from tqdm import tqdm
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    check_json_inputs,
+    int_at_least,
+    nonnegative_int,
+    positive_int,
+)
+from sahgrasp.fileio import check_output_path
 
-from sahgrasp.ik import IKSettings
-from sahgrasp.sequence import Progress, SearchResult, SearchSettings, search_sequence
+if TYPE_CHECKING:
+    from sahgrasp.sequence import Progress, SearchResult
 
-__all__ = ["add_parser", "run"]
+__all__ = ["SEARCH_DEFAULTS", "add_parser", "resume_command", "run"]
+
+SEARCH_DEFAULTS = {"grid": 10, "problems": 300, "rounds": 12, "seed": 0, "method": "auto"}
+"""``SearchSettings()``'s values, spelled out so that ``--help`` need not import the search."""
+
+DESCRIPTION = (
+    "Search the sequence of initial hand poses (Claret & Suárez, Section 3.2). With the defaults "
+    "(N = 10, M = 300, 12 rounds) this is a job of about 30 minutes on 2 cores; the work is "
+    "checkpointed in DIR, so an interrupted search continues with --resume."
+)
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
-    d = SearchSettings()
-    p = sub.add_parser("sequence", help="search the sequence of initial hand poses")
-    p.add_argument("--hand", default="sah", help="sah, allegro, or a hand-description JSON path")
-    p.add_argument("--grid", type=int, default=d.grid, help="N values per lambda (N^2 cells)")
-    p.add_argument("--problems", type=int, default=d.problems, help="M problems per round")
-    p.add_argument("--rounds", type=int, default=d.rounds, help="sequence length i_max")
-    p.add_argument("--seed", type=int, default=d.seed, help="seed of the random problems")
-    p.add_argument("--method", choices=("auto", "paper"), default=d.method, help="IK method")
+    d = SEARCH_DEFAULTS
+    p = add_command(sub, "sequence", "search the sequence of initial hand poses", DESCRIPTION)
+    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument(
+        "--grid", type=int_at_least(2), default=d["grid"], help="N values per lambda (N^2 cells)"
+    )
+    p.add_argument("--problems", type=positive_int, default=d["problems"], help="M per round")
+    p.add_argument("--rounds", type=positive_int, default=d["rounds"], help="sequence length")
+    p.add_argument("--seed", type=nonnegative_int, default=d["seed"], help="problem seed (>= 0)")
+    p.add_argument("--method", choices=("auto", "paper"), default=d["method"], help="IK method")
     p.add_argument("--out", required=True, metavar="DIR", help="output and checkpoint folder")
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None,
-                       help="local worker processes (default: one per core)")  # fmt: skip
-    where.add_argument("--scheduler", default=None, metavar="ADDR",
-                       help="Dask scheduler address, e.g. tcp://host:8786")  # fmt: skip
+    where.add_argument(
+        "--workers",
+        type=positive_int,
+        default=None,
+        help="local worker processes (default: one per core)",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="Dask scheduler address, e.g. tcp://host:8786",
+    )
     p.add_argument("--resume", action="store_true", help="continue the search checkpointed in DIR")
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, on_interrupt=resume_command)
+
+
+def resume_command(args: argparse.Namespace) -> str:
+    """The command that continues this search after an interruption."""
+    words = ["sahgrasp", "sequence", "--hand", args.hand, "--grid", str(args.grid),
+             "--problems", str(args.problems), "--rounds", str(args.rounds),
+             "--seed", str(args.seed), "--method", args.method, "--out", args.out]  # fmt: skip
+    if args.workers is not None:
+        words += ["--workers", str(args.workers)]
+    if args.scheduler is not None:
+        words += ["--scheduler", args.scheduler]
+    resume = shlex.join([*words, "--resume"])
+    return f"interrupted; continue from the last checkpoint with: {resume}"
 
 
 class _Bar:
     """A tqdm bar over the grid's IK runs, fed by the search's progress reports."""
 
     def __init__(self) -> None:
-        self.bar: tqdm[Any] | None = None
+        self.bar: Any = None
 
     def __call__(self, p: Progress) -> None:
         if self.bar is None:
+            from tqdm import tqdm
+
             self.bar = tqdm(total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05)
         self.bar.set_description(f"round {p.round}/{p.rounds} {p.stage}", refresh=False)
         screening = p.stage == "screening"
@@ -69,6 +112,11 @@ def _print_summary(result: SearchResult, out: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp sequence``."""
+    check_output_path(args.out, inputs=[args.hand], folder=True)
+    check_json_inputs(args.hand)
+    from sahgrasp.ik import IKSettings
+    from sahgrasp.sequence import SearchSettings, search_sequence
+
     settings = SearchSettings(
         grid=args.grid, problems=args.problems, rounds=args.rounds, seed=args.seed,
         ik=IKSettings(method=args.method),

@@ -1,90 +1,318 @@
-"""``sahgrasp solve TARGETS.json``: IK for every problem of a targets file."""
+"""``sahgrasp solve TARGETS``: IK for every problem of a targets file (JSON or JSON Lines)."""
 
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
+import math
+import shlex
+import signal
+import sys
+import threading
+import time
+from collections import Counter
 from pathlib import Path
 from statistics import mean, median
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from sahgrasp.cli.common import emit_json
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import Hand, load_hand
-from sahgrasp.ik import IKResult, IKSettings, Sequence, invalid_result, solve_many
+from sahgrasp.cli.common import (
+    HAND_OVERRIDE_HELP,
+    INITS_HELP,
+    MAX_INITS,
+    METHOD_HELP,
+    add_command,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    human_stream,
+    int_in_range,
+    nonnegative_int,
+    positive_int,
+    printable,
+)
 
-__all__ = ["add_parser", "results_document", "run"]
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+    from concurrent.futures import Executor
+
+    from sahgrasp.contacts import GraspTarget, InvalidProblem
+    from sahgrasp.stream import ResultsWriter
+
+__all__ = ["Summary", "add_parser", "results_document", "run"]
+
+TARGETS_HELP = "targets file: a JSON document, or JSON Lines (.jsonl) read line by line"
+JSON_HELP = (
+    "write the results to OUT: a JSON document, or JSON Lines if OUT ends in .jsonl (written "
+    "as solved, resumable); '-': JSON alone on stdout, other lines on stderr"
+)
+DISPATCH_CHUNKS_IN_FLIGHT = 64
+"""Chunks queued on a Dask cluster (its size is not known here): 2,048 problems."""
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
-    p = sub.add_parser("solve", help="inverse kinematics for a targets file")
-    p.add_argument("targets", type=Path, help="targets JSON (docs/formats.md)")
-    p.add_argument("--hand", default=None, help="override the file's hand (sah, allegro, PATH)")
-    p.add_argument("--method", choices=("auto", "paper"), default="auto")
-    p.add_argument("--init", choices=("sequence", "random"), default="sequence")
-    p.add_argument("--inits", type=int, default=12, help="i_max, initial configurations")
-    p.add_argument("--sequence", type=Path, default=None, help="sequence file (default: shipped)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--workers", type=int, default=1)
-    p.add_argument("--json", default=None, metavar="OUT", help="write the results JSON to OUT")
-    p.set_defaults(run=run)
+    p = add_command(sub, "solve", "inverse kinematics for every problem of a targets file")
+    p.add_argument("targets", type=Path, help=TARGETS_HELP)
+    p.add_argument("--hand", default=None, help=HAND_OVERRIDE_HELP)
+    p.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
+    p.add_argument(
+        "--init",
+        choices=("sequence", "random", "learned"),
+        default="sequence",
+        help="initial configurations: the searched sequence of poses, random ones, or the nearest "
+        "solved grasps of the shipped database followed by the sequence",
+    )
+    p.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
+    p.add_argument(
+        "--sequence",
+        type=Path,
+        default=None,
+        help="sequence file of initial poses (default: the one shipped for the hand)",
+    )
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
+    where.add_argument(
+        "--scheduler", default=None, metavar="ADDR", help="Dask scheduler, e.g. tcp://host:8786"
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue the JSON Lines results of a stopped run (--json OUT.jsonl)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", default=None, metavar="OUT", help=JSON_HELP)
+    p.set_defaults(run=run, on_interrupt=resume_hint)
 
 
-def _read_problems(path: Path) -> tuple[str, list[GraspTarget | str]]:
-    """The file's hand and problems; a problem that fails validation is kept as its name."""
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise InvalidTargetError(f"cannot read targets file {path}: {exc}") from exc
-    if not isinstance(data, dict) or not isinstance(data.get("problems"), list):
-        raise InvalidTargetError(f"targets file {path} needs a 'problems' list")
-    problems: list[GraspTarget | str] = []
-    for i, raw in enumerate(data["problems"]):
-        try:
-            problems.append(GraspTarget.from_dict(raw))
-        except InvalidTargetError as exc:
-            name = raw.get("name", f"problem-{i}") if isinstance(raw, dict) else f"problem-{i}"
-            print(f"{name}: invalid input: {exc}")
-            problems.append(str(name))
-    return str(data.get("hand", "sah")), problems
+def resume_hint(args: argparse.Namespace) -> str:
+    """What to say when a run is interrupted: how to continue a JSON Lines output."""
+    from sahgrasp.stream import is_jsonl
+
+    if not is_jsonl(args.json):
+        return "interrupted"
+    words = ["sahgrasp", *sys.argv[1:]]
+    command = shlex.join(words if "--resume" in words else [*words, "--resume"])
+    return f"interrupted; results so far in {args.json}.part; continue with: {command}"
 
 
-def results_document(hand: Hand, results: list[IKResult]) -> dict[str, Any]:
-    """The results file of conventions.md."""
-    times = [r.time_s * 1e3 for r in results if r.reason != "invalid_input"] or [0.0]
-    solved = sum(r.success for r in results)
+def _line(entry: dict[str, Any]) -> str:
+    """One problem's line for the terminal."""
+    name = printable(entry["name"])
+    if entry["reason"] == "invalid_input":
+        return f"{name}: invalid input: {printable(entry.get('detail', 'refused by the solver'))}"
+    status = "solved" if entry["success"] else f"FAILED ({entry['reason']})"
+    error_mm = max(entry["max_position_error_mm"], entry["max_centre_error_mm"])
+    return (f"{name}: {status}, inits {entry['inits_used']}, iterations {entry['iterations']}, "
+            f"{entry['time_ms']:.2f} ms, max error {error_mm:.3f} mm")  # fmt: skip
+
+
+def results_document(hand_name: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
+    """The results file (``docs/formats.md``) from the results entries, in problem order."""
+    times = [e["time_ms"] for e in entries if e["reason"] != "invalid_input"] or [0.0]
+    solved = sum(e["success"] for e in entries)
     return {
-        "hand": hand.description.name,
-        "results": [r.to_dict(hand) for r in results],
+        "hand": hand_name,
+        "results": entries,
         "summary": {
-            "problems": len(results),
+            "problems": len(entries),
             "solved": solved,
-            "success_rate": solved / len(results) if results else 0.0,
+            "invalid": sum(e["reason"] == "invalid_input" for e in entries),
+            "success_rate": solved / len(entries) if entries else 0.0,
             "median_time_ms": median(times),
             "mean_time_ms": mean(times),
         },
     }
 
 
+class Summary:
+    """Counts of a run, in constant memory: solved, unsolved by reason, invalid, resumed."""
+
+    def __init__(self) -> None:
+        self.reasons: Counter[str] = Counter()
+        self.solved = 0
+        self.resumed = 0
+        self.solve_ms = 0.0
+        self.started = time.perf_counter()
+
+    def add(self, entry: dict[str, Any], resumed: bool = False) -> None:
+        """Count one result entry (``resumed``: read from the output, not solved now)."""
+        self.solved += bool(entry.get("success"))
+        self.reasons[str(entry.get("reason"))] += not entry.get("success")
+        self.resumed += resumed
+        if not resumed:
+            self.solve_ms += float(entry.get("time_ms") or 0.0)
+
+    @property
+    def problems(self) -> int:
+        """Problems counted."""
+        return self.solved + sum(self.reasons.values())
+
+    def line(self) -> str:
+        """The final summary line."""
+        invalid = self.reasons["invalid_input"]
+        unsolved = ", ".join(f"{r} {n}" for r, n in sorted(self.reasons.items())
+                             if n and r != "invalid_input")  # fmt: skip
+        seconds = time.perf_counter() - self.started
+        done = self.problems - self.resumed
+        return (f"solved {self.solved}/{self.problems} ({invalid} invalid input); unsolved: "
+                f"{unsolved or 'none'}; {self.resumed} resumed; {done} problems in {seconds:.1f} "
+                f"s, {done / max(seconds, 1e-9):.1f} problems/s")  # fmt: skip
+
+
+def _skip_finished(
+    writer: ResultsWriter, problems: Iterator[GraspTarget | InvalidProblem], summary: Summary
+) -> None:
+    """Count the results a resumed output already holds, and skip their problems."""
+    from sahgrasp.errors import InvalidSettingsError
+
+    for index, entry in enumerate(writer.finished()):
+        problem = next(problems, None)
+        if problem is None or problem.name != entry.get("name"):
+            raise InvalidSettingsError(
+                f"cannot resume {writer.part}: its result {index} ({entry.get('name')!r}) is not "
+                f"for problem {index} of the targets file "
+                f"({problem.name if problem else 'none'!r}); was it made from another file?"
+            )
+        summary.add(entry, resumed=True)
+
+
+def _executor(args: argparse.Namespace) -> Any:
+    """Where the chunks run: None (this process), local workers, or a Dask cluster."""
+    if args.scheduler is not None:
+        from sahgrasp.sequence.executors import open_executor
+
+        return open_executor(args.scheduler)
+    if args.workers <= 1:
+        return contextlib.nullcontext(None)
+    return _local_pool(args.workers)
+
+
+@contextlib.contextmanager
+def _local_pool(workers: int) -> Iterator[Executor]:
+    """Local worker processes, all started (signals held meanwhile) before the work is sent.
+
+    A stop signal that unwinds the parent while it writes a spawned worker's start-up data makes
+    that worker print an ``EOFError`` traceback; held until the workers are up, the signal stops
+    the run cleanly (one line, exit status 130).
+    """
+    from concurrent.futures import wait
+
+    from sahgrasp.parallel import process_pool
+
+    with process_pool(workers) as pool:
+        with _signals_held():
+            wait([pool.submit(time.monotonic) for _ in range(workers)])  # one spawn per submit
+        yield pool
+
+
+_HELD_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """Record the stop signals instead of acting on them; raise KeyboardInterrupt after, if any."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set in the main thread
+        return
+    caught: list[int] = []
+    numbers = [getattr(signal, name) for name in _HELD_SIGNALS if hasattr(signal, name)]
+    previous = {n: signal.signal(n, lambda number, _: caught.append(number)) for n in numbers}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
+def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
+    """Problems per chunk and chunks in flight: all workers busy, scheduling cost under 1%."""
+    from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT
+
+    if args.scheduler is not None:
+        return CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
+    if args.workers <= 1:  # solved here: each chunk written as soon as it is solved
+        return CHUNK_SIZE, 1
+    per_worker = math.ceil(total / (CHUNKS_IN_FLIGHT * args.workers))
+    return max(1, min(CHUNK_SIZE, per_worker)), CHUNKS_IN_FLIGHT * args.workers
+
+
+def _check_run(args: argparse.Namespace, hand_name: str) -> None:
+    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.stream import is_jsonl
+
+    check_outputs([args.json], inputs=[args.targets, args.sequence, hand_name])
+    check_json_inputs(hand_name, args.sequence)
+    if args.resume and not is_jsonl(args.json):
+        raise InvalidSettingsError("--resume continues a JSON Lines output: give --json OUT.jsonl")
+
+
 def run(args: argparse.Namespace) -> int:
-    """Execute ``sahgrasp solve``."""
-    file_hand, problems = _read_problems(args.targets)
-    hand = load_hand(args.hand or file_hand)
+    """Execute ``sahgrasp solve``; 0 if every problem was solved, 1 otherwise."""
+    from sahgrasp.stream import open_targets
+
+    targets = open_targets(args.targets)
+    hand_name = args.hand or targets.hand
+    _check_run(args, hand_name)
+
+    from sahgrasp.hand import load_hand
+    from sahgrasp.ik import IKSettings, Sequence, default_sequence
+    from sahgrasp.ik.batch import solve_chunks
+    from sahgrasp.stream import ResultsWriter, is_jsonl, settings_header
+
+    hand = load_hand(hand_name)
     settings = IKSettings(method=args.method, init=args.init, max_inits=args.inits, seed=args.seed)
     sequence = Sequence.load(args.sequence) if args.sequence else None
-    valid = [p for p in problems if isinstance(p, GraspTarget)]
-    solved = iter(solve_many(hand, valid, settings, sequence, workers=args.workers))
-    results = [next(solved) if isinstance(p, GraspTarget) else invalid_result(hand, p)
-               for p in problems]  # fmt: skip
-    for r in results:
-        status = "solved" if r.success else f"FAILED ({r.reason})"
-        print(f"{r.name}: {status}, inits {r.inits_used}, iterations {r.iterations}, "
-              f"{r.time_s * 1e3:.2f} ms, max error {r.max_error_m * 1e3:.3f} mm")  # fmt: skip
-    document = results_document(hand, results)
-    s = document["summary"]
-    print(f"solved {s['solved']}/{s['problems']}, median {s['median_time_ms']:.2f} ms")
-    if args.json:
-        emit_json(document, args.json)
-    return 0
+    summary = Summary()
+    writer = None
+    if is_jsonl(args.json):
+        used = sequence or default_sequence(hand)
+        header = settings_header(hand, settings, used.to_dict(), args.targets)
+        writer = ResultsWriter(args.json, header, args.resume)
+        _skip_finished(writer, targets.problems, summary)
+    items = ((p, getattr(p, "object_spec", None), _key(p)) for p in targets.problems)
+    out = human_stream(args.json)
+    size, in_flight = _chunking(args, targets.total - summary.resumed)
+    entries: list[dict[str, Any]] = []
+    complete = False
+    try:
+        with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
+            for chunk in solve_chunks(
+                hand, items, settings, sequence, pool, "entry", size, in_flight
+            ):
+                done: list[dict[str, Any]] = chunk  # type: ignore[assignment]
+                for entry in done:
+                    summary.add(entry)
+                bar.update(len(done))
+                if writer is not None:
+                    writer.write(done)
+                else:  # a document: written at the end, each problem shown as it is solved
+                    entries += done
+                    print("\n".join(map(_line, done)), file=out)
+        complete = True
+    finally:
+        if writer is not None:
+            writer.close(complete)
+    print(summary.line(), file=out)
+    if writer is None and args.json:
+        emit_json(results_document(hand.description.name, entries), args.json)
+    elif writer is not None:
+        print(f"wrote {args.json}", file=out)
+    return 0 if summary.solved == summary.problems else 1
+
+
+def _key(problem: GraspTarget | InvalidProblem) -> str:
+    spec = getattr(problem, "object_spec", None)
+    return spec.key() if spec is not None else ""
+
+
+def _bar(args: argparse.Namespace, total: int, done: int) -> Any:
+    """A tqdm bar on stderr (problems/s and ETA), shown on a terminal unless ``--quiet``."""
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total, initial=done, unit="problem", smoothing=0.05, file=sys.stderr,
+        disable=True if args.quiet else None, dynamic_ncols=True,
+    )  # fmt: skip

@@ -133,7 +133,12 @@ def pose_basis(hand: Hand, samples: int = PCA_SAMPLES, seed: int = PCA_SEED) -> 
     """
     rng = np.random.default_rng(seed)
     E, offsets = expansion_matrix(hand), _mimic_offsets(hand)
-    X = np.array([hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)])
+    X = np.array(
+        [
+            hand.finger_part(hand.random_configuration(rng, collision_free=True))
+            for _ in range(samples)
+        ]
+    )
     Q = X @ E.T + offsets
     mean = Q.mean(axis=0)
     eigvals, eigvecs = np.linalg.eigh(np.cov(Q - mean, rowvar=False))
@@ -286,7 +291,7 @@ def hang_from_thumb(
     if psi is None:
         psi = _best_psi(hand, q, T_palm_thumb, R_align, thumb, target)
     T_world_thumb = pin.SE3(R_align @ _rot_x(psi), contact.point)
-    q[:7] = pin.SE3ToXYZQUAT(T_world_thumb * T_palm_thumb.inverse())
+    hand.wrist_part(q)[:] = pin.SE3ToXYZQUAT(T_world_thumb * T_palm_thumb.inverse())
     return q, psi
 
 

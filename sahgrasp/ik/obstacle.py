@@ -88,4 +88,4 @@ class Obstacle:
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link."""
-        return self.checker.clearance(q, self.contacts, self.allowance_m)
+        return self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)

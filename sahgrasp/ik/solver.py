@@ -20,18 +20,20 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dposv
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import ContactState, Hand
+from sahgrasp.hand import ContactState, Hand, HandState
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
+from sahgrasp.ik.learned import GraspDatabase, default_database
 from sahgrasp.ik.obstacle import Obstacle
 from sahgrasp.ik.starts import initial_lambdas
 
@@ -56,7 +58,7 @@ __all__ = [
 
 Method = Literal["auto", "paper"]
 """Inner solver of Algorithm 1."""
-Init = Literal["sequence", "random"]
+Init = Literal["sequence", "random", "learned"]
 """Where the initial configurations come from."""
 Reason = Literal[
     "converged", "max_inits", "no_progress", "collision", "object_collision", "invalid_input"
@@ -74,7 +76,10 @@ class IKSettings:
 
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
-        init: ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas, Fig. 9).
+        init: ``"sequence"`` (the offline sequence), ``"random"`` (random lambdas, Fig. 9) or
+            ``"learned"`` (the nearest grasps of a database first, then the sequence; see
+            :mod:`sahgrasp.ik.learned`).
+        learned_starts: With ``init="learned"``, how many database neighbours come first.
         max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
         d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
@@ -93,6 +98,7 @@ class IKSettings:
     method: Method = "auto"
     init: Init = "sequence"
     max_inits: int = 12
+    learned_starts: int = 2
     max_iterations: int = 100
     d_min_m: float = 1.5e-3
     s_min_m: float = 1e-3
@@ -111,6 +117,7 @@ class IKSettings:
                     f"{name} must be one of {list(valid)}, got {getattr(self, name)!r}"
                 )
         _check_int("max_inits", self.max_inits, 1, MAX_INITS_LIMIT)
+        _check_int("learned_starts", self.learned_starts, 0, MAX_INITS_LIMIT)
         for name in ("max_iterations", "stall_iterations", "repair_iterations"):
             _check_int(name, getattr(self, name), 1)
         _check_int("seed", self.seed, 0)
@@ -184,7 +191,7 @@ class IKResult:
     @property
     def T_world_palm(self) -> pin.SE3:
         """Wrist pose of the result."""
-        return pin.XYZQUATToSE3(self.q[:7])
+        return Hand.wrist_pose(self.q)
 
     def to_dict(self, hand: Hand) -> dict[str, Any]:
         """The results-file entry (docs/formats.md); the object clearance only with an obstacle."""
@@ -253,9 +260,13 @@ class ContactProblem:
         self.target = target
         self.fingers = tuple(constrained)
         self.rows = np.array([hand.fingers.index(f) for f in constrained], dtype=np.intp)
+        # Fingers of Hand.contact_stack: None (all, the fast path) unless some are free.
+        self.stack_fingers = None if not free_fingers else self.rows.tolist()
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
+        # The targets in the order of Hand.contact_stack: (p_i*, r_i*) per constrained finger.
+        self.target_stack = np.stack([self.points, self.centres], axis=1).ravel()
         self.obstacle = (
             None if obstacle is None else Obstacle(hand, obstacle, self.fingers, allowance_m)
         )
@@ -273,7 +284,7 @@ class ContactProblem:
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies, and links and the obstacle, closer than ``margin_m`` [m]."""
-        found = self.hand.collision.penetrations(q, margin_m)
+        found = self.hand.penetrations(q, margin_m)
         if self.obstacle is not None:
             found += self.obstacle.penetrations(q, margin_m)
         return found
@@ -374,6 +385,11 @@ def _lm_attempt(
 ) -> Attempt:
     """Free-wrist Levenberg-Marquardt from the thumb-hung start, then collision repair."""
     q, _ = hang_from_thumb(hand, coords, problem.target)
+    return _lm_from(hand, problem, q, s)
+
+
+def _lm_from(hand: Hand, problem: ContactProblem, q: NDArray[np.float64], s: IKSettings) -> Attempt:
+    """Levenberg-Marquardt from the configuration ``q``, then collision repair."""
     history = [q.copy()] if s.record_history else None
     attempt = _lm_loop(hand, problem, q, s, s.max_iterations, history)
     if attempt.outcome != "converged" or problem.collision(attempt.q) is None:
@@ -393,48 +409,65 @@ def _lm_loop(
     max_iterations: int,
     history: list[NDArray[np.float64]] | None,
 ) -> Attempt:
-    """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set."""
+    """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set.
+
+    The hot loop of the IK: it works on the flat residual of :meth:`Hand.contact_stack` and
+    its Jacobian, so that an iteration is a handful of numpy calls (docs/ik.md, "Cost").
+    """
     damping = 1e-3
-    jac = hand.contact_jacobians(q)
-    residual = problem.residual(jac.state)
-    costs = [float(residual @ residual)]
+    stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
+    residual = problem.target_stack - stack
+    costs = [float(residual.dot(residual))]
+    # The largest error is at least sqrt(cost / blocks): below that bound it must be computed.
+    refine_cost = (len(residual) // 3) * s.refine_m**2
     for k in range(max_iterations):
-        pos, cen = problem.errors(jac.state)
-        error = max(pos.max(), cen.max())
-        if error < s.refine_m:
+        if costs[-1] < refine_cost and (error := _max_error(residual)) < s.refine_m:
             return Attempt(q, "converged", k, error, history)
         stalled = (
             len(costs) > s.stall_iterations and costs[-1] > 0.5 * costs[-1 - s.stall_iterations]
         )
         if stalled or damping > 1e4:
+            error = _max_error(residual)
             return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
-        J = problem.jacobian(jac)
-        q_new, cost, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
-        if q_new is None:
+        q_new, r_new, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
+        if q_new is None or r_new is None:
             continue
-        q = q_new
+        q, residual = q_new, r_new
         if history is not None:
             history.append(q.copy())
-        jac = hand.contact_jacobians(q)
-        residual = problem.residual(jac.state)
-        costs.append(cost)
-    pos, cen = problem.errors(jac.state)
-    error = max(pos.max(), cen.max())
+        # The step's kinematics gave the residual; only the Jacobian is new.
+        J = hand.contact_jacobian(q, problem.stack_fingers)
+        costs.append(float(residual.dot(residual)))
+    error = _max_error(residual)
     outcome = "converged" if error < s.d_min_m else "max_iterations"
     return Attempt(q, outcome, max_iterations, error, history)
 
 
+def _max_error(residual: NDArray[np.float64]) -> float:
+    """Largest contact-point or centre error [m] of a stacked residual."""
+    return math.sqrt(float((residual * residual).reshape(-1, 3).sum(axis=1).max()))
+
+
 def _free_coordinates(
     hand: Hand, q: NDArray[np.float64], gradient: NDArray[np.float64]
-) -> NDArray[np.bool_]:
-    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed."""
+) -> NDArray[np.bool_] | None:
+    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed.
+
+    Returns the mask of the free coordinates, or None when every coordinate is free (the usual
+    case, which then needs no column selection).
+    """
+    x = hand.finger_part(q)
+    low, high = x <= hand.lower + 1e-12, x >= hand.upper - 1e-12
+    if not (low.any() or high.any()):  # the usual case: no coordinate at a bound
+        return None
+    g = gradient[6:]
+    fixed = (low & (g < 0)) | (high & (g > 0))
+    if not fixed.any():
+        return None
     free = np.ones(hand.nv, dtype=bool)
-    x, g = q[7:], gradient[6:]
-    at_lower = (x <= hand.lower + 1e-12) & (g < 0)
-    at_upper = (x >= hand.upper - 1e-12) & (g > 0)
-    free[6:] = ~(at_lower | at_upper)
+    free[6:] = ~fixed
     return free
 
 
@@ -442,8 +475,30 @@ def _clamped_step(
     hand: Hand, q: NDArray[np.float64], step: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     candidate = hand.integrate(q, step)
-    candidate[7:] = np.clip(candidate[7:], hand.lower, hand.upper)
+    joints = hand.finger_part(candidate)
+    np.clip(joints, hand.lower, hand.upper, out=joints)
     return candidate
+
+
+def _damped_solve(
+    A: NDArray[np.float64], g: NDArray[np.float64], mu: float
+) -> NDArray[np.float64] | None:
+    """``(A + mu I)^-1 g`` by Cholesky (LAPACK ``dposv``); None if not positive definite."""
+    damped = A.copy()
+    damped.flat[:: len(A) + 1] += mu
+    _, x, info = dposv(damped, g, overwrite_a=True)
+    return None if info != 0 else np.asarray(x)
+
+
+def _full_step(
+    hand: Hand, free: NDArray[np.bool_] | None, x: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The step in ``v`` whose free coordinates are ``x`` (fixed ones stay)."""
+    if free is None:
+        return x
+    step = np.zeros(hand.nv)
+    step[free] = x
+    return step
 
 
 def _damped_step(
@@ -454,26 +509,24 @@ def _damped_step(
     residual: NDArray[np.float64],
     cost: float,
     damping: float,
-) -> tuple[NDArray[np.float64] | None, float, float]:
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, float]:
     """One Marquardt step, its damping adapted until the cost decreases.
 
-    Returns the new configuration (None if the damping ran out), its cost and the new damping.
+    Returns the new configuration and its residual (None, None if the damping ran out) and the
+    new damping.
     """
-    gradient = J.T @ residual
-    free = _free_coordinates(hand, q, gradient)
-    JF = J[:, free]
-    A = JF.T @ JF
-    scaling = np.eye(len(A))
+    free = _free_coordinates(hand, q, J.T.dot(residual))
+    JF = J if free is None else J[:, free]
+    A, g = JF.T.dot(JF), JF.T.dot(residual)
     while damping <= 1e4:
-        step = np.zeros(hand.nv)
-        step[free] = np.linalg.solve(A + damping * scaling, gradient[free])
-        candidate = _clamped_step(hand, q, step)
-        r_new = problem.residual(hand.contact_state(candidate))
-        c_new = float(r_new @ r_new)
-        if c_new < cost:
-            return candidate, c_new, max(damping / 3.0, 1e-7)
+        x = _damped_solve(A, g, damping)
+        if x is not None:
+            candidate = _clamped_step(hand, q, _full_step(hand, free, x))
+            r_new = problem.target_stack - hand.contact_stack(candidate, problem.stack_fingers)
+            if float(r_new.dot(r_new)) < cost:
+                return candidate, r_new, max(damping / 3.0, 1e-7)
         damping *= 4.0
-    return None, cost, damping
+    return None, None, damping
 
 
 def _separate(
@@ -495,43 +548,37 @@ def _separate(
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
-        jac = hand.contact_jacobians(q)  # also leaves the joint Jacobians in hand.data
-        rows, depths = _separation_rows(hand, penetrations)
-        J = np.vstack([problem.jacobian(jac), rows])
-        e = np.concatenate([problem.residual(jac.state), depths])
-        free = _free_coordinates(hand, q, J.T @ e)
-        JF = J[:, free]
-        step = np.zeros(hand.nv)
-        step[free] = np.linalg.solve(JF.T @ JF + 1e-6 * np.eye(int(free.sum())), JF.T @ e)
-        q = _clamped_step(hand, q, step)
+        state = hand.state(q, jacobians=True)
+        stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
+        rows, depths = _separation_rows(state, penetrations)
+        J = np.vstack([J_contacts, rows])
+        e = np.concatenate([problem.target_stack - stack, depths])
+        free = _free_coordinates(hand, q, J.T.dot(e))
+        JF = J if free is None else J[:, free]
+        x = _damped_solve(JF.T.dot(JF), JF.T.dot(e), 1e-6)
+        if x is None:  # the rows are degenerate: no separating step exists here
+            return q, k
+        q = _clamped_step(hand, q, _full_step(hand, free, x))
         if history is not None:
             history.append(q.copy())
     return q, s.repair_iterations
 
 
 def _separation_rows(
-    hand: Hand, penetrations: list[Penetration]
+    state: HandState, penetrations: list[Penetration]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
-    rows = np.empty((len(penetrations), hand.nv))
-    depths = np.empty(len(penetrations))
-    for i, pen in enumerate(penetrations):
-        J_b = _point_jacobian(hand, pen.joint_b, pen.point_b)
-        J_a = _point_jacobian(hand, pen.joint_a, pen.point_a)
-        rows[i] = pen.normal @ (J_b - J_a)
-        depths[i] = pen.depth_m
-    return rows, depths
-
-
-def _point_jacobian(hand: Hand, joint: int, point: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Jacobian of a point fixed to ``joint``'s body (joint Jacobians must be up to date).
-
-    Joint 0 is the world: its Jacobian is zero (an obstacle does not move).
-    """
-    J = pin.getJointJacobian(hand.model, hand.data, joint, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
-    lever = point - hand.data.oMi[joint].translation
-    # v_p = v_o + omega x (p - o)
-    return np.asarray(J[:3] + np.cross(J[3:].T, lever).T)
+    rows = np.array(
+        [
+            pen.normal
+            @ (
+                state.point_jacobian(pen.joint_b, pen.point_b)
+                - state.point_jacobian(pen.joint_a, pen.point_a)
+            )
+            for pen in penetrations
+        ]
+    )
+    return rows, np.array([pen.depth_m for pen in penetrations])
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
@@ -545,6 +592,7 @@ def solve_ik(
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
     obstacle: GraspObject | None = None,
+    database: GraspDatabase | None = None,
     **overrides: Any,
 ) -> IKResult:
     """Find wrist pose and joints that put every fingertip on its contact (Algorithm 1).
@@ -558,6 +606,8 @@ def solve_ik(
         obstacle: The object being grasped, placed in the world: a solution must not put any
             link into it, except each contact fingertip sphere up to ``d_min`` (docs/ik.md).
             Its collision pieces are built once per (hand, object) and kept for the next solves.
+        database: Grasp database of ``init="learned"`` (default: the hand's shipped one; the
+            sequence alone if it has none).
         **overrides: Fields of :class:`IKSettings` to change, e.g. ``method="paper"``.
 
     Returns:
@@ -567,11 +617,12 @@ def solve_ik(
     Raises:
         InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
             refused when the target is built); an obstacle that is not a GraspObject.
-        SequenceFileError: ``sequence`` was made for another hand.
+        SequenceFileError: ``sequence`` (or ``database``: :class:`GraspDatabaseError`) was made
+            for another hand.
     """
     s = replace(settings or IKSettings(), **overrides)
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle)
+    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle, database)
 
 
 def run_algorithm1(
@@ -582,26 +633,75 @@ def run_algorithm1(
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
     obstacle: GraspObject | None = None,
+    database: GraspDatabase | None = None,
 ) -> IKResult:
-    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here)."""
+    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here).
+
+    Learned starts (whole configurations) go to the auto method as they are; another inner
+    solver receives their finger coordinates and hangs the hand from the thumb as usual.
+    """
     problem = ContactProblem(hand, target, free_fingers, obstacle, settings.d_min_m)
     sequence = sequence or default_sequence(hand)  # built once per hand, not timed
     sequence.check_hand(hand)
+    if settings.init == "learned":
+        database = database or default_database(hand)
+        if database is not None:
+            database.check_hand(hand)
     start = time.perf_counter()
     attempts: list[Attempt] = []
-    starts = initial_lambdas(
-        settings.init, settings.max_inits, settings.seed, sequence, problem.target
-    )
-    for lambdas in starts:
-        attempt = attempt_fn(hand, problem, sequence.basis.coordinates(hand, lambdas), settings)
+    for kind, x in _starts(hand, problem, settings, sequence, database):
+        if kind == "q" and attempt_fn is _lm_attempt:
+            attempt = _lm_from(hand, problem, x, settings)
+        else:
+            attempt = attempt_fn(
+                hand, problem, x if kind == "coords" else hand.finger_part(x), settings
+            )
         if attempt.outcome == "converged":  # Step 8, and the obstacle
             attempt.outcome = problem.collision(attempt.q) or attempt.outcome
+        if attempt.outcome == "converged" and free_fingers:
+            attempt.q = _place_free_fingers(problem, attempt.q, free_fingers, obstacle)
         attempt.seconds = time.perf_counter() - start
         attempts.append(attempt)
         if attempt.outcome == "converged":
             return _result(hand, problem, attempt, attempts, True)
     best = min(attempts, key=lambda a: a.error_m)
     return _result(hand, problem, best, attempts, False)
+
+
+def _place_free_fingers(
+    problem: ContactProblem,
+    q: NDArray[np.float64],
+    free_fingers: tuple[str, ...],
+    obstacle: GraspObject | None,
+) -> NDArray[np.float64]:
+    """``q`` with the fingers without a contact moved clear of the object and the other links.
+
+    Only the free fingers' joints move (``HandObjectClearance.place_free_fingers``), so the
+    contacts are untouched; a placement that would collide is not taken.
+    """
+    from sahgrasp.objects.clearance import HandObjectClearance  # objects imports the hand only
+
+    placed = HandObjectClearance(problem.hand, obstacle).place_free_fingers(q, free_fingers).q
+    return placed if problem.collision(placed) is None else q
+
+
+def _starts(
+    hand: Hand,
+    problem: ContactProblem,
+    s: IKSettings,
+    sequence: Sequence,
+    database: GraspDatabase | None,
+) -> Iterator[tuple[Literal["q", "coords"], NDArray[np.float64]]]:
+    """The ``max_inits`` starts: learned configurations first, then the sequence's coordinates."""
+    used = 0
+    if s.init == "learned" and database is not None:
+        for q in database.starts(hand, problem.target, min(s.learned_starts, s.max_inits)):
+            used += 1
+            yield "q", q
+    init = "sequence" if s.init == "learned" else s.init
+    rest = s.max_inits - used
+    for lambdas in initial_lambdas(init, rest, s.seed, sequence, problem.target):
+        yield "coords", sequence.basis.coordinates(hand, lambdas)
 
 
 _FAILURE_REASONS: dict[str, Reason] = {

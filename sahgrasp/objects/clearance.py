@@ -15,6 +15,13 @@ accepts its contact point up to ``d_min`` from the surface: that sphere alone ma
 object by up to ``allowance_m``. Only the tip link's geometry is excepted; the distal phalanx on
 the same joint is checked as every other link.
 
+Cost. The object may have thousands of small pieces (one per mesh triangle, or per sector of a
+revolved band), so no query tries them all: a pair's distance is bounded from below by the
+link's own shape (sphere, box, cylinder) against a ball about the piece, and by their boxes; a
+coal broad phase (:class:`~sahgrasp.objects.collision.PieceTree`, in the object frame, built
+once) answers in C++ whether a link comes closer than a margin; only the pairs those leave are
+measured with GJK/EPA one by one. The results are those of measuring every pair.
+
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
 """
@@ -34,6 +41,7 @@ from sahgrasp.collision import Penetration
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.objects.body import GraspObject
+from sahgrasp.objects.collision import PieceTree
 from sahgrasp.objects.frames import FloatArray, as_placement
 
 __all__ = [
@@ -62,7 +70,8 @@ class Clearance:
         distance_m: Smallest signed distance [m] over the links, contact tips within their
             allowance left out (negative: a link is inside the object).
         link: The link at ``distance_m``.
-        links_m: Signed distance [m] of every link to the object, contact tips included.
+        links_m: Signed distance [m] of every link to the object, contact tips included; from
+            a query that asked for the closest link only, the links measured to find it.
     """
 
     distance_m: float
@@ -146,11 +155,32 @@ class HandObjectClearance:
             radii.append(float(g.geometry.aabb_radius))
         self._link_centres = np.array(centres)
         self._link_radii = np.array(radii)
+        self._link_objects = [
+            coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
+        ]
+        self._describe_shapes([g.geometry for g in geometries])
+        self._tree = PieceTree(self._shapes)
         self._tips = {f.name: f.tip_link for f in hand.description.fingers}
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._free: dict[str, _FreeFinger] = {}
         self._transforms_key = b""
+
+    def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
+        """Per hand geometry, the parameters :meth:`_shape_gaps` measures it with."""
+        self._half_m = np.zeros((len(shapes), 3))
+        self._rounding_m = np.zeros(len(shapes))
+        self._cylinder = np.array([isinstance(s, coal.Cylinder) for s in shapes])
+        self._other = np.zeros(len(shapes), dtype=bool)
+        for g, shape in enumerate(shapes):
+            if isinstance(shape, coal.Box):
+                self._half_m[g] = shape.halfSide
+            elif isinstance(shape, coal.Cylinder):
+                self._half_m[g, :2] = shape.radius, shape.halfLength
+            elif isinstance(shape, coal.Sphere):
+                self._rounding_m[g] = shape.radius
+            else:
+                self._other[g] = True
 
     @property
     def links(self) -> tuple[str, ...]:
@@ -179,7 +209,9 @@ class HandObjectClearance:
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, margin_m, allowance_m)
-        pairs = self._pairs(q, T_world_object, thresholds, nearest_only=False)
+        T = self._place(q, T_world_object)
+        near = self._screen(T, thresholds, range(len(self._links)))
+        pairs = self._pairs(T, thresholds, nearest_only=False, geometries=near)
         return [
             Penetration(
                 0,
@@ -199,26 +231,43 @@ class HandObjectClearance:
         contacts: Iterable[str] = (),
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
+        all_links: bool = True,
     ) -> Clearance:
         """Signed distance of every link to the object and the smallest one at ``q``.
 
         The fingertip sphere of a finger in ``contacts`` enters the smallest distance only when
         it is deeper than ``allowance_m`` [m] inside the object.
 
+        Args:
+            q: Hand configuration.
+            contacts: Fingers whose tip spheres touch the object at their contacts.
+            allowance_m: How deep those spheres may enter the object [m].
+            T_world_object: The object's placement (default: its own).
+            all_links: False: find the smallest distance and its link only, measuring just the
+                links whose lower bound is below it (``links_m`` holds those); a far link then
+                costs one coarse query instead of an exact distance.
+
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        pairs = self._pairs(q, T_world_object, np.full(len(self._links), np.inf), True)
+        T = self._place(q, T_world_object)
+        if all_links:
+            every = range(len(self._links))
+            self._pose_links(T, every)
+            pairs = self._pairs(T, np.full(len(every), np.inf), True, every)
+            measured = {p.geometry: p.distance_m for p in pairs}
+        else:
+            measured = self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
-        for p in pairs:
-            link = self._links[p.geometry]
-            links[link] = min(links.get(link, math.inf), p.distance_m)
-            excepted = thresholds[p.geometry] < 0.0 and p.distance_m >= thresholds[p.geometry]
-            if not excepted and p.distance_m < distance:
-                distance, closest = p.distance_m, link
+        for g in sorted(measured):  # in geometry order: a tie goes to the first link
+            link, d = self._links[g], measured[g]
+            links[link] = min(links.get(link, math.inf), d)
+            excepted = thresholds[g] < 0.0 and d >= thresholds[g]
+            if not excepted and d < distance:
+                distance, closest = d, link
         return Clearance(float(distance), closest, links)
 
     def place_free_fingers(
@@ -291,7 +340,9 @@ class HandObjectClearance:
         """
         stop = limit_m if fail_fast else -math.inf
         limits = np.full(len(self._links), limit_m)
-        pairs = self._pairs(q, T_world_object, limits, True, finger.geometries, stop)
+        T = self._place(q, T_world_object)
+        near = self._screen(T, limits, finger.geometries)
+        pairs = self._pairs(T, limits, True, near, stop)
         distance = min((p.distance_m for p in pairs), default=math.inf)
         if distance < stop:
             return distance
@@ -375,36 +426,91 @@ class HandObjectClearance:
             return self.object.T_world_object
         return as_placement(T_world_object)
 
+    def _pose_links(self, T: FloatArray, geometries: Iterable[int]) -> None:
+        """Place the coal objects of hand ``geometries`` in the frame of the object at ``T``.
+
+        The piece tree stays in the object frame, built once, whatever the object's placement.
+        """
+        T_object_world = pin.SE3(T).inverse()
+        for g in geometries:
+            M = T_object_world * self._geometry_data.oMg[g]
+            link = self._link_objects[g]
+            link.setTransform(coal.Transform3s(M.rotation, M.translation))
+            link.computeAABB()
+
+    def _screen(
+        self, T: FloatArray, thresholds: NDArray[np.float64], geometries: Iterable[int]
+    ) -> list[int]:
+        """The ``geometries`` that may have a piece closer than their threshold [m].
+
+        Every geometry left out has none (exact, from the piece tree), so only the ones returned
+        need the pair-by-pair search of :meth:`_pairs`.
+        """
+        chosen = list(geometries)
+        self._pose_links(T, chosen)
+        tree, links = self._tree, self._link_objects
+        return [g for g in chosen if not tree.clear_of(links[g], float(thresholds[g]))]
+
+    def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
+        """Signed distances [m] of the hand geometries that may hold the smallest one.
+
+        Geometries are taken by increasing lower bound (their own shapes against the coarse
+        hulls' balls) until the bound exceeds the smallest distance found. A contact tip the
+        piece tree finds within its allowance is excepted; the others are measured against the
+        pieces whose bounds are below that distance, so a far link costs no GJK call.
+        """
+        if not self._shapes:
+            return {}
+        every = range(len(self._links))
+        self._pose_links(T, every)
+        tree = self._tree
+        coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
+        gaps = self._shape_gaps(np.arange(len(every)), list(self._geometry_data.oMg), coarse)
+        bounds = (gaps - tree.coarse_radii_m).min(axis=1)
+        measured: dict[int, float] = {}
+        smallest = math.inf
+        for g in (int(i) for i in np.argsort(bounds, kind="stable")):
+            if bounds[g] > smallest:
+                break
+            tip = thresholds[g] < 0.0  # counts only deeper than its allowance
+            limit = float(thresholds[g]) if tip else smallest
+            if limit < math.inf and tree.clear_of(self._link_objects[g], limit):
+                continue  # one C++ query instead of bounding every piece in numpy
+            for pair in self._pairs(T, np.full(len(every), smallest), True, [g]):
+                if pair.distance_m < smallest:  # exact below the limit
+                    measured[g] = smallest = pair.distance_m
+        return measured
+
     def _pairs(
         self,
-        q: NDArray[np.float64],
-        T_world_object: FloatArray | None,
+        T: FloatArray,
         thresholds: NDArray[np.float64],
         nearest_only: bool,
-        geometries: Sequence[int] | None = None,
+        geometries: Sequence[int],
         stop_below_m: float = -math.inf,
     ) -> list[_Pair]:
-        """Signed distances of hand geometries (default all) to the object pieces that may matter.
+        """Signed distances of hand geometries to the object pieces that may matter.
 
-        ``nearest_only``: one pair per geometry, its nearest piece. Otherwise every pair whose
-        bounding spheres come closer than the geometry's threshold. The search ends at the first
+        The hand is placed (:meth:`_place`), its ``geometries`` posed (:meth:`_pose_links`) and
+        the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
+        than the geometry's threshold (else some pair at least that far, or none). Otherwise
+        every pair whose bounds come closer than the threshold. The search ends at the first
         pair closer than ``stop_below_m``.
         """
-        T = self._place(q, T_world_object)
-        chosen = range(len(self._links)) if geometries is None else geometries
         placements = self._geometry_data.oMg
         piece_centres = self._piece_centres @ T[:3, :3].T + T[:3, 3]
         transforms = self._piece_transforms(T)
         out: list[_Pair] = []
-        for g in chosen:
+        for g in geometries:
             M = placements[g]
-            gaps = np.linalg.norm(piece_centres - M.act(self._link_centres[g]), axis=1)
-            bounds = gaps - self._link_radii[g] - self._piece_radii
             geometry = self._geometry_model.geometryObjects[g].geometry
+            bounds = self._shape_gaps(np.array([g]), [M], piece_centres)[0] - self._piece_radii
+            near = np.flatnonzero(bounds < thresholds[g])  # no other piece can be kept
+            bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
             best: _Pair | None = None
-            for i in np.argsort(bounds):
-                limit = best.distance_m if best is not None else thresholds[g]
+            for i in near[np.argsort(bounds[near])]:
+                limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
                 if bounds[i] >= limit:
                     break
                 if transforms[i] is None:
@@ -419,6 +525,49 @@ class HandObjectClearance:
             if best is not None:
                 out.append(best)
         return out
+
+    def _shape_gaps(
+        self, geometries: NDArray[np.intp], placements: Sequence[pin.SE3], points_m: FloatArray
+    ) -> FloatArray:
+        """Signed distances [m] from hand geometries, placed, to world points: (G, N).
+
+        Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
+        to its bounding ball. A piece within a ball of radius r about a point is then at least
+        this minus r from the link, inside as well (its penetration is at most the ball's): a
+        much tighter bound than the link's own ball when the pieces are small.
+        """
+        R = np.array([M.rotation for M in placements]).reshape(-1, 3, 3)
+        t = np.array([M.translation for M in placements]).reshape(-1, 3)
+        local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
+        half = self._half_m[geometries][:, None]
+        excess = np.abs(local) - half  # box (a sphere is a box of no size, rounded)
+        cylinder = self._cylinder[geometries]
+        if cylinder.any():  # axis z: (radial, axial) excess
+            excess[cylinder, :, 0] = np.hypot(local[cylinder, :, 0], local[cylinder, :, 1])
+            excess[cylinder, :, 0] -= half[cylinder, :, 0]
+            excess[cylinder, :, 1] = np.abs(local[cylinder, :, 2]) - half[cylinder, :, 1]
+            excess[cylinder, :, 2] = -np.inf
+        gaps = np.sqrt(np.square(np.maximum(excess, 0.0)).sum(axis=2))
+        gaps += np.minimum(excess.max(axis=2), 0.0) - self._rounding_m[geometries][:, None]
+        other = self._other[geometries]
+        if other.any():
+            ball = local[other] - self._link_centres[geometries[other]][:, None]
+            gaps[other] = (
+                np.linalg.norm(ball, axis=2) - self._link_radii[geometries[other]][:, None]
+            )
+        return gaps
+
+    def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
+        """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
+
+        Both boxes in the object frame. Disjoint boxes bound the distance from below;
+        overlapping ones bound nothing (-inf).
+        """
+        box = self._link_objects[g].getAABB()
+        boxes = self._tree.boxes_m[pieces]
+        gaps = np.maximum(np.asarray(box.min_) - boxes[:, 1], boxes[:, 0] - np.asarray(box.max_))
+        gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=1)
+        return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _piece_transforms(self, T: FloatArray) -> list[coal.Transform3s | None]:
         """The pieces' coal transforms at object placement ``T``, built on first use."""

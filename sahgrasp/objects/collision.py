@@ -4,6 +4,11 @@ Convex pieces (coal primitives or convex hulls) give a signed distance: positive
 negative penetration depth inside, which a triangle mesh (``coal.BVHModel``) cannot give for a
 point inside a closed surface. Each piece carries a bounding sphere, so that a query skips the
 pieces that cannot be the closest.
+
+:class:`PieceTree` puts the pieces in coal's broad phase (a dynamic AABB tree, queried in C++)
+under a coarse level of convex hulls, each holding the pieces of one grid cell: a link clear of
+the hulls by a margin is clear of the pieces, so most links cost one coarse query, and whether a
+link comes closer than a margin is answered without a Python call per piece.
 """
 
 from __future__ import annotations
@@ -17,7 +22,11 @@ from numpy.typing import ArrayLike
 
 from sahgrasp.objects.frames import FloatArray, transform_points
 
-__all__ = ["CollisionShape", "convex_hull", "signed_distances"]
+__all__ = ["COARSE_CELL_M", "CollisionShape", "PieceTree", "convex_hull", "signed_distances"]
+
+COARSE_CELL_M = 0.02
+"""Grid cell [m] of :class:`PieceTree`'s coarse level: the pieces whose centres share a cell are
+bounded by one convex hull (smaller: tighter bounds, more hulls to query)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +60,114 @@ def convex_hull(points_m: ArrayLike) -> CollisionShape:
     T[:3, 3] = centre
     radius = float(np.linalg.norm(points - centre, axis=1).max())
     return CollisionShape(coal.Convex.convexHull(vertices, False, ""), T, radius)
+
+
+def _support_points(shape: CollisionShape) -> FloatArray:
+    """Points (N, 3) in the object frame whose convex hull holds ``shape``.
+
+    A convex hull's own vertices; for a primitive (box, ellipsoid), the corners of its box.
+    """
+    geometry = shape.geometry
+    if isinstance(geometry, coal.ConvexBase):
+        local = np.asarray(geometry.points(), dtype=np.float64)
+    else:
+        geometry.computeLocalAABB()
+        box = geometry.aabb_local
+        low, high = np.asarray(box.min_), np.asarray(box.max_)
+        local = np.array([[(low, high)[(k >> i) & 1][i] for i in range(3)] for k in range(8)])
+    return transform_points(shape.placement, local)
+
+
+class PieceTree:
+    """An object's convex pieces in coal's broad phase, in the object frame, with a coarse level.
+
+    Queries take a coal collision object (a hand link) already placed in the object frame. The
+    fine level holds the pieces themselves; the coarse level one convex hull per grid cell of
+    ``cell_m``, holding the pieces whose centres fall in it (a lone piece stands for itself).
+    A query is a coal collision test with a security margin, run in C++ over the AABB tree:
+    coal's default distance callback cannot serve, as it keeps the last pair's distance, not the
+    smallest.
+
+    Args:
+        shapes: The object's pieces.
+        cell_m: Coarse grid cell [m].
+
+    Attributes:
+        coarse_centres_m: Centre of a ball about each coarse hull, object frame (K, 3) [m].
+        coarse_radii_m: Radius of each such ball (K,) [m].
+        boxes_m: Each piece's axis-aligned box in the object frame, (N, 2, 3): low, high [m].
+    """
+
+    def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
+        coarse = _coarse_pieces(shapes, cell_m)
+        # The trees hold raw pointers to the collision objects: keep them (and their shapes).
+        self._shapes = (tuple(shapes), tuple(coarse))
+        self._objects = tuple([_collision_object(s) for s in level] for level in self._shapes)
+        self._fine, self._coarse = (_manager(objects) for objects in self._objects)
+        self.coarse_centres_m = np.array([s.placement[:3, 3] for s in coarse]).reshape(-1, 3)
+        self.coarse_radii_m = np.array([s.bounding_radius_m for s in coarse])
+        self.boxes_m = _boxes(self._objects[0])
+        self._callback = coal.CollisionCallBackDefault()
+
+    def clear_of(self, link: coal.CollisionObject, threshold_m: float) -> bool:
+        """True if no piece is closer to ``link`` than ``threshold_m`` [m] (signed distance).
+
+        Exact up to coal's GJK/EPA tolerances: the coarse hulls hold the pieces, so a link
+        clear of them is clear of the pieces; otherwise the pieces are tested.
+        """
+        return not (
+            self._closer(self._coarse, link, threshold_m)
+            and self._closer(self._fine, link, threshold_m)
+        )
+
+    def _closer(
+        self, manager: coal.BroadPhaseCollisionManager, link: coal.CollisionObject, limit_m: float
+    ) -> bool:
+        """True if a shape of ``manager`` is closer to ``link`` than ``limit_m`` [m]."""
+        link.computeAABB()
+        if limit_m > 0.0:  # the tree only pairs overlapping boxes: grow the link's by the margin
+            link.getAABB().expand(limit_m)
+        self._callback.init()
+        self._callback.data.request.security_margin = limit_m
+        manager.collide(link, self._callback)
+        link.computeAABB()  # leave the link's own box for the caller's bounds
+        return bool(self._callback.data.result.isCollision())
+
+
+def _boxes(objects: Sequence[coal.CollisionObject]) -> FloatArray:
+    """The objects' axis-aligned boxes, (N, 2, 3): low and high corners [m]."""
+    boxes = [(o.getAABB().min_, o.getAABB().max_) for o in objects]
+    return np.array(boxes, dtype=np.float64).reshape(-1, 2, 3)
+
+
+def _collision_object(shape: CollisionShape) -> coal.CollisionObject:
+    return coal.CollisionObject(shape.geometry, shape.transform(np.eye(4)))
+
+
+def _manager(objects: list[coal.CollisionObject]) -> coal.BroadPhaseCollisionManager:
+    """A dynamic AABB tree of ``objects`` (the caller keeps them alive)."""
+    manager = coal.DynamicAABBTreeCollisionManager()
+    for obj in objects:
+        obj.computeAABB()
+        manager.registerObject(obj)
+    manager.setup()
+    return manager
+
+
+def _coarse_pieces(shapes: Sequence[CollisionShape], cell_m: float) -> list[CollisionShape]:
+    """One convex hull per grid cell of the pieces' centres, holding that cell's pieces."""
+    if not shapes:
+        return []
+    centres = np.array([s.placement[:3, 3] for s in shapes])
+    _, cells = np.unique(np.floor(centres / cell_m), axis=0, return_inverse=True)
+    out = []
+    for cell in range(int(cells.max()) + 1):
+        members = [shapes[int(i)] for i in np.flatnonzero(cells.ravel() == cell)]
+        if len(members) == 1:
+            out.append(members[0])
+        else:
+            out.append(convex_hull(np.vstack([_support_points(m) for m in members])))
+    return out
 
 
 def signed_distances(

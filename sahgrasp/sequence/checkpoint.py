@@ -30,8 +30,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sahgrasp.errors import SequenceFileError
+from sahgrasp.fileio import write_json_atomic
 from sahgrasp.ik import PoseBasis
-from sahgrasp.sequence.folder import CHECKPOINT, HEADER, RESULTS, write_json
+from sahgrasp.sequence.folder import CHECKPOINT, HEADER, RESULTS
 
 __all__ = ["CellOutcome", "Checkpoint", "RoundState", "refuse_leftovers"]
 
@@ -250,7 +251,7 @@ class Checkpoint:
         checkpoint = cls(out_dir / CHECKPOINT, identity, basis, shape, [])
         header = {"format": FORMAT, **identity, "key": checkpoint._key, "basis": basis.to_dict()}
         checkpoint.folder.mkdir(exist_ok=True)
-        write_json(checkpoint.folder / HEADER, header)
+        write_json_atomic(checkpoint.folder / HEADER, header)
         return checkpoint
 
     @classmethod
@@ -295,7 +296,7 @@ class Checkpoint:
         else:
             self.rounds.append(state)
         data = {"format": FORMAT, "key": self._key, **state.to_dict()}
-        write_json(self.folder / _round_name(state.index), data)
+        write_json_atomic(self.folder / _round_name(state.index), data)
 
     def _read_rounds(self) -> list[RoundState]:
         rounds: list[RoundState] = []

@@ -5,25 +5,22 @@
   never leaves the folder locked; a second search (or a second ``--resume``) gets a
   :class:`SequenceFileError` naming the folder and the holder's pid. ``flock`` needs a POSIX
   system and a local file system (over NFS it may not exclude a run on another machine).
-* :func:`write_bytes` / :func:`write_json` write through a temporary file in the same folder and a
-  rename. The temporary's name, ``.NAME.PID-XXXXXXXX.sahgrasp.tmp``, cannot be mistaken for a
-  user's file, so :func:`remove_stale_temporaries` (run by the lock holder, when no write of its
-  own is in progress) deletes exactly the temporaries of killed writes and nothing else.
+* Files are written with :mod:`sahgrasp.fileio`'s atomic writer, whose temporary files have a
+  name no user file is mistaken for, so :func:`remove_stale_temporaries` (run by the lock holder,
+  when no write of its own is in progress) deletes exactly the temporaries of killed writes.
 """
 
 from __future__ import annotations
 
 import fcntl
-import json
 import os
 import re
-import secrets
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 from sahgrasp.errors import SequenceFileError
+from sahgrasp.fileio import is_temporary
 
 __all__ = [
     "CHECKPOINT",
@@ -33,11 +30,8 @@ __all__ = [
     "REPORT",
     "RESULTS",
     "SEQUENCE",
-    "is_temporary",
     "locked_folder",
     "remove_stale_temporaries",
-    "write_bytes",
-    "write_json",
 ]
 
 CHECKPOINT = "checkpoint"
@@ -52,47 +46,16 @@ SEQUENCE, REPORT, FIGURE = RESULTS = ("sequence.json", "search.json", "fig4.png"
 LOCK_NAME = ".sahgrasp-search.lock"
 """Lock file inside the output folder (kept after the run: deleting it would race a waiter)."""
 
-_TEMPORARY = re.compile(r"\..+\.[0-9]+-[0-9a-f]{8}\.sahgrasp\.tmp")
-
-
-def is_temporary(name: str) -> bool:
-    """Whether ``name`` is that of a temporary file written by :func:`write_bytes`."""
-    return _TEMPORARY.fullmatch(name) is not None
-
-
-def write_bytes(path: Path, payload: bytes) -> None:
-    """Write ``payload`` to ``path`` atomically: a reader sees the old file or the new one.
-
-    The temporary file is created exclusively next to ``path`` and removed if the write fails.
-    """
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{secrets.token_hex(4)}.sahgrasp.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_CLOEXEC, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(payload)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def write_json(path: Path, data: Any) -> None:
-    """Write ``data`` as indented JSON (no NaN/inf) to ``path`` atomically."""
-    text = json.dumps(data, indent=2, allow_nan=False) + "\n"
-    write_bytes(path, text.encode("utf-8"))
-
 
 def remove_stale_temporaries(folder: Path) -> list[Path]:
-    """Delete the temporaries of killed :func:`write_bytes` calls in ``folder``; never other files.
+    """Delete the temporaries of killed atomic writes in ``folder``; never other files.
 
     Only call it while holding the folder's lock (then no write is in progress).
 
     Returns:
         The files deleted.
     """
-    stale = [p for p in folder.glob(".*.sahgrasp.tmp") if is_temporary(p.name) and p.is_file()]
+    stale = [p for p in folder.glob(".*.sahgrasp.tmp*") if is_temporary(p.name) and p.is_file()]
     for path in stale:
         path.unlink(missing_ok=True)
     return stale

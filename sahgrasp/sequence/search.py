@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.fileio import write_bytes_atomic, write_json_atomic
 from sahgrasp.hand import Hand, HandDescription, load_hand
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, pose_basis
 from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED, expansion_matrix
@@ -47,8 +48,6 @@ from sahgrasp.sequence.folder import (
     SEQUENCE,
     locked_folder,
     remove_stale_temporaries,
-    write_bytes,
-    write_json,
 )
 from sahgrasp.sequence.tasks import Chunk, ChunkResult, solve_chunk
 
@@ -488,9 +487,9 @@ def _sequence(
 
 
 def _write_outputs(result: SearchResult, out: Path) -> None:
-    write_json(out / SEQUENCE, result.sequence.to_dict())  # as Sequence.save writes it
-    write_json(out / REPORT, result.to_dict())
+    write_json_atomic(out / SEQUENCE, result.sequence.to_dict())  # as Sequence.save writes it
+    write_json_atomic(out / REPORT, result.to_dict())
     rounds = result.rounds
     title = f"Success rates E_i of the initial-pose search, hand {result.sequence.hand}"
     png = success_maps_png([r.success_rates for r in rounds], [r.lambdas for r in rounds], title)
-    write_bytes(out / FIGURE, png)
+    write_bytes_atomic(out / FIGURE, png)

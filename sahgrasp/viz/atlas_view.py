@@ -17,8 +17,10 @@ import meshcat.geometry as mg
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.errors import VizError
 from sahgrasp.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
+from sahgrasp.quality import principal_projection
 from sahgrasp.viz.colors import hex_color, quality_colors
 from sahgrasp.viz.grasp_view import show_grasp
 from sahgrasp.viz.viewer import Viewer, translation
@@ -76,15 +78,12 @@ def display_points(points: ArrayLike, size_m: float = ATLAS_SIZE_M) -> NDArray[n
     three principal axes.
 
     Raises:
-        ValueError: ``points`` is not a finite (N, d) array with N >= 1.
+        VizError: ``points`` is not a finite (N, d) array with N >= 1.
     """
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[0] == 0 or not np.all(np.isfinite(p)):
-        raise ValueError(f"chart centres must be a finite (N, d) array, got shape {p.shape}")
-    p = p - p.mean(axis=0)
-    if p.shape[1] > 3:
-        _, _, vt = np.linalg.svd(p, full_matrices=False)
-        p = p @ vt[:3].T
+        raise VizError(f"chart centres must be a finite (N, d) array, got shape {p.shape}")
+    p = principal_projection(p, 3) if p.shape[1] > 3 else p - p.mean(axis=0)
     p = np.pad(p, ((0, 0), (0, 3 - p.shape[1])))
     extent = float(np.ptp(p, axis=0).max())
     return p * (size_m / extent) if extent > 0 else p
@@ -93,7 +92,7 @@ def display_points(points: ArrayLike, size_m: float = ATLAS_SIZE_M) -> NDArray[n
 def _extremes(values: NDArray[np.float64]) -> tuple[int, int]:
     candidates = np.flatnonzero(np.isfinite(values))
     if not candidates.size:
-        raise ValueError("no chart has a finite quality value")
+        raise VizError("no chart has a finite quality value")
     return (
         int(candidates[np.argmax(values[candidates])]),
         int(candidates[np.argmin(values[candidates])]),
@@ -123,13 +122,13 @@ def show_atlas(
         colliding: Per chart, (N,) booleans: drawn purple whatever their value (default none).
 
     Raises:
-        ValueError: Shapes disagree, or no value is finite.
+        VizError: Shapes disagree, or no value is finite.
     """
     v = np.asarray(values, dtype=np.float64)
     positions = display_points(points)
     hit = np.zeros(len(v), dtype=bool) if colliding is None else np.asarray(colliding, dtype=bool)
     if v.shape != (len(positions),) or hit.shape != v.shape:
-        raise ValueError(
+        raise VizError(
             f"{len(positions)} chart centres but values of shape {v.shape} and colliding "
             f"flags of shape {hit.shape}"
         )

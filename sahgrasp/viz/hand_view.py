@@ -7,6 +7,7 @@ for the SAH, STL meshes for the Allegro hand. Pinocchio's ``MeshcatVisualizer`` 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
@@ -18,7 +19,7 @@ from sahgrasp.errors import HandModelError
 from sahgrasp.hand import Hand
 from sahgrasp.viz.viewer import Viewer
 
-__all__ = ["HandView", "visual_model"]
+__all__ = ["HandView", "visual_corners", "visual_model"]
 
 _VISUAL = pin.GeometryType.VISUAL
 
@@ -35,6 +36,29 @@ def visual_model(hand: Hand) -> pin.GeometryModel:
         return pin.buildGeomFromUrdf(hand.model, str(d.urdf_path), _VISUAL, None, dirs)
     except (ValueError, RuntimeError, OSError) as exc:
         raise HandModelError(f"visual geometry of {d.urdf_path} does not load: {exc}") from exc
+
+
+def visual_corners(
+    hand: Hand, q: NDArray[np.float64], visual: pin.GeometryModel | None = None
+) -> NDArray[np.float64]:
+    """Corners of every visual geometry's bounding box at ``q`` (8 per geometry, world frame) [m].
+
+    Args:
+        hand: The hand model.
+        q: Its configuration.
+        visual: Its visual model (:func:`visual_model` if None).
+    """
+    visual = visual_model(hand) if visual is None else visual
+    data, visual_data = hand.model.createData(), visual.createData()
+    pin.forwardKinematics(hand.model, data, hand.check_q(q))
+    pin.updateGeometryPlacements(hand.model, data, visual, visual_data)
+    corners = []
+    for geometry, placement in zip(visual.geometryObjects, visual_data.oMg, strict=True):
+        geometry.geometry.computeLocalAABB()
+        box = geometry.geometry.aabb_local
+        local = np.array(list(itertools.product(*zip(box.min_, box.max_, strict=True))))
+        corners.append(local @ placement.rotation.T + placement.translation)
+    return np.concatenate(corners)
 
 
 class HandView:

@@ -2,6 +2,12 @@
 
 ``python -m sahgrasp.viz.screenshot SCENE.html OUT.png [--size 1200x800]`` does the same from the
 command line.
+
+Headless Chromium now and then hangs at start or after writing the image, under load. Each run
+therefore has its own process group and a fresh profile, is bounded by a timeout, and is killed
+whole afterwards; a run that hangs or fails is retried, and only the last failure is reported, as
+one :class:`ScreenshotError`. The image is written beside the profile and moved into place once
+complete, so a failed run never leaves a partial or stale PNG at the output path.
 """
 
 from __future__ import annotations
@@ -13,17 +19,24 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Sequence
 from contextlib import suppress
 from pathlib import Path
 
-__all__ = ["CHROMIUM_NAMES", "find_chromium", "screenshot"]
+from sahgrasp.errors import SahGraspError
+
+__all__ = ["CHROMIUM_NAMES", "ScreenshotError", "find_chromium", "screenshot"]
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 """Executables tried, in order, by :func:`find_chromium`."""
 
-_ATTEMPTS = 2
-_TIMEOUT_S = 90.0
+INSTALL_HINT = "install Chromium (Debian/Ubuntu: apt-get install -y chromium)"
+
+_ATTEMPTS = 3
+_TIMEOUT_S = 60.0  # measured: 3-5 s for a small scene, 15-50 s for the demo on a loaded machine
+_POLL_S = 0.2
+_SETTLED_S = 1.0  # an image unchanged this long is complete even if Chromium has not exited
 _FLAGS = (
     "--headless",
     "--no-sandbox",
@@ -32,7 +45,14 @@ _FLAGS = (
     "--use-angle=swiftshader",
     "--enable-unsafe-swiftshader",
     "--hide-scrollbars",
+    # Every frame fully drawn before virtual time moves on: without it, heavy scenes stalled in
+    # 2 of 3 runs (no image after 60 s); with it 3 of 3 finished.
+    "--run-all-compositor-stages-before-draw",
 )
+
+
+class ScreenshotError(SahGraspError):
+    """No Chromium, or Chromium failed or hung on every attempt to render a page."""
 
 
 def find_chromium() -> str | None:
@@ -49,6 +69,9 @@ def screenshot(
     png: str | os.PathLike[str],
     size: tuple[int, int] = (1200, 800),
     settle_ms: int = 5000,
+    timeout_s: float = _TIMEOUT_S,
+    attempts: int = _ATTEMPTS,
+    chromium: str | None = None,
 ) -> Path:
     """Render an exported scene to a PNG in headless Chromium.
 
@@ -57,60 +80,132 @@ def screenshot(
         png: The image to write.
         size: Window width and height [px].
         settle_ms: Virtual time the page runs before the shot [ms] (animations play meanwhile).
+        timeout_s: Wall time one Chromium run may take [s] before it is killed.
+        attempts: Chromium runs tried before giving up.
+        chromium: The browser executable; the first of :data:`CHROMIUM_NAMES` on ``PATH`` if None.
+
+    Returns:
+        The absolute path of the image.
 
     Raises:
-        FileNotFoundError: No Chromium on ``PATH`` (install Debian's ``chromium``).
-        subprocess.CalledProcessError: Chromium failed.
-        subprocess.TimeoutExpired: Chromium hung twice in a row.
+        ScreenshotError: No Chromium, a missing page, bad sizes or counts, or every run failed
+            or hung (the message gives the last reason and the install hint).
     """
-    chromium = find_chromium()
-    if chromium is None:
-        raise FileNotFoundError(f"no Chromium found (tried {', '.join(CHROMIUM_NAMES)})")
+    page = Path(html)
+    _check(page, size, settle_ms, timeout_s, attempts)
+    browser = chromium or find_chromium()
+    if browser is None or shutil.which(browser) is None:
+        tried = browser or ", ".join(CHROMIUM_NAMES)
+        raise ScreenshotError(f"no Chromium found (tried {tried}); {INSTALL_HINT}")
     out = Path(png).resolve()
     out.parent.mkdir(parents=True, exist_ok=True)
-    for _ in range(_ATTEMPTS - 1):
-        try:
-            _run_chromium(chromium, Path(html), out, size, settle_ms)
+    reason = ""
+    for _ in range(attempts):
+        reason = _run_chromium(browser, page.resolve(), out, size, settle_ms, timeout_s)
+        if not reason:
             return out
-        except subprocess.TimeoutExpired:
-            pass  # headless Chromium hangs now and then under load: once more
-    _run_chromium(chromium, Path(html), out, size, settle_ms)
-    return out
+    raise ScreenshotError(
+        f"Chromium failed {attempts} times to render {page}: {reason}; {INSTALL_HINT}, or retry"
+    )
+
+
+def _check(page: Path, size: tuple[int, int], settle_ms: int, timeout_s: float, n: int) -> None:
+    """Refuse a missing page and non-positive sizes, times and counts."""
+    if not page.is_file():
+        raise ScreenshotError(f"no page to render: {page} is not a file")
+    if min(size) < 1 or settle_ms < 0 or not timeout_s > 0 or n < 1:
+        raise ScreenshotError(
+            f"size must be positive pixels, settle_ms >= 0, timeout_s > 0 and attempts >= 1; "
+            f"got size={size}, settle_ms={settle_ms}, timeout_s={timeout_s}, attempts={n}"
+        )
 
 
 def _run_chromium(
-    chromium: str, html: Path, png: Path, size: tuple[int, int], settle_ms: int
-) -> None:
-    """One Chromium run in its own process group, killed whole afterwards (no stray children)."""
-    with tempfile.TemporaryDirectory(prefix="sahgrasp-chromium-") as profile:
+    chromium: str, html: Path, png: Path, size: tuple[int, int], settle_ms: int, timeout_s: float
+) -> str:
+    """One Chromium run in its own process group, killed whole afterwards (no stray children).
+
+    Returns:
+        An empty string once ``png`` is written, else why the run failed.
+    """
+    with tempfile.TemporaryDirectory(prefix="sahgrasp-chromium-") as work:
+        shot = Path(work) / "shot.png"
         command = [
-            chromium, *_FLAGS, f"--user-data-dir={profile}", f"--screenshot={png}",
-            f"--window-size={size[0]},{size[1]}", f"--virtual-time-budget={settle_ms}",
-            html.resolve().as_uri(),
+            chromium, *_FLAGS, f"--user-data-dir={Path(work) / 'profile'}",
+            f"--screenshot={shot}", f"--window-size={size[0]},{size[1]}",
+            f"--virtual-time-budget={settle_ms}", html.as_uri(),
         ]  # fmt: skip
-        proc = subprocess.Popen(
-            command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True
-        )
-        try:
-            _, errors = proc.communicate(timeout=_TIMEOUT_S)
-        finally:
-            with suppress(ProcessLookupError):
-                os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    if proc.returncode != 0:
-        raise subprocess.CalledProcessError(proc.returncode, command, stderr=errors)
+        log = Path(work) / "stderr.txt"
+        with log.open("wb") as errors:
+            proc = subprocess.Popen(
+                command, stdout=subprocess.DEVNULL, stderr=errors, start_new_session=True
+            )
+            try:
+                written = _wait_for_image(proc, shot, timeout_s)
+            finally:
+                with suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()  # reaps the group leader, killed above: returns at once
+        if written:
+            os.replace(shot, png)
+            return ""
+        if proc.returncode not in (0, -signal.SIGKILL):
+            last = log.read_text(errors="replace").strip().splitlines()
+            return f"exit code {proc.returncode}" + (f" ({last[-1][:200]})" if last else "")
+        return f"no image after {timeout_s:g} s (Chromium hung)"
+
+
+def _wait_for_image(proc: subprocess.Popen[bytes], shot: Path, timeout_s: float) -> bool:
+    """Wait until Chromium exits or its image stops growing; True when the image is there."""
+    deadline = time.monotonic() + timeout_s
+    size, since = -1, time.monotonic()
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            return proc.returncode == 0 and _size(shot) > 0
+        now, current = time.monotonic(), _size(shot)
+        if current != size:
+            size, since = current, now
+        elif size > 0 and now - since >= _SETTLED_S:
+            return True  # written and complete; Chromium hangs on exit now and then
+        time.sleep(_POLL_S)
+    return False
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except FileNotFoundError:
+        return 0
+
+
+def _window_size(text: str) -> tuple[int, int]:
+    """``WIDTHxHEIGHT`` as two positive integers, for argparse."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT like 1200x800, got {text!r}"
+        ) from None
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f"width and height must be >= 1 px, got {text!r}")
+    return width, height
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``SCENE.html OUT.png [--size WxH] [--settle-ms MS]``."""
+    """Command line: ``SCENE.html OUT.png [--size WxH] [--settle-ms MS]``; 2 on an error."""
     parser = argparse.ArgumentParser(description="Screenshot an exported sahgrasp scene.")
     parser.add_argument("html")
     parser.add_argument("png")
-    parser.add_argument("--size", default="1200x800", help="window size WIDTHxHEIGHT [px]")
+    parser.add_argument("--size", type=_window_size, default=(1200, 800),
+                        help="window size WIDTHxHEIGHT [px]")  # fmt: skip
     parser.add_argument("--settle-ms", type=int, default=5000, help="virtual time before the shot")
     args = parser.parse_args(argv)
-    width, height = (int(v) for v in args.size.lower().split("x"))
-    print(f"wrote {screenshot(args.html, args.png, (width, height), args.settle_ms)}")
+    try:
+        out = screenshot(args.html, args.png, args.size, args.settle_ms)
+    except ScreenshotError as exc:
+        print(f"screenshot: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {out}")
     return 0
 
 

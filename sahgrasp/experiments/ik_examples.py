@@ -1,10 +1,11 @@
-"""The IK examples of ik-initial-sequence Section 4.1 (Figs. 6-8): solve, report, show.
+"""The IK examples of Claret & Suárez's IK paper, Section 4.1 (Figs. 6-8): solve, report, show.
 
 Each example is a paper object with its precision grasp (``sahgrasp.objects``). It is solved with
 the default IK (iterates recorded), reported beside the paper's counts of initial configurations
 and Jacobian iterations, and drawn as Fig. 6 draws the fork: object, contact disks with normal
 cylinders, and the hand animated from the initial configuration to the solution. The example
 scripts ``examples/grasp_*.py`` and ``sahgrasp demo`` are thin wrappers around this module.
+The paper's counts are :data:`sahgrasp.objects.PAPER_IK_REPORT`.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from sahgrasp.contacts import GraspTarget
+from sahgrasp.experiments.arguments import add_html_argument, add_ik_arguments, ik_settings
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
 from sahgrasp.objects import (
@@ -29,8 +31,9 @@ from sahgrasp.objects import (
     paper_grasp,
     transform_points,
 )
-from sahgrasp.viz.grasp_view import show_grasp
-from sahgrasp.viz.present import add_html_argument, present
+from sahgrasp.tables import format_table
+from sahgrasp.viz.grasp_view import grasp_points, show_grasp
+from sahgrasp.viz.present import present
 from sahgrasp.viz.viewer import Viewer
 
 __all__ = [
@@ -38,9 +41,7 @@ __all__ = [
     "EXAMPLE_NAMES",
     "ROW_ASPECT",
     "GraspExample",
-    "add_ik_arguments",
     "format_report",
-    "ik_settings",
     "run_grasp_example",
     "show_examples",
     "solve_example",
@@ -52,8 +53,8 @@ EXAMPLE_NAMES = GRASP_NAMES
 EXAMPLE_GAP_M = 0.06
 """Gap along x between the extents of neighbouring grasps in a row [m]."""
 
-ROW_ASPECT = 2.0
-"""Width/height ratio of the window a row of grasps is framed for."""
+ROW_ASPECT = 1.5
+"""Smallest width/height ratio of the window a row of grasps fits in (1280x800 is 1.6)."""
 
 
 @dataclass(frozen=True)
@@ -91,35 +92,29 @@ def solve_example(hand: Hand, name: str, settings: IKSettings | None = None) -> 
     return GraspExample(name, load_object(name), target, result, PAPER_IK_REPORT[name])
 
 
-_COLUMNS = (
-    ("object", 10),
-    ("solved", 14),
-    ("inits (paper)", 13),
-    ("iterations (paper)", 18),
-    ("time [ms]", 9),
-    ("max error [mm]", 14),
-)
+_HEADERS = ("object", "solved", "inits (paper)", "iterations (paper)", "time [ms]",
+            "max error [mm]")  # fmt: skip
 
 
 def format_report(examples: Iterable[GraspExample]) -> str:
     """A table of the results beside the paper's numbers (Section 4.1); one row per example.
 
     The paper gives no per-example time (5 ms on average per initial configuration, Section 4.2)
-    and solves to ``d_min = 1.5 mm``; ``solved`` gives the solver's reason when it failed.
+    and solves to ``d_min = 1.5 mm``; ``solved`` gives the solver's reason when it failed. Columns
+    are as wide as their content.
     """
-    lines = ["  ".join(f"{title:>{width}}" for title, width in _COLUMNS)]
-    for ex in examples:
-        r = ex.result
-        cells = (
+    rows = [
+        (
             ex.name,
-            "yes" if r.success else f"no ({r.reason})",
-            f"{r.inits_used} ({ex.paper.initial_configurations})",
-            f"{r.iterations} ({ex.paper.jacobian_iterations})",
-            f"{r.time_s * 1e3:.1f}",
-            f"{r.max_error_m * 1e3:.3f}",
+            "yes" if ex.result.success else f"no ({ex.result.reason})",
+            f"{ex.result.inits_used} ({ex.paper.initial_configurations})",
+            f"{ex.result.iterations} ({ex.paper.jacobian_iterations})",
+            f"{ex.result.time_s * 1e3:.1f}",
+            f"{ex.result.max_error_m * 1e3:.3f}",
         )
-        lines.append("  ".join(f"{c:>{w}}" for c, (_, w) in zip(cells, _COLUMNS, strict=True)))
-    return "\n".join(lines)
+        for ex in examples
+    ]
+    return format_table(_HEADERS, rows)
 
 
 def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) -> None:
@@ -131,7 +126,7 @@ def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) 
     extents, cursor = [], 0.0
     for ex in examples:
         T = _facing_placement(ex)
-        extent = transform_points(T, _extent_m(hand, ex))
+        extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
         T[0, 3] += shift
         extent[:, 0] += shift
@@ -168,26 +163,6 @@ def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
     return T
 
 
-def _extent_m(hand: Hand, example: GraspExample) -> NDArray[np.float64]:
-    """Points spanning the drawn grasp: object mesh vertices and hand link origins [m]."""
-    obj = example.obj
-    links = [M.translation for M in hand.frame_placements(example.result.q).values()]
-    return np.concatenate([transform_points(obj.T_world_object, obj.mesh().vertices_m), links])
-
-
-def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the examples' IK options: ``--hand``, ``--method``, ``--inits``, ``--iterations``."""
-    parser.add_argument("--hand", default="sah", help="sah, allegro, or a hand-description JSON")
-    parser.add_argument("--method", choices=("auto", "paper"), default="auto")
-    parser.add_argument("--inits", type=int, default=12, help="i_max, initial configurations")
-    parser.add_argument("--iterations", type=int, default=100, help="k_max, per configuration")
-
-
-def ik_settings(args: argparse.Namespace) -> IKSettings:
-    """The IK settings of :func:`add_ik_arguments`'s options."""
-    return IKSettings(method=args.method, max_inits=args.inits, max_iterations=args.iterations)
-
-
 def run_grasp_example(name: str, argv: Sequence[str] | None = None) -> int:
     """Main of ``examples/grasp_<name>.py``: solve, print beside the paper, show or write HTML.
 
@@ -195,7 +170,7 @@ def run_grasp_example(name: str, argv: Sequence[str] | None = None) -> int:
         0 if the grasp was solved, 1 otherwise (the scene is shown either way).
     """
     parser = argparse.ArgumentParser(
-        description=f"IK of the paper's {name} grasp (ik-initial-sequence Section 4.1)."
+        description=f"IK of the paper's {name} grasp (Claret & Suárez's IK paper, Section 4.1)."
     )
     add_ik_arguments(parser)
     add_html_argument(parser)

@@ -1,0 +1,7 @@
+"""``python -m sahgrasp.cli``: the ``sahgrasp`` command."""
+
+import sys
+
+from sahgrasp.cli import main
+
+sys.exit(main())

@@ -1,0 +1,156 @@
+"""Command-line options shared by the ``sahgrasp`` commands and the example scripts.
+
+Imported to build parsers (``sahgrasp --help``), so it imports nothing heavy: the IK settings are
+imported when :func:`ik_settings` first runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sahgrasp.ik import IKSettings
+
+__all__ = [
+    "ATLAS_DEFAULTS",
+    "HAND_HELP",
+    "INDEX_CHOICES",
+    "INITS_HELP",
+    "MAX_INITS",
+    "METHOD_HELP",
+    "add_atlas_arguments",
+    "add_html_argument",
+    "add_ik_arguments",
+    "atlas_geometry",
+    "ik_settings",
+    "int_at_least",
+    "int_in_range",
+    "nonnegative_int",
+    "positive_float",
+    "positive_int",
+]
+
+MAX_INITS = 1000
+"""Largest ``--inits`` accepted: the initial configurations are built before the first solve."""
+
+HAND_HELP = "sah, allegro, or the path of a hand-description JSON (not a URDF)"
+METHOD_HELP = "IK inner loop: the paper's (paper) or the Levenberg-Marquardt default (auto)"
+INITS_HELP = f"i_max, initial configurations per problem (1..{MAX_INITS})"
+
+ATLAS_DEFAULTS = {"planar": (0.125, 0.4), "can": (0.1, 0.5), "bottle": (0.1, 0.5)}
+"""Per experiment: the chart radius ``r`` and ``epsilon`` used unless told otherwise (the one place
+they are set). Planar: the atlas paper's values; SAH: ours, as ``x`` mixes radians and metres."""
+
+INDEX_CHOICES = ("inverse_condition", "volume", "min_semiaxis")
+"""``sahgrasp.quality.INDICES``, spelled out so that building a parser needs no numpy."""
+
+
+def _checked(kind: Callable[[str], Any], ok: Callable[[Any], bool], rule: str) -> Any:
+    """An argparse ``type``: parse with ``kind``, then require ``ok`` (``rule`` says what is)."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {rule}") from None
+        if not ok(value):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {rule}")
+        return value
+
+    parse.__name__ = rule  # argparse names the type in some messages
+    return parse
+
+
+def int_at_least(low: int) -> Any:
+    """An argparse ``type`` accepting integers ``>= low``."""
+    return _checked(int, lambda v: v >= low, f"an integer >= {low}")
+
+
+def int_in_range(low: int, high: int) -> Any:
+    """An argparse ``type`` accepting integers in ``low..high``."""
+    return _checked(int, lambda v: low <= v <= high, f"an integer in {low}..{high}")
+
+
+positive_int = int_at_least(1)
+nonnegative_int = int_at_least(0)
+positive_float = _checked(float, lambda v: math.isfinite(v) and v > 0.0, "a finite number > 0")
+
+
+def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the IK options of the paper examples: ``--hand``, ``--method``, ``--inits``, ...
+
+    :func:`ik_settings` turns them into the IK's settings.
+    """
+    parser.add_argument("--hand", default="sah", help=HAND_HELP)
+    parser.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
+    parser.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
+    parser.add_argument(
+        "--iterations", type=positive_int, default=100, help="k_max, iterations per start"
+    )
+
+
+def ik_settings(args: argparse.Namespace) -> IKSettings:
+    """The IK settings of :func:`add_ik_arguments`'s options."""
+    from sahgrasp.ik import IKSettings
+
+    return IKSettings(method=args.method, max_inits=args.inits, max_iterations=args.iterations)
+
+
+def add_html_argument(parser: argparse.ArgumentParser, default: str | None = None) -> None:
+    """Add ``--html OUT``: write the scene there instead of opening the live viewer."""
+    parser.add_argument(
+        "--html",
+        default=default,
+        metavar="OUT",
+        help="write the scene as a standalone HTML file"
+        + (f" (default: {default})" if default else " instead of opening the viewer"),
+    )
+
+
+def _per_experiment(names: Sequence[str], i: int) -> str:
+    return ", ".join(f"{name} {ATLAS_DEFAULTS[name][i]:g}" for name in names)
+
+
+def add_atlas_arguments(parser: argparse.ArgumentParser, experiments: Sequence[str]) -> None:
+    """Add ``--k``, ``--r``, ``--eps``, ``--index`` and ``--max-charts`` (validated).
+
+    Args:
+        parser: The parser.
+        experiments: The experiments the parser runs (keys of :data:`ATLAS_DEFAULTS`). With one,
+            ``--r`` and ``--eps`` default to its values; with several, to None, and the help lists
+            each one's (:func:`atlas_geometry` resolves them).
+    """
+    one = len(experiments) == 1
+    radius, epsilon = ATLAS_DEFAULTS[experiments[0]] if one else (None, None)
+    parser.add_argument(
+        "--k", type=positive_int, default=2, help="dimension of the relevant-grasp set"
+    )
+    parser.add_argument(
+        "--r",
+        type=positive_float,
+        default=radius,
+        help="chart radius > 0" + ("" if one else f" (default: {_per_experiment(experiments, 0)})"),
+    )
+    parser.add_argument(
+        "--eps",
+        type=positive_float,
+        default=epsilon,
+        help="epsilon > 0 of Eqs. (17)-(18)"
+        + ("" if one else f" (default: {_per_experiment(experiments, 1)})"),
+    )
+    parser.add_argument("--index", choices=INDEX_CHOICES, default="volume", help="quality index")
+    parser.add_argument(
+        "--max-charts", type=positive_int, default=20_000, help="stop the atlas at this many charts"
+    )
+
+
+def atlas_geometry(experiment: str, args: argparse.Namespace) -> tuple[float, float]:
+    """Chart radius and epsilon of ``args``, the experiment's defaults where not given."""
+    radius, epsilon = ATLAS_DEFAULTS[experiment]
+    return (
+        radius if args.r is None else args.r,
+        epsilon if args.eps is None else args.eps,
+    )

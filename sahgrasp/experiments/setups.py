@@ -1,0 +1,180 @@
+"""The atlas paper's experiments as grasp manifolds: the planar hand, the SAH with a can, a bottle.
+
+Rosales, Porta and Ros, "Global optimization of robotic grasps", RSS 2011, Section V: the planar
+three-finger hand (Figs. 8-9), the SAH holding a can (Fig. 10a) and an oil bottle (Fig. 10b).
+:func:`make_experiment` builds the problem, :func:`run_experiment` runs Algorithm 1 on it
+(:func:`sahgrasp.optimization.optimize`), with the experiment's default chart radius and epsilon
+(:data:`sahgrasp.experiments.arguments.ATLAS_DEFAULTS`) unless told otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from sahgrasp.errors import OptimizationError
+from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
+from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
+from sahgrasp.hand import load_hand
+from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
+from sahgrasp.optimization import (
+    ComponentSearch,
+    GraspManifold,
+    OptimizationResult,
+    OptimizationSettings,
+    optimize,
+    optimize_components,
+)
+from sahgrasp.planar import make_planar_problem
+from sahgrasp.progress import ProgressCallback
+
+__all__ = [
+    "EXPERIMENTS",
+    "SAH_EXPERIMENTS",
+    "SahExperiment",
+    "experiment_settings",
+    "make_experiment",
+    "run_components",
+    "run_experiment",
+]
+
+
+@dataclass(frozen=True)
+class SahExperiment:
+    """One of the atlas paper's SAH experiments (Section V).
+
+    Attributes:
+        patches: Builds the object's contact regions.
+        object: Builds the object, in the regions' frame.
+        free_object: Whether the object pose varies.
+        symmetry_axis: Axis of revolution shared by every contact region (object frame), if any.
+    """
+
+    patches: Callable[[], GraspPatches]
+    object: Callable[[], GraspObject]
+    free_object: bool = True
+    symmetry_axis: tuple[float, float, float] | None = None
+
+
+SAH_EXPERIMENTS = {
+    # The thumb's fixed point breaks the can's symmetry.
+    "can": SahExperiment(can_patches, lambda: load_object("can")),
+    "bottle": SahExperiment(
+        bottle_patches, lambda: load_object("bottle"), symmetry_axis=(0.0, 0.0, 1.0)
+    ),
+}
+"""The SAH + can (Fig. 10a) and SAH + oil bottle (Fig. 10b) experiments, by name."""
+
+EXPERIMENTS = ("planar", *SAH_EXPERIMENTS)
+"""Every experiment's name."""
+
+_MOTION_SAMPLES = {"random": 2000, "grasps": 200}
+"""Configurations sampled for the principal motions per source (an IK solve each for grasps)."""
+
+
+def make_experiment(
+    name: str,
+    k: int = 2,
+    hand: str = "sah",
+    motions: str = "random",
+    length_scale_m: float | None = None,
+) -> GraspManifold:
+    """The grasp manifold of experiment ``name`` with ``k`` kept dimensions.
+
+    The SAH experiments check their chart centres against the object.
+
+    Args:
+        name: One of :data:`EXPERIMENTS`.
+        k: Dimension of the relevant-grasp set R.
+        hand: The hand of the SAH experiments (a name or a hand-description JSON).
+        motions: Source of the SAH's principal motions, one of
+            :data:`~sahgrasp.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
+        length_scale_m: Scale the SAH's coordinates at this length
+            (:func:`sahgrasp.grasp.coordinate_scales`); None: unscaled.
+
+    Raises:
+        OptimizationError: ``name`` is unknown, or the IK finds no first grasp.
+        GraspSystemError: ``k`` is out of range.
+    """
+    if name == "planar":
+        return make_planar_problem(k)
+    if name not in SAH_EXPERIMENTS:
+        raise OptimizationError(f"unknown experiment {name!r}; valid: {', '.join(EXPERIMENTS)}")
+    setup = SAH_EXPERIMENTS[name]
+    samples = _MOTION_SAMPLES.get(motions, 0)
+    return make_sah_manifold(
+        load_hand(hand), setup.patches(), k, setup.free_object, setup.symmetry_axis,
+        setup.object(), samples, motion_source=motions, length_scale_m=length_scale_m,
+    )  # fmt: skip
+
+
+def experiment_settings(
+    name: str,
+    radius: float | None = None,
+    epsilon: float | None = None,
+    index: str = "volume",
+    max_charts: int = 20_000,
+    progress: ProgressCallback | None = None,
+) -> OptimizationSettings:
+    """The optimization settings of experiment ``name``: its radius and epsilon where None.
+
+    Raises:
+        OptimizationError: ``name`` or ``index`` is unknown.
+    """
+    if name not in ATLAS_DEFAULTS:
+        raise OptimizationError(f"unknown experiment {name!r}; valid: {', '.join(EXPERIMENTS)}")
+    default_radius, default_epsilon = ATLAS_DEFAULTS[name]
+    return OptimizationSettings(
+        radius=default_radius if radius is None else radius,
+        epsilon=default_epsilon if epsilon is None else epsilon,
+        index=index,
+        max_charts=max_charts,
+        progress=progress,
+    )
+
+
+def run_experiment(
+    name: str,
+    k: int = 2,
+    radius: float | None = None,
+    epsilon: float | None = None,
+    index: str = "volume",
+    max_charts: int = 20_000,
+    progress: ProgressCallback | None = None,
+    hand: str = "sah",
+    motions: str = "random",
+    length_scale_m: float | None = None,
+) -> OptimizationResult:
+    """Algorithm 1 on experiment ``name``.
+
+    The arguments are those of :func:`make_experiment` and :func:`experiment_settings`.
+    """
+    settings = experiment_settings(name, radius, epsilon, index, max_charts, progress)
+    return optimize(make_experiment(name, k, hand, motions, length_scale_m), settings)
+
+
+def run_components(
+    name: str,
+    seeds: int = 8,
+    k: int = 2,
+    radius: float | None = None,
+    epsilon: float | None = None,
+    index: str = "volume",
+    max_charts: int = 20_000,
+    motions: str = "random",
+) -> ComponentSearch:
+    """Algorithm 1 on every connected component of an SAH experiment's R met by IK seeds.
+
+    The seeds are the first grasp and the IK's solutions of the same contacts from ``seeds``
+    random starts (:func:`sahgrasp.grasp.ik_seeds`); other arguments as :func:`run_experiment`.
+
+    Raises:
+        OptimizationError: ``name`` is not an SAH experiment, or no seed reaches R.
+    """
+    problem = make_experiment(name, k, motions=motions)
+    if not isinstance(problem, SahGraspManifold):
+        raise OptimizationError(
+            f"components are searched for {sorted(SAH_EXPERIMENTS)}, not {name!r}"
+        )
+    settings = experiment_settings(name, radius, epsilon, index, max_charts)
+    return optimize_components(problem, settings, ik_seeds(problem, seeds))

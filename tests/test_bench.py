@@ -1,0 +1,146 @@
+"""Benchmarks: missing optional peers are skipped, progress goes to stderr, a summary table."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from sahgrasp.bench import atlas as bench_atlas
+from sahgrasp.bench import ik as bench_ik
+from sahgrasp.bench import kinematics as bench_kinematics
+from sahgrasp.bench.peers import available_peers
+from sahgrasp.bench.report import summary_table
+from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.progress import StderrProgress
+from sahgrasp.tables import format_table
+
+ROOT = Path(__file__).resolve().parent.parent
+CLI = "import sys; from sahgrasp.cli import main; sys.exit(main(sys.argv[1:]))"
+
+
+def hide_pink(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Make ``import pink`` fail as on a README install (no ``[bench]`` extra)."""
+    monkeypatch.setitem(sys.modules, "pink", None)
+
+
+# ----- tables ---------------------------------------------------------------------------------
+def test_columns_are_as_wide_as_their_content() -> None:
+    table = format_table(
+        ("object", "solved", "ms"), [("fork", "yes", 1.5), ("can", "no (no_progress)", 12.25)]
+    )
+    lines = table.splitlines()
+    starts = [line.index(word) for line, word in zip(lines[1:], ("yes", "no (no"), strict=True)]
+    assert starts[0] == starts[1] == lines[0].index("solved")
+    assert lines[1].endswith(" 1.5") and lines[2].endswith("12.25")  # numbers right-aligned
+    assert lines[0].endswith("   ms")
+
+
+def test_markdown_table_and_cell_formats() -> None:
+    table = format_table(("a", "b"), [(True, None), (False, 2.0)], markdown=True)
+    assert table.splitlines() == ["| a   | b |", "|-----|--:|", "| yes | - |", "| no  | 2 |"]
+    with pytest.raises(ValueError, match="row 0 has 1 cells for 2 headers"):
+        format_table(("a", "b"), [("x",)])
+
+
+def test_stderr_progress_draws_one_bar_per_stage(capsys: pytest.CaptureFixture[str]) -> None:
+    with StderrProgress() as bar:
+        for done in range(1, 4):
+            bar("first", done, 3)
+        bar("second", 1, None)
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert "first: 100%" in captured.err and "3/3" in captured.err and "second: 1" in captured.err
+
+
+# ----- bench ik -------------------------------------------------------------------------------
+def test_missing_peer_is_skipped_with_the_extra_named(monkeypatch: pytest.MonkeyPatch) -> None:
+    hide_pink(monkeypatch)
+    ready, skipped = available_peers(["scipy", "pink", "scipy"])
+    assert ready == ["scipy"]
+    assert set(skipped) == {"pink"} and '".[bench]"' in skipped["pink"]
+    with pytest.raises(InvalidSettingsError, match="valid: scipy, pink"):
+        available_peers(["matlab"])
+
+
+def test_bench_ik_without_pink_runs_the_others(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    hide_pink(monkeypatch)
+    heard: list[tuple[str, int, int | None]] = []
+    doc = bench_ik.run(problems=3, peer_problems=2, progress=lambda *r: heard.append(r))
+    assert set(doc["skipped_peers"]) == {"pink"}
+    assert "peer:scipy/sequence" in doc["runs"] and "peer:pink/sequence" not in doc["runs"]
+    assert doc["runs"]["peer:scipy/sequence"]["problems"] == 2
+    assert heard == [("bench ik: problems", i, 3) for i in (1, 2, 3)]
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pink" in err[0] and '".[bench]"' in err[0]
+    table = summary_table(doc)
+    assert "auto/sequence" in table and "peer pink skipped" in table
+    with pytest.raises(InvalidSettingsError, match="problems"):
+        bench_ik.run(problems=0)
+
+
+def test_bench_ik_command_without_pink_exits_cleanly(tmp_path: Path) -> None:
+    fake = tmp_path / "site" / "pink"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ModuleNotFoundError(\"No module named 'pink'\")\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join((str(tmp_path / "site"), str(ROOT)))}
+    out = tmp_path / "ik.json"
+    done = subprocess.run(
+        [sys.executable, "-c", CLI, "bench", "ik", "--problems", "2",
+         "--peer-problems", "1", "--json", str(out)],
+        capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr and '".[bench]"' in done.stderr
+    assert set(json.loads(out.read_text())["skipped_peers"]) == {"pink"}
+
+
+# ----- bench atlas and kinematics -------------------------------------------------------------
+def test_bench_atlas_reports_each_case_and_tables_them() -> None:
+    heard: list[tuple[str, int, int | None]] = []
+    doc = bench_atlas.run(repeats=1, cases=["S2", "planar"], progress=lambda *r: heard.append(r))
+    assert list(doc["cases"]) == ["S2", "planar"]
+    assert heard == [("bench atlas: cases", i, 2) for i in (0, 1, 2)]
+    lines = summary_table(doc).splitlines()
+    assert lines[0] == "bench atlas" and lines[1].split()[:3] == ["case", "charts", "complete"]
+    assert [line.split()[0] for line in lines[2:]] == ["S2", "planar"]
+    with pytest.raises(InvalidSettingsError, match="valid: S2, S3, planar"):
+        bench_atlas.run(cases=["S4"])
+
+
+def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    bench_atlas.run(repeats=1, cases=["S2"])
+    assert "bench atlas: cases" in capsys.readouterr().err
+    bench_atlas.run(repeats=1, cases=["S2"], quiet=True)
+    assert capsys.readouterr().err == ""
+
+
+def test_kinematics_table() -> None:
+    doc = bench_kinematics.run(hands=("sah",), calls=5)
+    lines = summary_table(doc).splitlines()
+    assert lines[0].startswith("bench kinematics: 5 calls") and lines[2].split()[0] == "sah"
+
+
+def test_sequence_table_and_unknown_documents() -> None:
+    row = {"wall_seconds": 2.0, "ik_runs": 100, "ik_runs_per_second": 50.0}
+    doc: dict[str, Any] = {
+        "benchmark": "sequence",
+        "hand": "sah",
+        "workers": {"1": row, "2": {**row, "wall_seconds": 1.25}},
+        "speedup": 1.6,
+        "paper_scale": {"cluster_workers": 16, "hours": 3.5},
+    }
+    lines = summary_table(doc).splitlines()
+    assert [line.split()[:2] for line in lines[2:4]] == [["1", "2"], ["2", "1.25"]]
+    assert lines[-1] == "speed-up 1.6; paper scale on 16 workers: 3.5 h"
+    with pytest.raises(InvalidSettingsError, match="valid: ik, atlas, kinematics, sequence"):
+        summary_table({"benchmark": "nope"})

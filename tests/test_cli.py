@@ -1,0 +1,456 @@
+"""The ``sahgrasp`` command as a user runs it: a subprocess, its exit status and its stderr."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+
+from sahgrasp.contacts import save_targets
+from sahgrasp.hand import load_hand
+from sahgrasp.ik import IKSettings, random_problems
+
+ROOT = Path(__file__).resolve().parent.parent
+HEAVY = ("numpy", "pinocchio", "coal", "scipy", "matplotlib", "meshcat", "dask", "trimesh", "tqdm")
+
+
+def sahgrasp(*args: object, cwd: Path, **kwargs: Any) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m sahgrasp ARGS`` on this checkout."""
+    return subprocess.run(
+        [sys.executable, "-m", "sahgrasp", *map(str, args)],
+        capture_output=True, encoding="utf-8", errors="strict", cwd=cwd,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300, **kwargs,
+    )  # fmt: skip
+
+
+def start(*args: object, cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "sahgrasp", *map(str, args)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, encoding="utf-8", cwd=cwd,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )  # fmt: skip
+
+
+def one_line_error(done: subprocess.CompletedProcess[str], pattern: str) -> None:
+    """Exit status 2 and exactly one line on stderr, matching ``pattern``."""
+    assert "Traceback" not in done.stderr, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1, done.stderr
+    assert re.search(pattern, lines[0]), lines[0]
+    assert done.returncode == 2
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with ``one.json`` (1 problem, solvable) and ``many.json`` (60 problems)."""
+    folder = tmp_path_factory.mktemp("cli")
+    hand = load_hand("sah")
+    save_targets(folder / "one.json", "sah", random_problems(hand, 1, 0))
+    save_targets(folder / "many.json", "sah", random_problems(hand, 6, 1) * 10)
+    return folder
+
+
+def test_help_version_and_lazy_parser(tmp_path: Path) -> None:
+    done = sahgrasp("--help", cwd=tmp_path)
+    assert done.returncode == 0
+    for command in ("info", "solve", "bench", "atlas", "sequence", "demo"):
+        assert command in done.stdout
+    version = sahgrasp("--version", cwd=tmp_path)
+    assert version.returncode == 0 and re.fullmatch(r"sahgrasp \S+\n", version.stdout)
+    # Building the parser (and importing the package) imports no heavy module.
+    probe = (
+        "import sys; from sahgrasp.cli import _parser; _parser(); "
+        f"print(sorted(m for m in sys.modules if m.split('.')[0] in {HEAVY!r}))"
+    )
+    loaded = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
+    assert loaded.stdout.strip() == "[]", loaded.stderr
+
+
+def _every_parser() -> list[argparse.ArgumentParser]:
+    from sahgrasp.cli import _parser
+
+    found, todo = [], [_parser()]
+    while todo:
+        parser = todo.pop()
+        found.append(parser)
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                todo.extend(action.choices.values())
+    return found
+
+
+def test_every_option_has_help_and_shows_its_default() -> None:
+    parsers = _every_parser()
+    commands = ("info", "solve", "atlas", "sequence", "demo", "bench")
+    benches = ("kinematics", "ik", "atlas", "sequence", "grasps")
+    expected = {"sahgrasp", *(f"sahgrasp {c}" for c in commands)}
+    assert expected | {f"sahgrasp bench {b}" for b in benches} <= {p.prog for p in parsers}
+    for parser in parsers:
+        formatter = parser._get_formatter()
+        for action in parser._actions:
+            assert action.help, f"{parser.prog} {action.dest} has no help"
+            shown = formatter._get_help_string(action)  # type: ignore[attr-defined]
+            if action.default not in (None, False, argparse.SUPPRESS) and action.option_strings:
+                assert "%(default)s" in shown, f"{parser.prog} {action.dest} hides its default"
+    sequence = next(p for p in parsers if p.prog.endswith(" sequence"))
+    assert "about 30 minutes on 2 cores" in " ".join(sequence.format_help().split())
+
+
+def test_cli_defaults_are_the_library_defaults() -> None:
+    import inspect
+
+    from sahgrasp.bench import atlas, ik, kinematics
+    from sahgrasp.bench import sequence as bench_sequence
+    from sahgrasp.cli import sequence as sequence_cli
+    from sahgrasp.experiments.arguments import INDEX_CHOICES
+    from sahgrasp.quality import INDICES
+    from sahgrasp.sequence import SearchSettings
+
+    assert INDEX_CHOICES == INDICES
+    settings = SearchSettings()
+    assert {
+        "grid": settings.grid, "problems": settings.problems, "rounds": settings.rounds,
+        "seed": settings.seed, "method": settings.method,
+    } == sequence_cli.SEARCH_DEFAULTS  # fmt: skip
+    from sahgrasp.cli.learn import LEARN_DEFAULTS
+    from sahgrasp.ik.learned import LEARN_SEED
+
+    assert LEARN_DEFAULTS["seed"] == LEARN_SEED
+    parsers = {p.prog: p for p in _every_parser()}
+    ik_defaults = IKSettings()
+    solve = parsers["sahgrasp solve"]
+    assert (solve.get_default("inits"), solve.get_default("method"), solve.get_default("init")) == (
+        ik_defaults.max_inits,
+        ik_defaults.method,
+        ik_defaults.init,
+    )
+    for module in (atlas, ik, kinematics, bench_sequence):
+        name = module.__name__.rsplit(".", 1)[1]
+        parser = parsers[f"sahgrasp bench {name}"]
+        params = inspect.signature(module.run).parameters
+        options = {a.dest for a in parser._actions if a.option_strings} - {"help", "json"}
+        assert options <= set(params), (name, options - set(params))
+        for param in params.values():
+            if parser.get_default(param.name) is not None:
+                expected = param.default
+                got = parser.get_default(param.name)
+                assert type(expected)(got) == expected, (name, param.name)
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["solve", "one.json", "--seed", "-1"], r"--seed: -1 is out of range: must be .* >= 0"),
+        (["solve", "one.json", "--inits", "1001"], r"--inits: 1001 .* in 1\.\.1000"),
+        (["solve", "one.json", "--inits", "0"], r"--inits: 0 .* in 1\.\.1000"),
+        (["solve", "one.json", "--workers", "0"], r"--workers: 0 .* >= 1"),
+        (["solve", "one.json", "--seed", "x"], r"--seed: 'x' is not an integer"),
+        (["sequence", "--out", "d", "--seed", "-1"], r"--seed: -1 .* >= 0"),
+        (["sequence", "--out", "d", "--workers", "0"], r"--workers: 0 .* >= 1"),
+        (["sequence", "--out", "d", "--grid", "1"], r"--grid: 1 .* >= 2"),
+        (["atlas", "planar", "--r", "0"], r"--r: 0 .* finite number > 0"),
+        (["atlas", "can", "--eps", "0"], r"--eps: 0 .* finite number > 0"),
+        (["atlas", "can", "--r", "nan"], r"--r: nan .* finite number > 0"),
+        (["atlas", "can", "--max-charts", "0"], r"--max-charts: 0 .* >= 1"),
+        (["bench", "kinematics", "--calls", "0"], r"--calls: 0 .* >= 1"),
+        (["bench", "kinematics", "--calls", "-1"], r"--calls: -1 .* >= 1"),
+        (["bench", "atlas", "--repeats", "0"], r"--repeats: 0 .* >= 1"),
+        (["bench", "ik", "--problems", "0"], r"--problems: 0 .* >= 1"),
+        (["demo", "--inits", "5000"], r"--inits: 5000 .* in 1\.\.1000"),
+        (["info", "--bogus"], r"unrecognized arguments: --bogus"),
+    ],
+)
+def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
+    one_line_error(sahgrasp(*args, cwd=files), r"^sahgrasp[a-z ]*: error: (argument )?" + pattern)
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["solve", "one.json", "--json", "one.json"], r"output one\.json is the input file"),
+        (["solve", "one.json", "--json", "."], r"output \. is a folder"),
+        (["solve", "one.json", "--json", "one.json/out.json"], r"one\.json is not a folder"),
+        (["info", "--json", "."], r"output \. is a folder"),
+        (["atlas", "planar", "--plot", "one.json/p.png"], r"one\.json is not a folder"),
+        (["atlas", "planar", "--plot", "o.png", "--json", "o.png"], r"o\.png is given twice"),
+        (["bench", "ik", "--targets", "one.json", "--plot", "one.json"], r"is the input file"),
+        (["bench", "kinematics", "--json", "."], r"is a folder"),
+        (["demo", "--html", "."], r"is a folder"),
+        (["sequence", "--out", "one.json"], r"one\.json exists and is not a folder"),
+    ],
+)
+def test_bad_output_paths_fail_before_the_work(files: Path, args: list[str], pattern: str) -> None:
+    before = (files / "one.json").read_bytes()
+    one_line_error(sahgrasp(*args, cwd=files), r"^sahgrasp: error: .*" + pattern)
+    assert (files / "one.json").read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    ("content", "pattern"),
+    [
+        (None, r"cannot read targets file missing\.json: No such file"),
+        (b"\xff\xfe{\x00}\x00", r"is not UTF-8 text"),
+        (b"\x7fELF\x02\x01\x01\x00\x00\xd0\xc3", r"is not UTF-8 text"),
+        (b"[" * 100_000 + b"]" * 100_000, r"is nested too deeply"),
+        (b'{"problems": ' + b"[" * 100_000 + b"]" * 100_000 + b"}", r"too deeply"),
+        (b"{", r"is not valid JSON"),
+        (b"[1, 2]", r"must be an object with 'hand' and a 'problems' list"),
+        (b'{"hand": 5, "problems": []}', r"'hand' must be 'sah', 'allegro' or a hand-desc"),
+        (b'{"hand": "nohand", "problems": []}', r"unknown hand 'nohand'"),
+    ],
+    ids=["missing", "utf16", "binary", "deep", "deep-problems", "truncated", "list", "hand-type",
+         "hand-name"],
+)  # fmt: skip
+def test_unreadable_targets_files(tmp_path: Path, content: bytes | None, pattern: str) -> None:
+    if content is not None:
+        (tmp_path / "missing.json").write_bytes(content)
+    one_line_error(
+        sahgrasp("solve", "missing.json", cwd=tmp_path), r"^sahgrasp: error: .*" + pattern
+    )
+
+
+def test_a_folder_as_targets(tmp_path: Path) -> None:
+    one_line_error(sahgrasp("solve", ".", cwd=tmp_path), r"cannot read targets file \.: Is a dir")
+
+
+def _mixed(files: Path, folder: Path) -> Path:
+    """``folder/mixed.json``: the solvable problem, then one invalid problem of each kind."""
+    good = json.loads((files / "one.json").read_text())["problems"][0]
+
+    def edit(name: str, **changes: Any) -> dict[str, Any]:
+        problem = json.loads(json.dumps(good))
+        problem["name"] = name
+        problem["contacts"][0].update(changes)
+        return problem
+
+    missing = edit("missing")
+    missing["contacts"].pop()
+    problems = [
+        good,
+        edit("huge", point=[10**400, 0, 0]),
+        edit("string", point=["0.1", 0, 0]),
+        edit("boolean", normal=[True, 0, 0]),
+        edit("short", point=[0, 0]),
+        edit("nan", point=[float("nan"), 0, 0]),
+        edit("pinky", finger="pinky"),
+        missing,
+        edit("lone\ud800surrogate\x1b[31m", finger="pinky"),
+        42,
+    ]
+    path = folder / "mixed.json"
+    path.write_text(json.dumps({"hand": "sah", "problems": problems}), encoding="utf-8")
+    return path
+
+
+def test_invalid_problems_are_reported_and_the_others_solved(files: Path, tmp_path: Path) -> None:
+    targets = _mixed(files, tmp_path)
+    done = sahgrasp("solve", targets, "--json", tmp_path / "out.json", cwd=tmp_path)
+    assert done.returncode == 1, done.stderr
+    assert "Traceback" not in done.stderr
+    assert "\x1b" not in done.stdout and "\\x1b[31m" in done.stdout
+    document = json.loads(
+        (tmp_path / "out.json").read_text(encoding="utf-8"), parse_constant=pytest.fail
+    )
+    results = document["results"]
+    assert results[0]["success"] and results[0]["reason"] == "converged"
+    assert all(r["reason"] == "invalid_input" for r in results[1:])
+    assert all(r["max_position_error_mm"] is None for r in results[1:])
+    details = {r["name"]: r["detail"] for r in results[1:]}
+    expected = {
+        "huge": "too large for a float", "string": "must be 3 numbers",
+        "boolean": "must be 3 numbers", "short": "3 components", "nan": "NaN or inf",
+        "pinky": "unknown finger", "missing": "missing contact", "problem-9": "must be an object",
+        "lone\ufffdsurrogate\x1b[31m": "unknown finger",
+    }  # fmt: skip
+    assert set(details) == set(expected)
+    for name, reason in expected.items():
+        assert reason in details[name]
+        assert f"{name}: invalid input: " in done.stdout.replace("\\x1b", "\x1b")
+    assert document["summary"] == {**document["summary"], "problems": 10, "solved": 1, "invalid": 9}
+
+
+def test_json_to_stdout_is_strict_json_alone(files: Path, tmp_path: Path) -> None:
+    done = sahgrasp(
+        "solve", _mixed(files, tmp_path).name, "--inits", "1", "--json", "-", cwd=tmp_path
+    )
+    assert done.returncode == 1
+    document = json.loads(done.stdout, parse_constant=pytest.fail)
+    assert len(document["results"]) == 10
+    assert "solved 0/10" in done.stderr or "solved 1/10" in done.stderr
+
+
+def test_all_solved_exits_0_and_writes_through_a_link(files: Path, tmp_path: Path) -> None:
+    real = tmp_path / "real.json"
+    real.write_text("old")
+    real.chmod(0o604)
+    (tmp_path / "link.json").symlink_to(real)
+    done = sahgrasp("solve", files / "one.json", "--json", "link.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert (tmp_path / "link.json").is_symlink()
+    assert json.loads(real.read_text())["summary"]["solved"] == 1
+    assert stat.S_IMODE(real.stat().st_mode) == 0o604
+
+
+def test_dev_null_stays_a_device(files: Path) -> None:
+    done = sahgrasp("solve", "one.json", "--json", os.devnull, cwd=files)
+    assert done.returncode == 0, done.stderr
+    assert stat.S_ISCHR(Path(os.devnull).stat().st_mode)
+
+
+def test_relative_hand_path_is_read_from_the_targets_folder(files: Path, tmp_path: Path) -> None:
+    sah = load_hand("sah").description
+    hand = {
+        "name": "mysah", "urdf": str(sah.urdf_path),
+        "fingertip_radius_m": sah.fingertip_radius_m,
+        "contact_pitch_limits_rad": list(sah.contact_pitch_limits_rad),
+        "contact_yaw_limits_rad": list(sah.contact_yaw_limits_rad),
+        "fingers": [{"name": f.name, "tip_link": f.tip_link, "tip_axis": list(f.tip_axis),
+                     "pad_axis": list(f.pad_axis)} for f in sah.fingers],
+    }  # fmt: skip
+    sub = tmp_path / "sub"
+    sub.mkdir()
+    (sub / "mysah.json").write_text(json.dumps(hand))
+    targets = json.loads((files / "one.json").read_text())
+    (sub / "t.json").write_text(json.dumps({**targets, "hand": "mysah.json"}))
+    done = sahgrasp(
+        "solve", "sub/t.json", "--init", "random", "--inits", "1", "--json", "-", cwd=tmp_path
+    )
+    assert "Traceback" not in done.stderr
+    assert json.loads(done.stdout)["hand"] == "mysah"
+
+
+def _wait_for_workers(process: subprocess.Popen[str], count: int) -> list[psutil.Process]:
+    """The worker processes once ``count`` are up (the signal handlers are installed by then)."""
+    for _ in range(600):
+        children = psutil.Process(process.pid).children(recursive=True)
+        if len(children) >= count:
+            return children
+        if process.poll() is not None:
+            pytest.fail(f"finished before its workers started: {process.communicate()}")
+        time.sleep(0.1)
+    pytest.fail("the workers never started")
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int) -> None:
+    process = start("solve", "many.json", "--workers", "2", "--inits", "1000", cwd=files)
+    workers = _wait_for_workers(process, 2)
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130
+    assert err.strip().splitlines()[-1] == "sahgrasp: interrupted"
+    assert "Traceback" not in err
+    psutil.wait_procs(workers, timeout=30)
+    assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
+
+
+def test_interrupted_sequence_prints_the_resume_command(tmp_path: Path) -> None:
+    process = start("sequence", "--grid", "3", "--problems", "30", "--rounds", "2",
+                    "--workers", "1", "--out", "out dir", cwd=tmp_path)  # fmt: skip
+    for _ in range(1200):  # the search is under way once its checkpoint folder exists
+        if (tmp_path / "out dir" / "checkpoint").is_dir() or process.poll() is not None:
+            break
+        time.sleep(0.1)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert err.strip().splitlines()[-1] == (
+        "sahgrasp: interrupted; continue from the last checkpoint with: sahgrasp sequence "
+        "--hand sah --grid 3 --problems 30 --rounds 2 --seed 0 --method auto --out 'out dir' "
+        "--workers 1 --resume"
+    )
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
+    problems = [{"name": f"p{i}", "contacts": []} for i in range(5000)]
+    (tmp_path / "t.json").write_text(json.dumps({"hand": "sah", "problems": problems}))
+    process = start("solve", "t.json", cwd=tmp_path)
+    assert process.stdout is not None and process.stderr is not None
+    assert process.stdout.readline().startswith("p0: invalid input")
+    process.stdout.close()
+    err = process.stderr.read()
+    assert process.wait(timeout=120) == 141
+    assert err == ""
+
+
+@pytest.mark.parametrize(
+    ("args", "pattern"),
+    [
+        (["info", "--hand", "deep.json"], r"hand description deep\.json is nested too deeply"),
+        (["solve", "one.json", "--hand", "u16.json"], r"hand description u16\.json is not UTF-8"),
+        (
+            ["solve", "one.json", "--sequence", "deep.json"],
+            r"sequence file deep\.json is nested too deeply",
+        ),
+        (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
+    ],
+)
+def test_malformed_hand_and_sequence_files(
+    files: Path, tmp_path: Path, args: list[str], pattern: str
+) -> None:
+    (tmp_path / "one.json").write_bytes((files / "one.json").read_bytes())
+    (tmp_path / "deep.json").write_bytes(b"[" * 100_000 + b"]" * 100_000)
+    (tmp_path / "u16.json").write_bytes('{"name": "x"}'.encode("utf-16"))
+    one_line_error(sahgrasp(*args, cwd=tmp_path), r"^sahgrasp: error: " + pattern)
+
+
+def test_bench_json_to_stdout(tmp_path: Path) -> None:
+    done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    document = json.loads(done.stdout, parse_constant=pytest.fail)
+    assert document["calls"] == 3 and set(document["hands"]) == {"sah", "allegro"}
+
+
+def test_bench_prints_its_table_and_writes_json_only_when_asked(tmp_path: Path) -> None:
+    done = sahgrasp("bench", "kinematics", "--calls", "3", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith("bench kinematics: 3 calls") and "{" not in done.stdout
+    assert list(tmp_path.iterdir()) == []
+    done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "k.json", cwd=tmp_path)
+    assert done.returncode == 0 and "bench kinematics" in done.stdout
+    assert json.loads((tmp_path / "k.json").read_text())["calls"] == 3
+
+
+def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
+    args = ("bench", "grasps", "--problems-per-object", "1", "--objects", "can", "--quiet")
+    done = sahgrasp(*args, "--without-object", "--json", "g.json", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert "| can | without object |" in done.stdout and "with object |" not in done.stdout
+    assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
+
+
+def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
+    done = sahgrasp("atlas", "planar", "--r", "0.3", "--plot", "p.png", "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout, parse_constant=pytest.fail)["radius"] == 0.3
+    assert "wrote p.png" in done.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.png"]
+    assert (tmp_path / "p.png").read_bytes().startswith(b"\x89PNG")
+
+
+def test_package_exports_load_lazily() -> None:
+    code = (
+        "import sys, sahgrasp; assert 'pinocchio' not in sys.modules; "
+        "from sahgrasp import _MODULE_OF; assert sorted(_MODULE_OF) == sahgrasp.__all__; "
+        "assert all(getattr(sahgrasp, n) is not None for n in sahgrasp.__all__); "
+        "assert 'pinocchio' in sys.modules"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(ROOT)}
+    )
