@@ -1,0 +1,212 @@
+"""Every module's imports obey the layering table of docs/architecture.md.
+
+The table is parsed from the markdown, so the document and the test cannot disagree. Imports are
+read from each file's syntax tree: module level, inside functions and under ``TYPE_CHECKING``.
+A module may import its own layer and the layers of smaller rank, never a larger rank; only the
+layers marked ``yes`` may import ``argparse``.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "sahgrasp"
+ARCHITECTURE = ROOT / "docs" / "architecture.md"
+HEADER = ["rank", "layer", "modules", "argparse"]
+
+
+@dataclass(frozen=True)
+class Layer:
+    rank: int
+    name: str
+    argparse: bool
+
+
+@dataclass(frozen=True)
+class Edge:
+    """One import in ``path`` at ``line`` of the sahgrasp module ``target`` (or ``argparse``)."""
+
+    path: Path
+    line: int
+    target: str
+
+    def __str__(self) -> str:
+        return f"{self.path.relative_to(ROOT)}:{self.line} imports {self.target}"
+
+
+def _cells(row: str) -> list[str]:
+    return [cell.strip() for cell in row.strip().strip("|").split("|")]
+
+
+@cache
+def layers() -> dict[str, Layer]:
+    """Module name -> its layer, from the table whose header is HEADER."""
+    rows = iter(ARCHITECTURE.read_text(encoding="utf-8").splitlines())
+    for row in rows:
+        if row.startswith("|") and _cells(row) == HEADER:
+            break
+    else:
+        raise AssertionError(f"{ARCHITECTURE}: no table with the header {HEADER}")
+    next(rows)  # the |---| separator
+    table: dict[str, Layer] = {}
+    for row in rows:
+        if not row.startswith("|"):
+            break
+        rank, name, modules, argparse = _cells(row)
+        assert argparse in {"yes", "no"}, f"argparse column must be yes or no: {row}"
+        layer = Layer(int(rank), name, argparse == "yes")
+        for module in re.findall(r"`([^`]+)`", modules):
+            assert module not in table, f"{module} is in two layers"
+            table[module] = layer
+    return table
+
+
+def module_of(path: Path) -> str:
+    """``sahgrasp/ik/solver.py`` -> ``ik``; the package's own ``__init__.py`` -> ``__init__``."""
+    parts = path.relative_to(PACKAGE).parts
+    return parts[0].removesuffix(".py")
+
+
+def _package_parts(path: Path) -> list[str]:
+    """Dotted-name parts of the package that holds ``path`` (for relative imports)."""
+    return ["sahgrasp", *path.parent.relative_to(PACKAGE).parts]
+
+
+def _imported_names(node: ast.Import | ast.ImportFrom, path: Path) -> Iterator[tuple[str, str]]:
+    """(absolute module, imported name) pairs; the name is "" for ``import a.b``."""
+    if isinstance(node, ast.Import):
+        yield from ((alias.name, "") for alias in node.names)
+        return
+    package = _package_parts(path)
+    base = package[: len(package) - node.level + 1] if node.level else []
+    module = ".".join([*base, *([node.module] if node.module else [])])
+    yield from ((module, alias.name) for alias in node.names)
+
+
+def _target(module: str, name: str) -> str | None:
+    """The layering-table name of an import, or None when it is neither ours nor argparse."""
+    parts = module.split(".")
+    if parts[0] == "argparse":
+        return "argparse"
+    if parts[0] != "sahgrasp":
+        return None
+    if len(parts) > 1:
+        return parts[1]
+    # ``from sahgrasp import ik`` loads a module, ``from sahgrasp import load_hand`` a re-export.
+    is_module = (PACKAGE / name).is_dir() or (PACKAGE / f"{name}.py").is_file()
+    return name if is_module else "__init__"
+
+
+def edges(path: Path, source: str | None = None) -> Iterator[Edge]:
+    """Imports of sahgrasp modules and of argparse in ``path`` (or in ``source``, as if there)."""
+    text = path.read_text(encoding="utf-8") if source is None else source
+    for node in ast.walk(ast.parse(text, str(path))):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            for module, name in _imported_names(node, path):
+                target = _target(module, name)
+                if target is not None:
+                    yield Edge(path, node.lineno, target)
+
+
+def sources() -> list[Path]:
+    return sorted(PACKAGE.rglob("*.py"))
+
+
+def broken_rules(path: Path, found: Iterable[Edge]) -> Iterator[str]:
+    """The imports among ``found`` that ``path``'s layer may not make, explained."""
+    table = layers()
+    own = table.get(module_of(path))
+    if own is None:  # reported by test_every_module_has_a_layer
+        return
+    for edge in found:
+        if edge.target == "argparse":
+            if not own.argparse:
+                yield f"{edge}: the {own.name} layer may not parse arguments"
+            continue
+        used = table.get(edge.target)
+        if used is not None and used.rank > own.rank:
+            yield f"{edge}: {own.name} (rank {own.rank}) may not use {used.name}"
+
+
+def test_the_table_is_complete_and_ordered() -> None:
+    table = layers()
+    assert sorted({layer.rank for layer in table.values()}) == list(range(7))
+    for must in ("errors", "atlas", "hand", "ik", "viz", "experiments", "cli", "bench"):
+        assert must in table
+    assert table["errors"].rank < table["atlas"].rank < table["hand"].rank < table["ik"].rank
+    assert table["ik"].rank < table["viz"].rank < table["experiments"].rank < table["cli"].rank
+
+
+def test_every_module_has_a_layer() -> None:
+    missing = {module_of(p) for p in sources()} - layers().keys()
+    assert not missing, f"modules without a row in {ARCHITECTURE.name}: {sorted(missing)}"
+
+
+def test_every_import_of_a_sahgrasp_module_names_a_module_with_a_layer() -> None:
+    known = layers().keys() | {"argparse"}
+    unknown = [str(e) for p in sources() for e in edges(p) if e.target not in known]
+    assert not unknown, "\n".join(unknown)
+
+
+def test_imports_point_down_the_layers() -> None:
+    found = [rule for path in sources() for rule in broken_rules(path, edges(path))]
+    assert not found, f"{len(found)} layering violations:\n" + "\n".join(found)
+
+
+def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
+    source = (
+        "import argparse\n"
+        "from sahgrasp import load_hand, hand\n"
+        "def f():\n"
+        "    from ..viz import show\n"
+        "    import sahgrasp.experiments.paper\n"
+        "    from . import solver\n"
+    )
+    path = PACKAGE / "ik" / "_probe.py"  # never written: only its package matters
+    nodes = [n for n in ast.walk(ast.parse(source)) if isinstance(n, ast.Import | ast.ImportFrom)]
+    pairs = [pair for node in nodes for pair in _imported_names(node, path)]
+    assert [_target(*pair) for pair in pairs] == [
+        "argparse",
+        "__init__",
+        "hand",
+        "viz",
+        "experiments",
+        "ik",
+    ]
+
+
+@pytest.mark.parametrize(
+    ("where", "source", "broken"),
+    [
+        (
+            "atlas/builder.py",
+            "from sahgrasp.hand import Hand\n",
+            ["engine (rank 1) may not use model"],
+        ),
+        (
+            "viz/x.py",
+            "def f():\n    from sahgrasp.experiments import t\n",
+            ["may not use experiments"],
+        ),
+        ("hand.py", "import argparse\n", ["the model layer may not parse arguments"]),
+        ("ik/x.py", "from ..cli import main\n", ["solvers (rank 3) may not use entry points"]),
+        ("cli/x.py", "import argparse\nfrom sahgrasp.experiments import t\n", []),
+        ("objects/x.py", "from sahgrasp.errors import SahGraspError\nimport numpy\n", []),
+    ],
+)
+def test_the_rules_catch_upward_imports_and_argparse(
+    where: str, source: str, broken: list[str]
+) -> None:
+    path = PACKAGE / where  # never written: the source is given
+    found = list(broken_rules(path, edges(path, source)))
+    assert len(found) == len(broken)
+    for message, expected in zip(found, broken, strict=True):
+        assert expected in message
