@@ -16,6 +16,7 @@ import numpy as np
 import psutil
 import pytest
 
+from sahgrasp.cli import main
 from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.errors import VizError
 from sahgrasp.experiments.ik_examples import (
@@ -48,7 +49,6 @@ from sahgrasp.viz import (
 )
 from sahgrasp.viz.hand_view import visual_corners
 from sahgrasp.viz.screenshot import ScreenshotError, screenshot
-from sahgrasp.viz.screenshot import main as screenshot_main
 from sahgrasp.viz.viewer import ViewerError
 
 
@@ -524,9 +524,9 @@ def test_no_chromium_is_one_typed_error_and_one_line(
     monkeypatch.setenv("PATH", str(tmp_path))
     with pytest.raises(ScreenshotError, match=r"no Chromium found.*apt-get install -y chromium"):
         screenshot(page, tmp_path / "out.png")
-    assert screenshot_main([str(page), str(tmp_path / "out.png")]) == 2
+    assert main(["screenshot", str(page), str(tmp_path / "out.png")]) == 2
     (line,) = capsys.readouterr().err.splitlines()
-    assert line.startswith("screenshot: error: no Chromium found")
+    assert line.startswith("sahgrasp: error: no Chromium found")
 
 
 def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None:
@@ -534,5 +534,4 @@ def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None
         screenshot(tmp_path / "missing.html", tmp_path / "out.png")
     with pytest.raises(ScreenshotError, match="attempts >= 1"):
         screenshot(page, tmp_path / "out.png", attempts=0)
-    with pytest.raises(SystemExit):
-        screenshot_main([str(page), str(tmp_path / "out.png"), "--size", "12x"])
+    assert main(["screenshot", str(page), str(tmp_path / "out.png"), "--size", "12x"]) == 2

@@ -1,18 +1,17 @@
 """meshcat's zmq/web server bound to one interface, ending when the process that started it ends.
 
 meshcat 0.3.2's server listens for browsers on every interface (``0.0.0.0:7000``) and outlives a
-parent that is killed. This script runs the same server with the web port bound to ``--host``
-(``127.0.0.1`` unless asked) and exits as soon as its parent (``--parent PID``) is gone: at once on
+parent that is killed. This script runs the same server with the web port bound to ``HOST``
+(``127.0.0.1`` unless asked) and exits as soon as its parent (``PARENT_PID``) is gone: at once on
 Linux (``PR_SET_PDEATHSIG``), within half a second elsewhere (a poll of the parent process id).
 
-:class:`sahgrasp.viz.Viewer` starts it by file path (``python -u meshcat_server.py``), so the
-server imports meshcat only, not the toolkit. It prints ``zmq_url=...`` and ``web_url=...`` as
-meshcat's server does.
+:class:`sahgrasp.viz.Viewer` starts it by file path (``python -u meshcat_server.py HOST
+PARENT_PID``), so the server imports meshcat only, not the toolkit. It prints ``zmq_url=...`` and
+``web_url=...`` as meshcat's server does.
 """
 
 from __future__ import annotations
 
-import argparse
 import ctypes
 import ctypes.util
 import os
@@ -63,14 +62,15 @@ def _poll_parent(parent: int) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Serve until the parent ends or a signal arrives."""
-    parser = argparse.ArgumentParser(description="meshcat server bound to one interface")
-    parser.add_argument("--host", default="127.0.0.1", help="interface for zmq and the browser")
-    parser.add_argument("--parent", type=int, required=True, help="exit when this process ends")
-    args = parser.parse_args(argv)
-    _die_with_parent(args.parent)
-    bridge = _local_bridge(args.host)
-    _poll_parent(args.parent)
+    """Serve until the parent ends or a signal arrives (arguments: ``HOST PARENT_PID``)."""
+    words = list(sys.argv[1:] if argv is None else argv)
+    if len(words) != 2 or not words[1].isdigit():
+        print("usage: meshcat_server.py HOST PARENT_PID", file=sys.stderr)
+        return 2
+    host, parent = words[0], int(words[1])
+    _die_with_parent(parent)
+    bridge = _local_bridge(host)
+    _poll_parent(parent)
     print(f"zmq_url={bridge.zmq_url}")
     print(f"web_url={bridge.web_url}", flush=True)
     # Nobody reads the pipe after these lines: later output must not fill it and block us.

@@ -1,7 +1,6 @@
 """PNG screenshots of exported scenes with headless Chromium (software WebGL, no GPU, no display).
 
-``python -m sahgrasp.viz.screenshot SCENE.html OUT.png [--size 1200x800]`` does the same from the
-command line.
+``sahgrasp screenshot SCENE.html OUT.png [--size 1200x800]`` does the same from the command line.
 
 Headless Chromium now and then hangs at start or after writing the image, under load. Each run
 therefore has its own process group and a fresh profile, is bounded by a timeout, and is killed
@@ -12,15 +11,12 @@ complete, so a failed run never leaves a partial or stale PNG at the output path
 
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import signal
 import subprocess
-import sys
 import tempfile
 import time
-from collections.abc import Sequence
 from contextlib import suppress
 from pathlib import Path
 
@@ -176,38 +172,3 @@ def _size(path: Path) -> int:
         return path.stat().st_size
     except FileNotFoundError:
         return 0
-
-
-def _window_size(text: str) -> tuple[int, int]:
-    """``WIDTHxHEIGHT`` as two positive integers, for argparse."""
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected WIDTHxHEIGHT like 1200x800, got {text!r}"
-        ) from None
-    if width < 1 or height < 1:
-        raise argparse.ArgumentTypeError(f"width and height must be >= 1 px, got {text!r}")
-    return width, height
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Command line: ``SCENE.html OUT.png [--size WxH] [--settle-ms MS]``; 2 on an error."""
-    parser = argparse.ArgumentParser(description="Screenshot an exported sahgrasp scene.")
-    parser.add_argument("html")
-    parser.add_argument("png")
-    parser.add_argument("--size", type=_window_size, default=(1200, 800),
-                        help="window size WIDTHxHEIGHT [px]")  # fmt: skip
-    parser.add_argument("--settle-ms", type=int, default=5000, help="virtual time before the shot")
-    args = parser.parse_args(argv)
-    try:
-        out = screenshot(args.html, args.png, args.size, args.settle_ms)
-    except ScreenshotError as exc:
-        print(f"screenshot: error: {exc}", file=sys.stderr)
-        return 2
-    print(f"wrote {out}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

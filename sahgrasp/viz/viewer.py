@@ -74,8 +74,7 @@ def _spawn_server(host: str, errors: IO[bytes]) -> subprocess.Popen[bytes]:
     It runs in its own session (a Ctrl-C at the terminal reaches the script, which closes the
     viewer, not the server directly) and exits by itself when this process dies.
     """
-    command = [sys.executable, "-u", str(_SERVER_SCRIPT), "--host", host,
-               "--parent", str(os.getpid())]  # fmt: skip
+    command = [sys.executable, "-u", str(_SERVER_SCRIPT), host, str(os.getpid())]
     return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=errors, start_new_session=True)
 
 
