@@ -26,7 +26,7 @@ from sahgrasp.sequence import SearchSettings, open_executor, search_sequence
 __all__ = ["extrapolate", "run"]
 
 PAPER_SCALE = SearchSettings(grid=30, problems=5000, rounds=12)
-"""The search of ik-initial-sequence Fig. 4 and Table 1."""
+"""The search of Claret & Suárez Fig. 4 and Table 1."""
 
 
 def _warm(description: HandDescription, digest: str) -> None:

@@ -1,4 +1,4 @@
-"""Inverse kinematics of the hand from contact points and normals (ik-initial-sequence)."""
+"""Inverse kinematics of the hand from contact points and normals (Claret & Suárez)."""
 
 from sahgrasp.ik.batch import invalid_result, solve_many, worker_hand
 from sahgrasp.ik.initial import (

@@ -1,4 +1,4 @@
-"""Initial hand configurations of Algorithm 1 (ik-initial-sequence Sections 3.1 and 3.2).
+"""Initial hand configurations of Algorithm 1 (Claret & Suárez Sections 3.1 and 3.2).
 
 * :class:`PoseBasis` -- the PCA of a set S of sampled hand poses: mean ``m``, principal directions
   ``c_1, c_2`` and deviations ``sigma_1, sigma_2`` (Eq. (11)). Poses live in the paper's
@@ -45,7 +45,7 @@ PAPER_TABLE1_LAMBDAS: tuple[tuple[float, float], ...] = (
     (0.690, 0.448), (0.138, 0.241), (0.034, 0.827), (0.655, 0.241),
     (0.690, 0.0), (0.690, 0.448), (0.724, 0.276), (0.276, 0.827),
 )  # fmt: skip
-"""Table 1 of ik-initial-sequence: (lambda^1, lambda^2) of the 12 initial poses."""
+"""Table 1 of Claret & Suárez: (lambda^1, lambda^2) of the 12 initial poses."""
 
 PCA_SAMPLES = 10_000
 PCA_SEED = 20120101
@@ -151,7 +151,7 @@ def pose_basis(hand: Hand, samples: int = PCA_SAMPLES, seed: int = PCA_SEED) -> 
 
 @dataclass(frozen=True)
 class Sequence:
-    """A sequence of initial poses for one hand (ik-initial-sequence Section 3.2).
+    """A sequence of initial poses for one hand (Claret & Suárez Section 3.2).
 
     Attributes:
         hand: Hand name.

@@ -1,4 +1,4 @@
-"""Algorithm 1 of ik-initial-sequence: fingertip contacts -> wrist pose and joint values.
+"""Algorithm 1 of Claret & Suárez: fingertip contacts -> wrist pose and joint values.
 
 Two inner solvers share the outer loop (initial configurations from a :class:`Sequence`, or random
 ones) and the acceptance test (Eq. (9) for every finger, joints within limits, no self-collision):
@@ -617,8 +617,8 @@ def solve_ik(
     Raises:
         InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
             refused when the target is built); an obstacle that is not a GraspObject.
-        SequenceFileError: ``sequence`` (or ``database``: :class:`GraspDatabaseError`) was made
-            for another hand.
+        SequenceFileError: ``sequence`` was made for another hand (``database``: a
+            :class:`~sahgrasp.ik.learned.GraspDatabaseError`).
     """
     s = replace(settings or IKSettings(), **overrides)
     attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt

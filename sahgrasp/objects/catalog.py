@@ -1,7 +1,7 @@
 """The papers' objects, their precision grasps and their contact patches.
 
-Objects of ik-initial-sequence (Figs. 6-8: fork, cup, Buddha statuette, cup of coffee with saucer,
-can) and of atlas-grasp-optimization (Section V: the can, a Marquina oil drizzler). The figures give
+Objects of Claret & Suárez (Figs. 6-8: fork, cup, Buddha statuette, cup of coffee with saucer,
+can) and of Rosales, Porta & Ros (Section V: the can, a Marquina oil drizzler). The figures give
 no dimensions: docs/objects.md lists the sizes chosen and why. Every object stands on the world
 ``xy`` plane with its axis along ``z`` (the fork lies flat along ``x``) unless a placement
 ``T_world_object`` is given; grasps and patches follow the placement.
@@ -52,7 +52,7 @@ MM = 1e-3
 
 
 class IKReport(NamedTuple):
-    """What ik-initial-sequence reports for an example: initial configurations, iterations."""
+    """What Claret & Suárez reports for an example: initial configurations, iterations."""
 
     initial_configurations: int
     jacobian_iterations: int
@@ -65,7 +65,7 @@ PAPER_IK_REPORT: dict[str, IKReport] = {
     "coffee_cup": IKReport(7, 38),
     "can": IKReport(1, 22),
 }
-"""ik-initial-sequence Section 4.1: initial configurations used and Jacobian iterations."""
+"""Claret & Suárez Section 4.1: initial configurations used and Jacobian iterations."""
 
 
 @dataclass(frozen=True)
@@ -389,7 +389,7 @@ _BUILDERS: dict[str, Callable[[], _Entry]] = {
 OBJECT_NAMES: tuple[str, ...] = tuple(_BUILDERS)
 """Names accepted by :func:`load_object`, in the papers' order."""
 GRASP_NAMES: tuple[str, ...] = tuple(PAPER_IK_REPORT)
-"""Names accepted by :func:`paper_grasp`: the objects of ik-initial-sequence."""
+"""Names accepted by :func:`paper_grasp`: the objects of Claret & Suárez."""
 
 
 def _placed(patches: GraspPatches, T_world_object: Any) -> GraspPatches:

@@ -1,8 +1,8 @@
-"""The offline search for the sequence of initial hand poses (ik-initial-sequence Section 3.2).
+"""The offline search for the sequence of initial hand poses (Claret & Suárez Section 3.2).
 
 :func:`search_sequence` runs the greedy search on any ``concurrent.futures.Executor`` (local worker
-processes by default, Dask, MPI), checkpoints as it goes, and writes a :class:`Sequence` file that
-``solve_ik`` can use.
+processes by default, Dask, MPI), checkpoints as it goes, and writes a
+:class:`~sahgrasp.ik.Sequence` file that ``solve_ik`` can use.
 """
 
 from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState

@@ -1,4 +1,4 @@
-"""Fig. 4 of ik-initial-sequence: the success-rate maps ``E_i`` of the search, one per round."""
+"""Fig. 4 of Claret & Suárez: the success-rate maps ``E_i`` of the search, one per round."""
 
 from __future__ import annotations
 

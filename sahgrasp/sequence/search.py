@@ -1,4 +1,4 @@
-"""The greedy search for the sequence of initial hand poses (ik-initial-sequence Section 3.2).
+"""The greedy search for the sequence of initial hand poses (Claret & Suárez Section 3.2).
 
 The domain of ``(lambda^1, lambda^2)`` is discretised into ``N`` values each, uniform in [0, 1]
 with both ends included, giving ``N^2`` candidate cells (flat index ``j * N + k`` for

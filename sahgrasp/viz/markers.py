@@ -1,6 +1,6 @@
 """Things drawn beside a hand: triangle meshes, objects, contact targets.
 
-A contact target is drawn as in ik-initial-sequence Fig. 6a: a disk at the contact point, in the
+A contact target is drawn as in Claret & Suárez Fig. 6a: a disk at the contact point, in the
 object's tangent plane, with a cylinder along the outward normal (the fingertip-sphere centre lies
 on it at ``R`` from the point).
 """
