@@ -124,8 +124,10 @@ def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
     assert capsys.readouterr().err == ""
 
 
-def test_kinematics_table() -> None:
-    doc = bench_kinematics.run(hands=("sah",), calls=5)
+def test_kinematics_table_and_progress() -> None:
+    heard: list[tuple[str, int, int | None]] = []
+    doc = bench_kinematics.run(hands=("sah",), calls=5, progress=lambda *r: heard.append(r))
+    assert heard == [("bench kinematics: hands", 0, 1), ("bench kinematics: hands", 1, 1)]
     lines = summary_table(doc).splitlines()
     assert lines[0].startswith("bench kinematics: 5 calls") and lines[2].split()[0] == "sah"
 

@@ -15,8 +15,10 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from sahgrasp.bench.report import progress_reporter
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand, load_hand
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["run"]
 
@@ -82,17 +84,33 @@ def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
     }
 
 
-def run(hands: tuple[str, ...] = ("sah", "allegro"), calls: int = 20_000, seed: int = 0) -> dict:
+def run(
+    hands: tuple[str, ...] = ("sah", "allegro"),
+    calls: int = 20_000,
+    seed: int = 0,
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
+) -> dict[str, Any]:
     """Time the toolkit's contact queries and the raw Pinocchio floor, per call, on one core.
+
+    Args:
+        hands: Hands to time.
+        calls: Timed calls per query.
+        seed: Seed of the configuration.
+        quiet: No progress bar on stderr.
+        progress: Report progress here instead (one step per hand).
 
     Raises:
         InvalidSettingsError: ``calls`` is not a positive integer.
     """
     if isinstance(calls, bool) or not isinstance(calls, int) or calls < 1:
         raise InvalidSettingsError(f"calls must be a positive integer, got {calls!r}")
-    return {
-        "benchmark": "kinematics",
-        "target_ratio": 2.0,
-        "calls": calls,
-        "hands": {name: _hand_rows(load_hand(name), calls, seed) for name in hands},
-    }
+    rows: dict[str, Any] = {}
+    with progress_reporter(progress, quiet) as report:
+        for name in hands:
+            if report is not None:
+                report("bench kinematics: hands", len(rows), len(hands))
+            rows[name] = _hand_rows(load_hand(name), calls, seed)
+        if report is not None:
+            report("bench kinematics: hands", len(rows), len(hands))
+    return {"benchmark": "kinematics", "target_ratio": 2.0, "calls": calls, "hands": rows}

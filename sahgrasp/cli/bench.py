@@ -34,6 +34,7 @@ def _add_quiet(parser: argparse.ArgumentParser) -> None:
 def _kinematics(benches: Any) -> None:
     k = add_command(benches, "kinematics", "contact queries vs raw Pinocchio calls")
     k.add_argument("--calls", type=positive_int, default=20_000, help="timed calls per query")
+    _add_quiet(k)
     add_json_argument(k, "the timings")
 
 
