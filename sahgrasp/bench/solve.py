@@ -15,6 +15,7 @@ and 2 workers mean a 2x speed-up on two idle cores).
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import subprocess
@@ -132,7 +133,15 @@ def run(
     Returns:
         The cases (wall time, lines per second, peak memory), the speed-up from 1 to 2 workers
         and the machine's load average.
+
+    Raises:
+        InvalidSettingsError: psutil (the ``[bench]`` extra) is not installed.
     """
+    if importlib.util.find_spec("psutil") is None:
+        raise InvalidSettingsError(
+            "bench solve measures memory with psutil, which is not installed: "
+            'pip install -e ".[bench]"'
+        )
     with tempfile.TemporaryDirectory(prefix="sahgrasp-bench-solve-") as folder:
         targets = Path(folder) / "random.jsonl"
         _write_problems(targets, problems, seed)
