@@ -130,6 +130,9 @@ class GraspSystem:
         symmetry_axis: ArrayLike | None = None,
     ) -> None:
         self.hand = hand
+        # Its own Pinocchio Data: F and J read the kinematics they computed, whatever else
+        # queries the hand in between.
+        self._data = hand.model.createData()
         self.patches = patches
         self.free_object = free_object
         fingers = [f for f in hand.fingers if f in patches.regions]
@@ -159,7 +162,7 @@ class GraspSystem:
         self.n = self.pose_slice.stop
         self.m = 5 * len(contacts)
         self._q_palm = self.q_first.copy()  # the first grasp with the palm at the origin
-        self._q_palm[:7] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
+        hand.wrist_part(self._q_palm)[:] = pin.SE3ToXYZQUAT(pin.SE3.Identity())
         self._columns = 6 + self.coordinates  # v columns of x_h
         sizes = [c.params.stop - c.params.start for c in self.contacts]
         self._param_contact = np.repeat(np.arange(len(self.contacts)), sizes)  # owner of each
@@ -204,7 +207,7 @@ class GraspSystem:
 
     def _first_point(self) -> NDArray[np.float64]:
         x = np.zeros(self.n)
-        x[self.hand_rows] = self.q_first[7:][self.coordinates]
+        x[self.hand_rows] = self.hand.finger_part(self.q_first)[self.coordinates]
         for c in self.contacts:
             x[c.params] = c.region.nominal
         return x
@@ -217,7 +220,7 @@ class GraspSystem:
         the axis is dropped: Newton's method onto F lets the contacts absorb it).
         """
         x = self.x_first.copy()
-        x[self.hand_rows] = np.asarray(q, dtype=np.float64)[7:][self.coordinates]
+        x[self.hand_rows] = self.hand.finger_part(np.asarray(q, dtype=np.float64))[self.coordinates]
         if self.free_object:
             T = self.hand.wrist_pose(q).inverse()  # the object in the palm frame
             T0 = self.T_palm_object0
@@ -230,7 +233,7 @@ class GraspSystem:
     def configuration(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Hand configuration at ``x`` with the palm at the origin (other fingers as at first)."""
         q = self._q_palm.copy()
-        q[7:][self.coordinates] = x[self.hand_rows]
+        self.hand.finger_part(q)[self.coordinates] = x[self.hand_rows]
         return q
 
     def _rotation_vector(self, x: NDArray[np.float64]) -> FloatArray:
@@ -250,7 +253,7 @@ class GraspSystem:
     # ----- F and its Jacobian ----------------------------------------------------------------
     def _frames(self, x: NDArray[np.float64]) -> tuple[FloatArray, FloatArray]:
         """Contact frame placements (c, 4, 4) and Jacobians (c, 6, h) (palm-aligned) at ``x``."""
-        model, data = self.hand.model, self.hand.data
+        model, data = self.hand.model, self._data
         pin.computeJointJacobians(model, data, self.configuration(x))
         placements = [pin.updateFramePlacement(model, data, c.frame) for c in self.contacts]
         jacobians = [pin.getFrameJacobian(model, data, c.frame, _LWA) for c in self.contacts]
@@ -545,7 +548,8 @@ def hand_motions(
     """
     rng = np.random.default_rng(seed)
     if source == "random":
-        X = [hand.random_configuration(rng, collision_free=True)[7:] for _ in range(samples)]
+        draws = (hand.random_configuration(rng, collision_free=True) for _ in range(samples))
+        X = [hand.finger_part(q) for q in draws]
     elif source == "grasps":
         X = _grasp_postures(hand, system.patches, samples, rng)
     else:
@@ -563,7 +567,7 @@ def _grasp_postures(
         params = {f: rng.uniform(r.lower, r.upper) for f, r in patches.regions.items()}
         result = solve_ik(hand, patches.target(params), free_fingers=free)
         if result.success:
-            postures.append(result.q[7:])
+            postures.append(hand.finger_part(result.q))
     if len(postures) < 2:
         raise OptimizationError(
             f"{patches.name}: the IK solved {len(postures)} of {samples} grasps; need two or more"

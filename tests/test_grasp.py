@@ -100,6 +100,17 @@ def test_evaluations_do_not_depend_on_the_call_order(system: GraspSystem) -> Non
     assert not np.array_equal(system.F(z), f)
 
 
+def test_evaluations_leave_the_hands_data_alone(system: GraspSystem, sah: Hand) -> None:
+    """F and J compute in the system's own Pinocchio Data, not in the hand's shared one."""
+    sah.contact_jacobians(sah.random_configuration(np.random.default_rng(6)))
+    placements = np.array([M.homogeneous for M in sah.data.oMi])
+    joint_jacobians = np.array(sah.data.J)
+    x = perturbed(system, 7)
+    system.F(x), system.J(x)
+    assert np.array_equal(np.array([M.homogeneous for M in sah.data.oMi]), placements)
+    assert np.array_equal(np.array(sah.data.J), joint_jacobians)
+
+
 def test_object_velocity_is_the_twist_of_the_pose(system: GraspSystem) -> None:
     x = perturbed(system, 6)
     dx = np.random.default_rng(7).normal(size=system.n)
@@ -123,7 +134,8 @@ def test_hard_finger_constraints_match_the_contact_point_velocities(system: Gras
     assert C.shape == (3 * len(system.contacts), a + 6)
     T = system.object_pose(x)
     frames = [c.frame for c in system.contacts]
-    model, data = system.hand.model, system.hand.data
+    model = system.hand.model
+    data = model.createData()  # the test's own: the hand's Data is not shared state
     pin.forwardKinematics(model, data, system.configuration(x))
     local = [T.actInv(pin.updateFramePlacement(model, data, f).translation) for f in frames]
 
@@ -188,7 +200,7 @@ def test_the_free_finger_is_no_part_of_f(sah: Hand) -> None:
     assert not ring & set(system.coordinates.tolist())
     assert "ring" not in [c.finger for c in system.contacts]
     folded = system.q_first.copy()
-    folded[7:][sorted(ring)] = sah.lower[sorted(ring)]
+    sah.finger_part(folded)[sorted(ring)] = sah.lower[sorted(ring)]
     other = GraspSystem(sah, system.patches, folded, free_object=True)
     x = perturbed(system, seed=3)
     assert np.array_equal(other.x_first, system.x_first)

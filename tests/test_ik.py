@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import coal
@@ -19,6 +20,7 @@ from sahgrasp.ik import (
     solve_many,
 )
 from sahgrasp.ik.initial import expansion_matrix
+from sahgrasp.ik.solver import Attempt, run_algorithm1
 from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object
 
 
@@ -119,6 +121,27 @@ def test_unreachable_targets_fail_with_reason(sah: Hand) -> None:
          for c in problem.contacts],
     )  # fmt: skip
     assert not solve_ik(sah, behind, max_inits=3).success
+
+
+def test_attempts_are_frozen_and_a_colliding_one_is_refused_by_a_new_record(sah: Hand) -> None:
+    """The outer loop derives the checked attempt; the inner solver's record is never changed."""
+    rng = np.random.default_rng(3)
+    draws = (sah.random_configuration(rng) for _ in range(1000))
+    colliding = next(q for q in draws if sah.in_collision(q))
+    returned: list[Attempt] = []
+
+    def claims_convergence(hand: Hand, problem, coords, s: IKSettings) -> Attempt:
+        returned.append(Attempt(colliding.copy(), "converged", 4, 0.0, None))
+        return returned[-1]
+
+    target = random_problems(sah, 1, seed=8)[0]
+    result = run_algorithm1(sah, target, claims_convergence, IKSettings(max_inits=2))
+    assert not result.success and result.reason == "collision"
+    assert result.attempts == ("collision", "collision") and result.iterations == 8
+    assert [a.outcome for a in returned] == ["converged", "converged"]
+    assert all(a.seconds == 0.0 for a in returned) and result.attempt_seconds[1] > 0.0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        returned[0].outcome = "collision"  # type: ignore[misc]
 
 
 def test_invalid_targets_raise(sah: Hand) -> None:

@@ -87,7 +87,7 @@ class ObjectPenetration:
     def plain_configuration(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         """The plain URDF model's configuration for the solver's ``q`` (same wrist, same joints)."""
         plain = pin.neutral(self.model)
-        plain[:7] = q[:7]
+        self.hand.wrist_part(plain)[:] = self.hand.wrist_part(q)
         for name, value in self.hand.joint_values(q).items():
             plain[self.model.joints[self.model.getJointId(name)].idx_q] = value
         return plain

@@ -48,7 +48,8 @@ def _per_call_us(fns: tuple[Callable[[], object], ...], calls: int) -> tuple[flo
 
 def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
     q = hand.random_configuration(np.random.default_rng(seed))
-    model, data = hand.model, hand.data
+    model = hand.model
+    data = model.createData()  # the raw floor's own Data: the hand's is not shared state
     frames = [hand.contact_frame_id(f) for f in hand.fingers] + [
         int(model.getFrameId(f.tip_link)) for f in hand.description.fingers
     ]

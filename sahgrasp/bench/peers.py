@@ -47,8 +47,9 @@ def scipy_attempt(
     """Bounded trust-region least squares on the contact residual, from the thumb-hung start."""
     q0, _ = hang_from_thumb(hand, coords, problem.target)
     x0 = np.zeros(hand.nv)
-    lower = np.concatenate([np.full(6, -np.inf), hand.lower - q0[7:]])
-    upper = np.concatenate([np.full(6, np.inf), hand.upper - q0[7:]])
+    joints = hand.finger_part(q0)
+    lower = np.concatenate([np.full(6, -np.inf), hand.lower - joints])
+    upper = np.concatenate([np.full(6, np.inf), hand.upper - joints])
     x0 = np.clip(x0, lower, upper)
 
     def configuration(x: NDArray[np.float64]) -> NDArray[np.float64]:

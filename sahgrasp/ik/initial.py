@@ -52,7 +52,7 @@ PCA_SEED = 20120101
 
 
 def expansion_matrix(hand: Hand) -> NDArray[np.float64]:
-    """Matrix ``E`` mapping independent coordinates ``q[7:]`` to the paper's pose vector ``Q``.
+    """Matrix ``E`` mapping the coordinates ``Hand.finger_part(q)`` to the paper's pose ``Q``.
 
     ``Q`` lists every coordinate and then every mimic joint (``multiplier * leader``; offsets are
     added by :meth:`PoseBasis.coordinates`), so for the SAH ``E`` is 25 x 21.
@@ -95,7 +95,7 @@ class PoseBasis:
         return np.asarray(self.mean + (3.0 * self.sigmas * (2.0 * lam - 1.0)) @ self.directions)
 
     def coordinates(self, hand: Hand, lambdas: tuple[float, float]) -> NDArray[np.float64]:
-        """Independent coordinates ``q[7:]`` of pose ``Q_i``, clamped to the joint limits.
+        """Coordinates ``Hand.finger_part(q)`` of pose ``Q_i``, clamped to the joint limits.
 
         ``Q_i`` lies in the span of the sampled poses, where coupled joints are equal, so reading
         the independent entries loses nothing. Extreme lambdas (+-3 sigma) can leave the joint

@@ -215,9 +215,12 @@ class IKResult:
         return entry
 
 
-@dataclass
+@dataclass(frozen=True)
 class Attempt:
-    """How one initial configuration ended: its final ``q``, outcome, iterations and error [m]."""
+    """How one initial configuration ended: its final ``q``, outcome, iterations and error [m].
+
+    A record: the outer loop derives the checked attempt with :func:`dataclasses.replace`.
+    """
 
     q: NDArray[np.float64]
     outcome: str
@@ -397,8 +400,7 @@ def _lm_from(hand: Hand, problem: ContactProblem, q: NDArray[np.float64], s: IKS
     q, used = _separate(hand, problem, attempt.q, s, history)
     budget = max(s.max_iterations - attempt.iterations - used, 1)
     refined = _lm_loop(hand, problem, q, s, budget, history)
-    refined.iterations += attempt.iterations + used
-    return refined
+    return replace(refined, iterations=refined.iterations + attempt.iterations + used)
 
 
 def _lm_loop(
@@ -656,16 +658,30 @@ def run_algorithm1(
             attempt = attempt_fn(
                 hand, problem, x if kind == "coords" else hand.finger_part(x), settings
             )
-        if attempt.outcome == "converged":  # Step 8, and the obstacle
-            attempt.outcome = problem.collision(attempt.q) or attempt.outcome
-        if attempt.outcome == "converged" and free_fingers:
-            attempt.q = _place_free_fingers(problem, attempt.q, free_fingers, obstacle)
-        attempt.seconds = time.perf_counter() - start
+        attempt = _checked(problem, attempt, free_fingers, obstacle)
+        attempt = replace(attempt, seconds=time.perf_counter() - start)
         attempts.append(attempt)
         if attempt.outcome == "converged":
             return _result(hand, problem, attempt, attempts, True)
     best = min(attempts, key=lambda a: a.error_m)
     return _result(hand, problem, best, attempts, False)
+
+
+def _checked(
+    problem: ContactProblem,
+    attempt: Attempt,
+    free_fingers: tuple[str, ...],
+    obstacle: GraspObject | None,
+) -> Attempt:
+    """``attempt`` after Step 8: a converged ``q`` that collides is refused, free fingers placed."""
+    if attempt.outcome != "converged":
+        return attempt
+    rejected = problem.collision(attempt.q)
+    if rejected is not None:
+        return replace(attempt, outcome=rejected)
+    if free_fingers:
+        return replace(attempt, q=_place_free_fingers(problem, attempt.q, free_fingers, obstacle))
+    return attempt
 
 
 def _place_free_fingers(

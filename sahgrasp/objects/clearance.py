@@ -105,7 +105,7 @@ class FreeFingerPlacement:
 class _FreeFinger:
     """A finger's own joint coordinates, the geometries they move, and its self-collision pairs."""
 
-    coordinates: NDArray[np.intp]  # indices in q[7:]
+    coordinates: NDArray[np.intp]  # indices in Hand.finger_part(q)
     grid: NDArray[np.float64]  # candidate values of those coordinates, (N, len(coordinates))
     geometries: tuple[int, ...]
     pairs: NDArray[np.intp]  # hand geometry pairs (P, 2) the hand checks for self-collision
@@ -125,8 +125,8 @@ class _Pair:
 class HandObjectClearance:
     """Signed distances between a hand's collision geometry and an object's convex pieces.
 
-    Independent of any solver: it owns its Pinocchio data and coal geometry data, so queries do
-    not disturb ``hand.data``.
+    Independent of any solver: it owns its Pinocchio data and coal geometry data, so queries
+    share no mutable state with the hand or with other queries.
 
     Args:
         hand: The hand (its model and coal collision geometry are used, not modified).
@@ -308,13 +308,13 @@ class HandObjectClearance:
         margin_m: float,
         T_world_object: FloatArray | None,
     ) -> tuple[NDArray[np.float64], float]:
-        current = q[7:][finger.coordinates]
+        current = self.hand.finger_part(q)[finger.coordinates]
         grid = np.vstack([current, finger.grid])
         order = np.argsort(np.linalg.norm(grid - current, axis=1), kind="stable")
         candidates = []
         for values in grid[order]:
             candidate = q.copy()
-            candidate[7:][finger.coordinates] = values
+            self.hand.finger_part(candidate)[finger.coordinates] = values
             # A candidate fails at its first pair closer than the margin: cheap rejections.
             distance = self._finger_distance(candidate, finger, T_world_object, margin_m, True)
             if distance >= margin_m:
