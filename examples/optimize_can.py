@@ -44,7 +44,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{EXPERIMENT}: {atlas.n_charts} charts (paper {paper.charts}), "
           f"n = {atlas.ambient_dim} (paper {paper.n}), t = {problem.t} (paper {paper.t}), "
           f"k = {atlas.dim}")  # fmt: skip
-    print(f"valid (no collision): {np.count_nonzero(result.valid)} of {atlas.n_charts} charts")
+    checks = result.checks  # a chart centre is valid when the hand collides with nothing
+    print(f"valid: {np.count_nonzero(result.valid)} of {atlas.n_charts} charts; colliding: "
+          f"{np.count_nonzero(checks.self_collision)} self, "
+          f"{np.count_nonzero(checks.object_collision)} hand-object")  # fmt: skip
+    print(f"time: atlas {result.atlas_seconds:.1f} s, quality {result.quality_seconds:.1f} s")
     for which, chart in (("best", result.best), ("worst", result.worst)):
         print(f"{which} grasp: chart {chart}, {result.index} = {result.values[chart]:.4g}")
 
