@@ -22,7 +22,7 @@ import numpy as np
 
 import sahgrasp
 from sahgrasp.experiments.arguments import add_html_argument, positive_float
-from sahgrasp.objects import HandObjectClearance, MeshSolid, load_mesh
+from sahgrasp.objects import HandObjectClearance, MeshFileError, MeshSolid, load_mesh
 from sahgrasp.viz import Viewer, frame_grasp, present, show_grasp
 
 MUG = Path(__file__).resolve().parent / "meshes" / "mug.stl"
@@ -50,7 +50,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_html_argument(parser)
     args = parser.parse_args(argv)
     hand = sahgrasp.load_hand("sah")
-    obj = load_mesh(args.mesh, scale=args.scale)
+    try:
+        obj = load_mesh(args.mesh, scale=args.scale)
+    except MeshFileError as error:  # a file the user named: one line, not a traceback
+        parser.error(str(error))
     solid = cast(MeshSolid, obj.solids[0])  # load_mesh makes an object of one MeshSolid
     print(f"{obj.name}: {len(solid.faces)} triangles, {len(obj.collision_shapes())} convex "
           f"pieces; repairs: {', '.join(solid.repairs) or 'none'}")  # fmt: skip

@@ -163,3 +163,15 @@ def test_demo_writes_every_grasp_into_one_scene(
         assert {f"/meshcat/grasps/{grasp}/object",
                 f"/meshcat/grasps/{grasp}/contacts/thumb/disk"} <= drawn  # fmt: skip
         assert any(p.startswith(f"/meshcat/grasps/{grasp}/hand/visuals/") for p in drawn)
+
+
+def test_a_missing_mesh_file_is_one_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        load("grasp_mesh").main(
+            ["--mesh", str(tmp_path / "none.stl"), "--html", str(tmp_path / "x.html")]
+        )
+    assert stop.value.code == 2
+    assert "mesh file not found" in capsys.readouterr().err
+    assert not (tmp_path / "x.html").exists()
