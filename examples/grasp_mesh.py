@@ -4,10 +4,10 @@ The mesh (``examples/meshes/mug.stl`` by default, any STL/OBJ/PLY with ``--mesh`
 ``sahgrasp.objects.load_mesh``. The object is taken as standing on z = 0 with its axis along z
 through x = y = 0, as the shipped meshes are: the thumb touches it from -x, the index, middle and
 ring fingers from +x, 30 mm apart, each at the surface point nearest to where it reaches in, with
-the mesh's outward normal there. The IK solves the grasp, then the hand-object clearance
-(``sahgrasp.objects.HandObjectClearance``) checks that no link but the fingertips at their
-contacts is inside the object. Run `python examples/grasp_mesh.py` to open the viewer, or add
-`--html OUT` to write the scene.
+the mesh's outward normal there. The IK solves the grasp with the object as an obstacle, then the
+hand-object clearance (``sahgrasp.objects.HandObjectClearance``) checks that no link but the
+fingertips at their contacts is inside the object. Run `python examples/grasp_mesh.py` to open the
+viewer, or add `--html OUT` to write the scene.
 """
 
 from __future__ import annotations
@@ -16,15 +16,14 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.experiments.arguments import add_html_argument
-from sahgrasp.hand import load_hand
-from sahgrasp.ik import solve_ik
-from sahgrasp.objects import HandObjectClearance, MeshSolid, load_mesh
-from sahgrasp.viz import Viewer, present, show_grasp
+import sahgrasp
+from sahgrasp.experiments.arguments import add_html_argument, positive_float
+from sahgrasp.objects import HandObjectClearance, MeshFileError, MeshSolid, load_mesh
+from sahgrasp.viz import Viewer, frame_grasp, present, show_grasp
 
 MUG = Path(__file__).resolve().parent / "meshes" / "mug.stl"
 HEIGHTS_M = {"thumb": 0.06, "index": 0.09, "middle": 0.06, "ring": 0.03}
@@ -33,31 +32,33 @@ REACH_M = 0.5
 """Distance along x from which each finger reaches in towards the axis [m]."""
 
 
-def side_grasp(solid: MeshSolid, name: str) -> GraspTarget:
+def side_grasp(solid: MeshSolid, name: str) -> sahgrasp.GraspTarget:
     """The thumb on the -x side, the fingers on the +x side, at :data:`HEIGHTS_M`."""
     sides = {"thumb": -1.0, "index": 1.0, "middle": 1.0, "ring": 1.0}
     fingers = list(HEIGHTS_M)
     reach = np.array([[sides[f] * REACH_M, 0.0, HEIGHTS_M[f]] for f in fingers])
     points, normals = solid.nearest_surface(reach)
     normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    return GraspTarget(
-        name, [ContactTarget(*c) for c in zip(fingers, points, normals, strict=True)]
-    )
+    contacts = [sahgrasp.ContactTarget(*c) for c in zip(fingers, points, normals, strict=True)]
+    return sahgrasp.GraspTarget(name, contacts)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description="A grasp on an object from a mesh file.")
     parser.add_argument("--mesh", type=Path, default=MUG, help="STL, OBJ or PLY (default: mug)")
-    parser.add_argument("--scale", type=float, default=1.0, help="file unit in metres")
+    parser.add_argument("--scale", type=positive_float, default=1.0, help="file unit in metres")
     add_html_argument(parser)
     args = parser.parse_args(argv)
-    hand = load_hand("sah")
-    obj = load_mesh(args.mesh, scale=args.scale)
-    solid = obj.solids[0]
+    hand = sahgrasp.load_hand("sah")
+    try:
+        obj = load_mesh(args.mesh, scale=args.scale)
+    except MeshFileError as error:  # a file the user named: one line, not a traceback
+        parser.error(str(error))
+    solid = cast(MeshSolid, obj.solids[0])  # load_mesh makes an object of one MeshSolid
     print(f"{obj.name}: {len(solid.faces)} triangles, {len(obj.collision_shapes())} convex "
           f"pieces; repairs: {', '.join(solid.repairs) or 'none'}")  # fmt: skip
     target = side_grasp(solid, obj.name)
-    result = solve_ik(hand, target, record_history=True)
+    result = sahgrasp.solve_ik(hand, target, obstacle=obj, record_history=True)
     print(f"IK: {'solved' if result.success else 'not solved'} ({result.reason}), "
           f"{result.inits_used} initial configurations, {result.iterations} iterations, "
           f"max contact error {result.max_error_m * 1e3:.3f} mm")  # fmt: skip
@@ -68,12 +69,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def build(viewer: Viewer) -> None:
         show_grasp(viewer, "grasp", hand, result.q, obj, target, result.history)
-        links = [M.translation for M in hand.frame_placements(result.q).values()]
-        # Look from the side opposite the palm, a little from above: the object in front.
-        away = np.mean([c.point for c in target.contacts], axis=0) - result.q[:3]
-        away[2] = 0.0
-        view = away / np.linalg.norm(away) + np.array([0.0, 0.0, 0.35])
-        viewer.frame(np.vstack([obj.mesh().vertices_m, links]), view)
+        frame_grasp(viewer, hand, result.q, target, obj)
 
     present(build, args.html, f"sahgrasp {obj.name}")
     return 0 if result.success and clearance.clear() else 1

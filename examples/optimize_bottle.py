@@ -1,21 +1,72 @@
-"""Global grasp optimisation of the SAH holding the bottle (atlas paper, Fig. 10b).
+"""Global grasp optimisation of the SAH holding an oil bottle (Rosales, Porta & Ros, RSS 2011,
+Fig. 10b).
 
-An atlas of the relevant grasps (k = 2) from the IK's first grasp, the volume of the
-manipulability ellipsoid at every chart centre, the best and the worst grasp. Run
-`python examples/optimize_bottle.py` to open the viewer, or add `--html OUT` to write the scene;
-`--max-charts 200` gives a quick, partial atlas.
+Build the experiment (the IK's first grasp of the bottle, the grasp manifold with its principal
+motions, an atlas of the relevant grasps, k = 2), evaluate the volume of the manipulability
+ellipsoid at every chart centre, print the atlas beside the paper's and the best and worst grasps,
+and show the atlas coloured by the index with the best grasp on its right, the worst on its left.
+Run `python examples/optimize_bottle.py` to open the live viewer, or add `--html OUT` to write the
+scene; `--max-charts 200` gives a quick, partial atlas.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 from collections.abc import Sequence
+from typing import cast
 
-from sahgrasp.experiments.atlas_examples import run_optimize_example
+import numpy as np
+
+from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument
+from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
+from sahgrasp.experiments.setups import run_experiment
+from sahgrasp.grasp import SahGraspManifold
+from sahgrasp.progress import StderrProgress
+from sahgrasp.quality import SINGULAR_THRESHOLDS
+from sahgrasp.viz import ChartGrasp, Viewer, present, show_atlas_grasps
+
+EXPERIMENT = "bottle"
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    return run_optimize_example("bottle", argv)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_atlas_arguments(parser, [EXPERIMENT])  # --k, --r, --eps, --index, --max-charts
+    add_html_argument(parser)  # --html OUT
+    args = parser.parse_args(argv)
+
+    with StderrProgress() as progress:
+        result = run_experiment(
+            EXPERIMENT, k=args.k, radius=args.r, epsilon=args.eps, index=args.index,
+            max_charts=args.max_charts, progress=progress,
+        )  # fmt: skip
+    problem = cast(SahGraspManifold, result.problem)  # the SAH experiments' manifold
+    atlas, paper = result.atlas, PAPER_ATLAS_REPORT[EXPERIMENT]
+    print(f"{EXPERIMENT}: {atlas.n_charts} charts (paper {paper.charts}), "
+          f"n = {atlas.ambient_dim} (paper {paper.n}), t = {problem.t} (paper {paper.t}), "
+          f"k = {atlas.dim}")  # fmt: skip
+    checks = result.checks  # a chart centre is valid when the hand collides with nothing
+    print(f"valid: {np.count_nonzero(result.valid)} of {atlas.n_charts} charts; colliding: "
+          f"{np.count_nonzero(checks.self_collision)} self, "
+          f"{np.count_nonzero(checks.object_collision)} hand-object")  # fmt: skip
+    print(f"time: atlas {result.atlas_seconds:.1f} s, quality {result.quality_seconds:.1f} s")
+    for which, chart in (("best", result.best), ("worst", result.worst)):
+        print(f"{which} grasp: chart {chart}, {result.index} = {result.values[chart]:.4g}")
+
+    def grasp(chart: int) -> ChartGrasp:
+        x = problem.x_of(atlas.centres[chart])  # the chart centre in the system's variables
+        obj = problem.obj.placed(problem.system.object_pose(x)) if problem.obj else None
+        return ChartGrasp(chart, result.configurations[chart], obj)
+
+    def build(viewer: Viewer) -> None:
+        show_atlas_grasps(
+            viewer, problem.system.hand, atlas.centres, result.values,
+            SINGULAR_THRESHOLDS[result.index], grasp(result.best), grasp(result.worst),
+            colliding=~result.valid,
+        )  # fmt: skip
+
+    present(build, args.html, f"sahgrasp {EXPERIMENT}")
+    return 0
 
 
 if __name__ == "__main__":

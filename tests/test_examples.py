@@ -40,7 +40,8 @@ def children() -> set[int]:
     return {p.pid for p in psutil.Process().children(recursive=True)}
 
 
-def run_main(name: str, args: list[str], tmp_path: Path) -> str:
+def run_main(name: str, args: list[str], tmp_path: Path) -> set[str]:
+    """Run an example's main with ``--html``; the scene paths it drew."""
     out = tmp_path / f"{name}.html"
     before = children()
     code = load(name).main([*args, "--html", str(out)])
@@ -48,7 +49,7 @@ def run_main(name: str, args: list[str], tmp_path: Path) -> str:
     assert children() == before, "a process outlived the example"
     html = out.read_text(encoding="utf-8")
     assert "MeshCat.Viewer" in html
-    return html
+    return {command["path"] for command in scene_commands(html) if command["type"] == "set_object"}
 
 
 def test_every_script_is_tested_and_listed_in_the_readme() -> None:
@@ -63,17 +64,24 @@ def test_every_script_is_tested_and_listed_in_the_readme() -> None:
 
 @pytest.mark.parametrize("grasp", GRASPS)
 def test_grasp_example(grasp: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    run_main(f"grasp_{grasp}", [], tmp_path)
+    drawn = run_main(f"grasp_{grasp}", [], tmp_path)
     printed = capsys.readouterr().out
-    assert printed.splitlines()[1].split()[:2] == [grasp, "yes"]
-    assert "inits (paper)" in printed and "initial configurations:" in printed
+    assert printed.splitlines()[0].startswith(f"{grasp}: solved (converged), 1 initial")
+    assert "(paper " in printed and "initial configurations:" in printed
+    assert "contact errors: thumb" in printed and "object clearance:" in printed
+    assert {f"/meshcat/{grasp}/object", f"/meshcat/{grasp}/contacts/thumb/disk"} <= drawn
+    assert any(p.startswith(f"/meshcat/{grasp}/hand/visuals/") for p in drawn)
 
 
 @pytest.mark.parametrize("name", sorted(SMALL_ATLAS))
 def test_optimize_example(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    run_main(name, SMALL_ATLAS[name], tmp_path)
+    drawn = run_main(name, SMALL_ATLAS[name], tmp_path)
     printed = capsys.readouterr().out
     assert "charts" in printed and "best grasp: chart" in printed and "paper" in printed
+    assert "valid:" in printed and "worst grasp: chart" in printed
+    assert {"/meshcat/atlas/charts", "/meshcat/atlas/best", "/meshcat/atlas/worst"} <= drawn
+    for extreme in ("best", "worst"):  # each extreme grasp drawn beside the atlas
+        assert any(p.startswith(f"/meshcat/{extreme}/") for p in drawn)
 
 
 def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
@@ -155,3 +163,15 @@ def test_demo_writes_every_grasp_into_one_scene(
         assert {f"/meshcat/grasps/{grasp}/object",
                 f"/meshcat/grasps/{grasp}/contacts/thumb/disk"} <= drawn  # fmt: skip
         assert any(p.startswith(f"/meshcat/grasps/{grasp}/hand/visuals/") for p in drawn)
+
+
+def test_a_missing_mesh_file_is_one_usage_error(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as stop:
+        load("grasp_mesh").main(
+            ["--mesh", str(tmp_path / "none.stl"), "--html", str(tmp_path / "x.html")]
+        )
+    assert stop.value.code == 2
+    assert "mesh file not found" in capsys.readouterr().err
+    assert not (tmp_path / "x.html").exists()
