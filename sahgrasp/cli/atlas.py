@@ -33,10 +33,14 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-def _summary(args: argparse.Namespace, plot: str | None) -> dict[str, Any]:
-    """Run the experiment; write the plot to ``plot`` if given."""
+def _summary(args: argparse.Namespace, plot: str | None) -> tuple[dict[str, Any], tuple[str, ...]]:
+    """Run the experiment and write the plot to ``plot`` if given.
+
+    Returns:
+        The summary and the report lines on colliding charts.
+    """
     from sahgrasp.experiments.plotting import plot_index_map, plot_planar
-    from sahgrasp.experiments.report import summary
+    from sahgrasp.experiments.report import collision_notes, summary
     from sahgrasp.experiments.setups import run_experiment
     from sahgrasp.progress import StderrProgress
 
@@ -51,14 +55,14 @@ def _summary(args: argparse.Namespace, plot: str | None) -> dict[str, Any]:
     elif plot is not None:
         title = f"{args.experiment}: {args.index} over {result.atlas.n_charts} charts"
         plot_index_map(result, plot, title)
-    return summary(args.experiment, result)
+    return summary(args.experiment, result), collision_notes(result)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp atlas``."""
     check_outputs([args.json, args.plot])
     with output_file(args.plot) as plot:
-        summary = _summary(args, plot)
+        summary, notes = _summary(args, plot)
     out = human_stream(args.json)
     print(
         f"{args.experiment}: {summary['charts']} charts, t = {summary['t']}, k = {summary['k']}, "
@@ -71,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
     for which in ("best", "worst"):
         print(f"  {which}: chart {summary[which]['chart']}, {args.index} = "
               f"{summary[which]['value']:.4g}", file=out)  # fmt: skip
+    for line in notes:
+        print(f"  {line}", file=out)
     if args.plot:
         print(f"wrote {args.plot}", file=out)
     if args.json:

@@ -5,35 +5,25 @@ hand (Figs. 8-9) and the SAH holding a can (Fig. 10a) or an oil bottle (Fig. 10b
 :func:`sahgrasp.experiments.setups.run_experiment`. Each run is reported beside the paper's figures
 and drawn as the paper's figures draw it: the atlas's chart centres coloured by the quality index,
 the best grasp and the worst one. The SAH runs also draw (purple) the chart centres where the hand
-collides with itself or with the object. ``examples/optimize_{planar,can,bottle}.py`` call
-:func:`run_optimize_example`.
+collides with itself or with the object.
 """
 
 from __future__ import annotations
-
-import argparse
-from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from sahgrasp.errors import OptimizationError
-from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument
-from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
-from sahgrasp.experiments.report import format_atlas_report
-from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.grasp import SahGraspManifold
 from sahgrasp.objects import load_object
 from sahgrasp.optimization import OptimizationResult
 from sahgrasp.planar import PlanarGraspProblem, PlanarHand
-from sahgrasp.progress import StderrProgress
 from sahgrasp.quality import SINGULAR_THRESHOLDS
 from sahgrasp.viz.atlas_view import AtlasPlot, ChartGrasp, show_atlas_grasps, show_atlas_scene
 from sahgrasp.viz.planar_view import show_planar_grasp, upright
-from sahgrasp.viz.present import present
 from sahgrasp.viz.viewer import Viewer, translation
 
-__all__ = ["planar_drawing", "run_optimize_example", "show_optimization"]
+__all__ = ["planar_drawing", "show_optimization"]
 
 
 def planar_drawing(
@@ -100,26 +90,3 @@ def show_optimization(viewer: Viewer, result: OptimizationResult) -> AtlasPlot:
     if isinstance(problem, SahGraspManifold):
         return _show_sah(viewer, result, problem)
     raise OptimizationError(f"no drawing for a {type(problem).__name__}")
-
-
-def run_optimize_example(name: str, argv: Sequence[str] | None = None) -> int:
-    """Main of ``examples/optimize_<name>.py`` (``planar``, ``can`` or ``bottle``)."""
-    parser = argparse.ArgumentParser(
-        description=f"Global grasp optimisation of the {name} experiment "
-        f"(atlas paper Section V, {PAPER_ATLAS_REPORT[name].figure})."
-    )
-    add_atlas_arguments(parser, [name])
-    add_html_argument(parser)
-    args = parser.parse_args(argv)
-    with StderrProgress() as progress:
-        result = run_experiment(
-            name, k=args.k, radius=args.r, epsilon=args.eps, index=args.index,
-            max_charts=args.max_charts, progress=progress,
-        )  # fmt: skip
-    print(format_atlas_report(name, result))
-
-    def build(viewer: Viewer) -> None:
-        show_optimization(viewer, result)
-
-    present(build, args.html, f"sahgrasp {name}")
-    return 0

@@ -3,14 +3,13 @@
 Each example is a paper object with its precision grasp (``sahgrasp.objects``). It is solved with
 the default IK (iterates recorded), reported beside the paper's counts of initial configurations
 and Jacobian iterations, and drawn as Fig. 6 draws the fork: object, contact disks with normal
-cylinders, and the hand animated from the initial configuration to the solution. The example
-scripts ``examples/grasp_*.py`` and ``sahgrasp demo`` are thin wrappers around this module.
+cylinders, and the hand animated from the initial configuration to the solution. ``sahgrasp demo``
+runs all five through this module.
 The paper's counts are :data:`sahgrasp.objects.PAPER_IK_REPORT`.
 """
 
 from __future__ import annotations
 
-import argparse
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -19,8 +18,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 
 from sahgrasp.contacts import GraspTarget
-from sahgrasp.experiments.arguments import add_html_argument, add_ik_arguments, ik_settings
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.hand import Hand
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
 from sahgrasp.objects import (
     GRASP_NAMES,
@@ -33,7 +31,6 @@ from sahgrasp.objects import (
 )
 from sahgrasp.tables import format_table
 from sahgrasp.viz.grasp_view import grasp_points, show_grasp
-from sahgrasp.viz.present import present
 from sahgrasp.viz.viewer import Viewer
 
 __all__ = [
@@ -42,7 +39,6 @@ __all__ = [
     "ROW_ASPECT",
     "GraspExample",
     "format_report",
-    "run_grasp_example",
     "show_examples",
     "solve_example",
 ]
@@ -161,32 +157,3 @@ def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
     T[:3, :3] = pin.Quaternion.FromTwoVectors(back, _BEHIND).toRotationMatrix()
     T[:3, 3] = -T[:3, :3] @ example.contact_centre_m
     return T
-
-
-def run_grasp_example(name: str, argv: Sequence[str] | None = None) -> int:
-    """Main of ``examples/grasp_<name>.py``: solve, print beside the paper, show or write HTML.
-
-    Returns:
-        0 if the grasp was solved, 1 otherwise (the scene is shown either way).
-    """
-    parser = argparse.ArgumentParser(
-        description=f"IK of the paper's {name} grasp (Claret & Suárez's IK paper, Section 4.1)."
-    )
-    add_ik_arguments(parser)
-    add_html_argument(parser)
-    args = parser.parse_args(argv)
-    hand = load_hand(args.hand)
-    example = solve_example(hand, name, ik_settings(args))
-    print(format_report([example]))
-    _print_details(example)
-    present(lambda viewer: show_examples(viewer, hand, [example]), args.html, f"sahgrasp {name}")
-    return 0 if example.result.success else 1
-
-
-def _print_details(example: GraspExample) -> None:
-    r = example.result
-    print(f"initial configurations: {', '.join(r.attempts)}")
-    for finger, p, c in zip(r.fingers, r.position_errors_m, r.centre_errors_m, strict=True):
-        print(f"  {finger:>6}: contact error {p * 1e3:.3f} mm, centre error {c * 1e3:.3f} mm")
-    frames = 0 if r.history is None else len(r.history)
-    print(f"animation: {frames} configurations, initial to final")

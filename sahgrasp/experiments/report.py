@@ -11,13 +11,12 @@ from typing import Any
 
 import numpy as np
 
-from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.grasp import SahGraspManifold
 from sahgrasp.optimization import OptimizationResult
 from sahgrasp.planar import PlanarGraspProblem
 from sahgrasp.quality import INDICES, SINGULAR_THRESHOLDS
 
-__all__ = ["collision_notes", "describe_grasp", "format_atlas_report", "summary"]
+__all__ = ["collision_notes", "describe_grasp", "summary"]
 
 
 def describe_grasp(result: OptimizationResult, chart: int) -> dict[str, Any]:
@@ -109,38 +108,3 @@ def collision_notes(result: OptimizationResult) -> tuple[str, ...]:
             f"{result.index} = {value:.4g}"
         )
     return tuple(notes)
-
-
-def _cell(value: Any) -> str:
-    if value is None:
-        return "-"
-    return f"{value:.3g}" if isinstance(value, float) else str(value)
-
-
-def format_atlas_report(name: str, result: OptimizationResult) -> str:
-    """Our atlas figures beside the paper's, the best and worst grasps, the collision counts."""
-    paper = PAPER_ATLAS_REPORT[name]
-    atlas, values = result.atlas, result.values
-    rows = [
-        ("charts", atlas.n_charts, paper.charts),
-        ("n (variables)", atlas.ambient_dim, paper.n),
-        ("t = dim F", result.problem.t, paper.t),
-        ("k = dim R", atlas.dim, paper.k),
-        ("chart radius r", atlas.radius, paper.r),
-        ("epsilon", atlas.epsilon, paper.epsilon),
-        ("atlas time [s]", result.atlas_seconds, paper.atlas_seconds),
-        ("quality time [s]", result.quality_seconds, paper.quality_seconds),
-        ("total time [s]", result.atlas_seconds + result.quality_seconds, paper.total_seconds),
-    ]
-    threshold = SINGULAR_THRESHOLDS.get(result.index, -np.inf)
-    lines = [
-        f"{name} (atlas paper Section V, {paper.figure}), index {result.index}",
-        f"{'':18}{'ours':>10}{'paper':>10}",
-        *(f"{label:18}{_cell(ours):>10}{_cell(theirs):>10}" for label, ours, theirs in rows),
-        f"atlas complete: {'yes' if atlas.complete else 'no (chart cap reached)'}; "
-        f"{np.count_nonzero(values < threshold)} singular, "
-        f"{np.count_nonzero(np.isnan(values))} no candidate",
-    ]
-    for which, chart in (("best", result.best), ("worst", result.worst)):
-        lines.append(f"{which} grasp: chart {chart}, {result.index} = {values[chart]:.4g}")
-    return "\n".join([*lines, *collision_notes(result)])
