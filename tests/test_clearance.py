@@ -205,7 +205,9 @@ def _coal_depths(
 
 @pytest.mark.parametrize("name", GRASP_NAMES)
 def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
-    example = solve_example(sah, name)  # what `sahgrasp demo` and examples/grasp_*.py solve
+    example = solve_example(
+        sah, name
+    )  # what `sahgrasp demo` and examples/grasp_paper_object.py solve
     assert example.result.success
     depths = _coal_depths(
         sah, example.result.q, example.obj, example.obj.T_world_object, set(sah.fingers)

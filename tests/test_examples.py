@@ -22,9 +22,9 @@ from sahgrasp.viz import scene_commands
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 GRASPS = ("fork", "cup", "buddha", "coffee_cup", "can")
 SMALL_ATLAS = {
-    "optimize_can": ["--max-charts", "40"],
-    "optimize_bottle": ["--max-charts", "40"],
-    "optimize_planar": ["--r", "0.3"],
+    "can": ("optimize_sah", ["can", "--max-charts", "40"]),
+    "bottle": ("optimize_sah", ["bottle", "--max-charts", "40"]),
+    "planar": ("optimize_planar", ["--r", "0.3"]),
 }
 
 
@@ -55,16 +55,19 @@ def run_main(name: str, args: list[str], tmp_path: Path) -> set[str]:
 def test_every_script_is_tested_and_listed_in_the_readme() -> None:
     scripts = {p.stem for p in EXAMPLES.glob("*.py")}
     mesh = {"grasp_mesh"}  # run by tests/test_meshes.py
-    assert scripts == {f"grasp_{g}" for g in GRASPS} | set(SMALL_ATLAS) | mesh
+    assert scripts == {"grasp_paper_object"} | {s for s, _ in SMALL_ATLAS.values()} | mesh
     readme = (EXAMPLES / "README.md").read_text(encoding="utf-8")
     for name in scripts:
         assert f"{name}.py" in readme
-        assert (EXAMPLES / "img" / f"{name}.png").is_file(), f"no screenshot of {name}"
+    shots = {f"grasp_{g}" for g in GRASPS} | {f"optimize_{a}" for a in SMALL_ATLAS} | mesh
+    for shot in shots:
+        assert f"img/{shot}.png" in readme, f"README shows no screenshot {shot}"
+        assert (EXAMPLES / "img" / f"{shot}.png").is_file(), f"no screenshot {shot}"
 
 
 @pytest.mark.parametrize("grasp", GRASPS)
 def test_grasp_example(grasp: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    drawn = run_main(f"grasp_{grasp}", [], tmp_path)
+    drawn = run_main("grasp_paper_object", [grasp], tmp_path)
     printed = capsys.readouterr().out
     assert printed.splitlines()[0].startswith(f"{grasp}: solved (converged), 1 initial")
     assert "(paper " in printed and "initial configurations:" in printed
@@ -75,7 +78,8 @@ def test_grasp_example(grasp: str, tmp_path: Path, capsys: pytest.CaptureFixture
 
 @pytest.mark.parametrize("name", sorted(SMALL_ATLAS))
 def test_optimize_example(name: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    drawn = run_main(name, SMALL_ATLAS[name], tmp_path)
+    script, args = SMALL_ATLAS[name]
+    drawn = run_main(script, args, tmp_path)
     printed = capsys.readouterr().out
     assert "charts" in printed and "best grasp: chart" in printed and "paper" in printed
     assert "valid:" in printed and "worst grasp: chart" in printed
@@ -87,7 +91,8 @@ def test_optimize_example(name: str, tmp_path: Path, capsys: pytest.CaptureFixtu
 def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
     out = tmp_path / "fork.html"
     done = subprocess.run(
-        [sys.executable, str(EXAMPLES / "grasp_fork.py"), "--inits", "2", "--html", str(out)],
+        [sys.executable, str(EXAMPLES / "grasp_paper_object.py"), "fork", "--inits", "2",
+         "--html", str(out)],
         capture_output=True, text=True, timeout=120, cwd=tmp_path,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
@@ -129,7 +134,7 @@ def gone(process: psutil.Process) -> bool:
 def test_a_signal_on_a_live_example_stops_its_server(signum: int, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(EXAMPLES.parent), "BROWSER": "true"}  # no real browser
     script = subprocess.Popen(
-        [sys.executable, str(EXAMPLES / "grasp_fork.py"), "--inits", "2"],
+        [sys.executable, str(EXAMPLES / "grasp_paper_object.py"), "fork", "--inits", "2"],
         stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         env=env, cwd=tmp_path,
     )  # fmt: skip

@@ -62,7 +62,7 @@ _IK_FIGURES = {"fork": "Fig. 6", "cup": "Fig. 7a", "buddha": "Fig. 7b", "coffee_
 def _solved(method: Literal["auto", "paper"]) -> dict[str, tuple[bool, int, int]]:
     """Per example, with the SAH and ``method``: solved, initial configurations, iterations.
 
-    Each example gets a hand of its own, as each ``grasp_*.py`` script does.
+    Each example gets a hand of its own, as each run of ``grasp_paper_object.py`` does.
     """
     settings = IKSettings(method=method)
     out = {}
@@ -73,7 +73,7 @@ def _solved(method: Literal["auto", "paper"]) -> dict[str, tuple[bool, int, int]
 
 
 def ik_examples_table() -> str:
-    """examples/README.md: what each ``grasp_*.py`` prints (default IK), the paper's counts."""
+    """examples/README.md: what ``grasp_paper_object.py NAME`` prints, the paper's counts."""
     rows = []
     for name, (success, inits, iterations) in _solved("auto").items():
         paper = PAPER_IK_REPORT[name]
@@ -83,8 +83,8 @@ def ik_examples_table() -> str:
             f"({paper.jacobian_iterations})"
         )
         image = f"![{name.replace('_', ' ')}](img/grasp_{name}.png)"
-        rows.append((f"`grasp_{name}.py`", _IK_FIGURES[name], prints, image))
-    headers = ("script", "paper", "prints (ours, paper in parentheses)", "scene")
+        rows.append((f"`grasp_paper_object.py {name}`", _IK_FIGURES[name], prints, image))
+    headers = ("command", "paper", "prints (ours, paper in parentheses)", "scene")
     return format_table(headers, rows, markdown=True)
 
 
@@ -132,12 +132,14 @@ def optimize_examples_table() -> str:
     for name in ("can", "bottle"):
         paper = PAPER_ATLAS_REPORT[name]
         rows.append((
-            f"`optimize_{name}.py`", paper.figure,
+            f"`optimize_sah.py {name}`", paper.figure,
             f"charts, n, t, k vs {paper.charts} charts, n = {paper.n}, t = {paper.t}, "
             f"k = {paper.k}; best and worst chart by the volume",
             f"![{name}](img/optimize_{name}.png)",
         ))  # fmt: skip
-    return format_table(("script", "paper", "prints (ours vs paper)", "scene"), rows, markdown=True)
+    return format_table(
+        ("command", "paper", "prints (ours vs paper)", "scene"), rows, markdown=True
+    )
 
 
 TABLES: dict[str, Callable[[], str]] = {

@@ -1,12 +1,12 @@
-"""Global grasp optimisation of the SAH holding an oil bottle (Rosales, Porta & Ros, RSS 2011,
-Fig. 10b).
+"""Global grasp optimisation of the SAH holding a can or an oil bottle (Rosales, Porta & Ros, 2011).
 
-Build the experiment (the IK's first grasp of the bottle, the grasp manifold with its principal
+The can is the paper's Fig. 10a, the bottle its Fig. 10b. Build the experiment (the IK's first
+grasp of the object, the grasp manifold with its principal
 motions, an atlas of the relevant grasps, k = 2), evaluate the volume of the manipulability
 ellipsoid at every chart centre, print the atlas beside the paper's and the best and worst grasps,
 and show the atlas coloured by the index with the best grasp on its right, the worst on its left.
-Run `python examples/optimize_bottle.py` to open the live viewer, or add `--html OUT` to write the
-scene; `--max-charts 200` gives a quick, partial atlas.
+Run `python examples/optimize_sah.py can` (or `bottle`) to open the live viewer, or add
+`--html OUT` to write the scene; `--max-charts 200` gives a quick, partial atlas.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from typing import cast
 
 import numpy as np
 
-from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument
+from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument, atlas_geometry
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.grasp import SahGraspManifold
@@ -26,23 +26,25 @@ from sahgrasp.progress import StderrProgress
 from sahgrasp.quality import SINGULAR_THRESHOLDS
 from sahgrasp.viz import ChartGrasp, Viewer, present, show_atlas_grasps
 
-EXPERIMENT = "bottle"
+EXPERIMENTS = ("can", "bottle")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_atlas_arguments(parser, [EXPERIMENT])  # --k, --r, --eps, --index, --max-charts
+    parser.add_argument("experiment", choices=EXPERIMENTS, help="the object held")
+    add_atlas_arguments(parser, EXPERIMENTS)  # --k, --r, --eps, --index, --max-charts
     add_html_argument(parser)  # --html OUT
     args = parser.parse_args(argv)
+    radius, epsilon = atlas_geometry(args.experiment, args)  # each object's own defaults
 
     with StderrProgress() as progress:
         result = run_experiment(
-            EXPERIMENT, k=args.k, radius=args.r, epsilon=args.eps, index=args.index,
+            args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
             max_charts=args.max_charts, progress=progress,
         )  # fmt: skip
     problem = cast(SahGraspManifold, result.problem)  # the SAH experiments' manifold
-    atlas, paper = result.atlas, PAPER_ATLAS_REPORT[EXPERIMENT]
-    print(f"{EXPERIMENT}: {atlas.n_charts} charts (paper {paper.charts}), "
+    atlas, paper = result.atlas, PAPER_ATLAS_REPORT[args.experiment]
+    print(f"{args.experiment}: {atlas.n_charts} charts (paper {paper.charts}), "
           f"n = {atlas.ambient_dim} (paper {paper.n}), t = {problem.t} (paper {paper.t}), "
           f"k = {atlas.dim}")  # fmt: skip
     checks = result.checks  # a chart centre is valid when the hand collides with nothing
@@ -65,7 +67,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             colliding=~result.valid,
         )  # fmt: skip
 
-    present(build, args.html, f"sahgrasp {EXPERIMENT}")
+    present(build, args.html, f"sahgrasp {args.experiment}")
     return 0
 
 
