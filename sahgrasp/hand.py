@@ -35,7 +35,7 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.collision import Penetration, SelfCollision
-from sahgrasp.errors import HandModelError, InvalidConfigurationError
+from sahgrasp.errors import HandModelError, InvalidConfigurationError, SahGraspError
 from sahgrasp.hand_checks import (
     check_name,
     check_urdf,
@@ -55,6 +55,7 @@ __all__ = [
     "HandDescription",
     "HandState",
     "allegro_description",
+    "check_made_for",
     "load_hand",
     "sah_description",
 ]
@@ -1005,6 +1006,32 @@ def _build_models(description: HandDescription, urdf: str) -> tuple[pin.Model, p
     for line in log:
         print(shown(line), file=sys.stderr)
     return model, geometry
+
+
+def check_made_for(
+    hand: Hand,
+    what: str,
+    made_for: str,
+    digest: str,
+    error: type[SahGraspError],
+    remedy: str,
+) -> None:
+    """Raise ``error`` unless data ``what`` made for hand ``made_for`` (``digest``) fits ``hand``.
+
+    Args:
+        hand: The hand the data is about to be used with.
+        what: What the data is, for the message (``"sequence"``, ``"grasp database"``).
+        made_for: Name of the hand the data was made for.
+        digest: That hand's :meth:`HandDescription.digest`.
+        error: The error type to raise.
+        remedy: How to make data for ``hand`` (the message's last clause).
+    """
+    found = hand.description.digest()
+    if found != digest:
+        raise error(
+            f"{what} made for hand {made_for!r} (digest {digest[:12]}) cannot be used with hand "
+            f"{hand.description.name!r} (digest {found[:12]}); {remedy}"
+        )
 
 
 def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:

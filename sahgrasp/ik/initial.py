@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_json_atomic
-from sahgrasp.hand import Hand
+from sahgrasp.hand import Hand, check_made_for
 
 __all__ = [
     "PAPER_TABLE1_LAMBDAS",
@@ -171,13 +171,10 @@ class Sequence:
 
     def check_hand(self, hand: Hand) -> None:
         """Raise :class:`SequenceFileError` unless this sequence was made for ``hand``."""
-        digest = hand.description.digest()
-        if digest != self.hand_digest:
-            raise SequenceFileError(
-                f"sequence made for hand {self.hand!r} (digest {self.hand_digest[:12]}) cannot "
-                f"be used with hand {hand.description.name!r} (digest {digest[:12]}); compute "
-                "one with `sahgrasp sequence --hand ...`"
-            )
+        check_made_for(
+            hand, "sequence", self.hand, self.hand_digest, SequenceFileError,
+            "compute one with `sahgrasp sequence --hand ...`",
+        )  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
         """JSON form (``lambdas`` is the list of chosen pairs)."""

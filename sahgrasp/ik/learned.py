@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_bytes_atomic
-from sahgrasp.hand import Hand, HandDescription
+from sahgrasp.hand import Hand, HandDescription, check_made_for
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -124,13 +124,10 @@ class GraspDatabase:
 
     def check_hand(self, hand: Hand) -> None:
         """Raise :class:`GraspDatabaseError` unless this database was made for ``hand``."""
-        digest = hand.description.digest()
-        if digest != self.hand_digest:
-            raise GraspDatabaseError(
-                f"grasp database made for hand {self.hand!r} (digest {self.hand_digest[:12]}) "
-                f"cannot be used with hand {hand.description.name!r} (digest {digest[:12]}); "
-                "build one with `sahgrasp learn --hand ...`"
-            )
+        check_made_for(
+            hand, "grasp database", self.hand, self.hand_digest, GraspDatabaseError,
+            "build one with `sahgrasp learn --hand ...`",
+        )  # fmt: skip
 
     def starts(self, hand: Hand, target: GraspTarget, count: int) -> Iterator[NDArray[np.float64]]:
         """The ``count`` nearest entries' configurations, each wrist moved onto ``target``.
