@@ -8,13 +8,12 @@ import os
 import signal
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
 
 import psutil
 import pytest
+from polling import gone, until
 
 from sahgrasp.cli import demo
 from sahgrasp.viz import scene_commands
@@ -26,6 +25,9 @@ SMALL_ATLAS = {
     "bottle": ("optimize_sah", ["bottle", "--max-charts", "40"]),
     "planar": ("optimize_planar", ["--r", "0.3"]),
 }
+
+LIVE_TIMEOUT_S = 60.0
+"""How long a live viewer's processes may take to start or end [s]."""
 
 
 def load(name: str) -> ModuleType:
@@ -99,15 +101,6 @@ def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
     assert "fork" in done.stdout and out.stat().st_size > 100_000
 
 
-def until(condition: Callable[[], bool], timeout_s: float = 60.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.1)
-    return condition()
-
-
 def meshcat_servers(pid: int) -> list[psutil.Process]:
     found = []
     try:
@@ -123,13 +116,6 @@ def meshcat_servers(pid: int) -> list[psutil.Process]:
     return found
 
 
-def gone(process: psutil.Process) -> bool:
-    try:
-        return process.status() == psutil.STATUS_ZOMBIE
-    except psutil.NoSuchProcess:
-        return True
-
-
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_on_a_live_example_stops_its_server(signum: int, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(EXAMPLES.parent), "BROWSER": "true"}  # no real browser
@@ -139,12 +125,21 @@ def test_a_signal_on_a_live_example_stops_its_server(signum: int, tmp_path: Path
         env=env, cwd=tmp_path,
     )  # fmt: skip
     try:
-        assert until(lambda: bool(meshcat_servers(script.pid))), "no live server started"
+        assert until(lambda: bool(meshcat_servers(script.pid)), LIVE_TIMEOUT_S), (
+            "no live server started"
+        )
         (server,) = meshcat_servers(script.pid)
-        assert until(lambda: bool(server.net_connections()))  # serving: the script waits for Enter
+        assert until(
+            lambda: bool(server.net_connections()), LIVE_TIMEOUT_S
+        )  # serving: the script waits for Enter
         script.send_signal(signum)
-        assert until(lambda: script.poll() is not None) and script.returncode == -signum
-        assert until(lambda: gone(server)), "the meshcat server outlived the example"
+        assert (
+            until(lambda: script.poll() is not None, LIVE_TIMEOUT_S)
+            and script.returncode == -signum
+        )
+        assert until(lambda: gone(server), LIVE_TIMEOUT_S), (
+            "the meshcat server outlived the example"
+        )
     finally:
         script.kill()
         script.communicate(timeout=10)

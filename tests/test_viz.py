@@ -7,14 +7,13 @@ import os
 import signal
 import subprocess
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import psutil
 import pytest
+from polling import gone, until
 
 from sahgrasp.cli import main
 from sahgrasp.contacts import ContactTarget, GraspTarget
@@ -50,6 +49,9 @@ from sahgrasp.viz import (
 from sahgrasp.viz.hand_view import visual_corners
 from sahgrasp.viz.screenshot import ScreenshotError, screenshot
 from sahgrasp.viz.viewer import ViewerError
+
+LIVE_TIMEOUT_S = 20.0
+"""How long a live viewer's processes may take to start or end [s]."""
 
 
 def by_path(html: str, kind: str) -> dict[str, dict[str, Any]]:
@@ -117,22 +119,6 @@ time.sleep(120)
 """
 
 
-def gone(pid: int) -> bool:
-    try:
-        return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
-    except psutil.NoSuchProcess:
-        return True
-
-
-def until(condition: Callable[[], bool], timeout_s: float = 20.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.1)
-    return condition()
-
-
 def listening(pid: int) -> set[str]:
     return {c.laddr.ip for c in psutil.Process(pid).net_connections() if c.status == "LISTEN"}
 
@@ -157,8 +143,8 @@ def test_a_signalled_script_leaves_no_meshcat_server(signum: int, mode: str, cod
         server = int(next(line for line in lines if line.strip().isdigit()))
         assert listening(server) == {"127.0.0.1"}  # zmq and web ports, this machine only
         script.send_signal(signum)
-        assert until(lambda: script.poll() is not None), "the script did not end"
-        assert until(lambda: gone(server)), "the meshcat server outlived the script"
+        assert until(lambda: script.poll() is not None, LIVE_TIMEOUT_S), "the script did not end"
+        assert until(lambda: gone(server), LIVE_TIMEOUT_S), "the meshcat server outlived the script"
         assert script.returncode == code
         if mode == "own-handler":
             assert "own handler" in script.stdout.read()
