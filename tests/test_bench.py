@@ -146,3 +146,15 @@ def test_sequence_table_and_unknown_documents() -> None:
     assert lines[-1] == "speed-up 1.6; paper scale on 16 workers: 3.5 h"
     with pytest.raises(InvalidSettingsError, match="valid: ik, atlas, kinematics, sequence"):
         summary_table({"benchmark": "nope"})
+
+
+# ----- solve at scale -------------------------------------------------------------------------
+def test_bench_solve_runs_the_chosen_worker_counts() -> None:
+    pytest.importorskip("psutil")
+    from sahgrasp.bench import solve as bench_solve
+
+    doc = bench_solve.run(problems=6, lines=0, dask=False, workers=[1])
+    assert [case["where"] for case in doc["cases"]] == ["--workers 1"]
+    assert doc["cases"][0]["lines"] == 6 and doc["cases"][0]["peak_rss_mb"] > 0
+    assert doc["speedup_1_to_2_workers"] is None
+    assert "speed-up 1 -> 2 workers not run" in summary_table(doc)

@@ -101,10 +101,11 @@ def _solve_table(doc: Document) -> str:
         for c in doc["cases"]
     ]  # fmt: skip
     headers = ("case", "lines", "wall [s]", "lines/s", "CPU [s]", "lines/CPU s", "peak [MB]")
+    speedup = doc["speedup_1_to_2_workers"]
     return "\n".join((
         f"bench solve: {doc['problems']} problems, seed {doc['seed']}",
         format_table(headers, rows),
-        f"speed-up 1 -> 2 workers {doc['speedup_1_to_2_workers']:.3g}",
+        "speed-up 1 -> 2 workers " + ("not run" if speedup is None else f"{speedup:.3g}"),
     ))  # fmt: skip
 
 

@@ -125,6 +125,13 @@ def _solve(benches: Any) -> None:
     )
     solve.add_argument("--seed", type=nonnegative_int, default=9090, help="seed of the problems")
     solve.add_argument(
+        "--workers",
+        type=positive_int,
+        nargs="+",
+        default=[1, 2],
+        help="local worker counts to run (the speed-up needs 1 and 2)",
+    )
+    solve.add_argument(
         "--dask",
         action=argparse.BooleanOptionalAction,
         default=True,
