@@ -46,7 +46,7 @@ JSON_HELP = (
     "as solved, resumable); '-': JSON alone on stdout, other lines on stderr"
 )
 DISPATCH_CHUNKS_IN_FLIGHT = 64
-"""Chunks queued on a Dask cluster (its size is not known here): 2,048 problems."""
+"""Chunks queued on a Dask cluster (its size is not known here): 8,192 problems."""
 
 
 def add_parser(sub: Any) -> None:
@@ -229,10 +229,10 @@ def _signals_held() -> Iterator[None]:
 
 def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
     """Problems per chunk and chunks in flight: all workers busy, scheduling cost under 1%."""
-    from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT
+    from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT, CLUSTER_CHUNK_SIZE
 
     if args.scheduler is not None:
-        return CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
+        return CLUSTER_CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
     if args.workers <= 1:  # solved here: each chunk written as soon as it is solved
         return CHUNK_SIZE, 1
     per_worker = math.ceil(total / (CHUNKS_IN_FLIGHT * args.workers))

@@ -1,9 +1,9 @@
 """Solve many IK problems on worker processes or a Dask cluster, with the same results anywhere.
 
-Problems travel in chunks (:data:`CHUNK_SIZE` problems, a few hundred milliseconds of solving),
-so that the scheduling cost of a task (about a millisecond for a local pool, a few for Dask) stays
-under 1% of the solve time; at most :data:`CHUNKS_IN_FLIGHT` chunks per worker are queued at a
-time, so the memory does not grow with the number of problems (:func:`solve_stream`).
+Problems travel in chunks (:data:`CHUNK_SIZE` problems, a few hundred milliseconds of solving, on
+a local pool; :data:`CLUSTER_CHUNK_SIZE` on a cluster, whose tasks cost more to schedule), pickled
+into one bytes object each way; at most :data:`CHUNKS_IN_FLIGHT` chunks per worker are queued at
+a time, so the memory does not grow with the number of problems (:func:`solve_stream`).
 
 Workers receive the picklable :class:`HandDescription` and its digest and rebuild the hand once
 per worker thread (Pinocchio's GeometryModel does not pickle); :func:`worker_hand` also serves the
@@ -42,6 +42,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CHUNKS_IN_FLIGHT",
     "CHUNK_SIZE",
+    "CLUSTER_CHUNK_SIZE",
     "INVALID_ENTRY",
     "Job",
     "invalid_entry",
@@ -55,6 +56,10 @@ __all__ = [
 CHUNK_SIZE = 32
 """Problems per task: about 0.2 s of solving at 5 ms a problem, against about 1 ms (local pool)
 to a few ms (Dask) of scheduling per task."""
+
+CLUSTER_CHUNK_SIZE = 128
+"""Problems per task on a Dask cluster: about a second of solving, against 10 to 20 ms of CPU time
+per task for the client, the scheduler and the worker together (measured on a LocalCluster)."""
 
 CHUNKS_IN_FLIGHT = 4
 """Chunks queued per worker: enough to keep a worker busy while the parent collects results."""
@@ -181,6 +186,16 @@ def _solve_chunk(job: Job, items: list[Item]) -> list[IKResult | dict[str, Any]]
     return [_solve_item(job, hand, item) for item in items]
 
 
+def _solve_packed(job: Job, items: bytes) -> bytes:
+    """:func:`_solve_chunk` on a pickled chunk, its results pickled.
+
+    One bytes object each way instead of a tree of small arrays: Dask serialises every array of
+    a task's arguments and results as a frame of its own (eight per problem), which cost the
+    client and the scheduler more CPU time than the workers spent solving.
+    """
+    return pickle.dumps(_solve_chunk(job, pickle.loads(items)), pickle.HIGHEST_PROTOCOL)
+
+
 _MAX_CHUNK_ITEMS = 64 * CHUNK_SIZE
 """Items of a chunk at most, invalid problems included (they are answered by the caller)."""
 
@@ -211,10 +226,12 @@ class _Batch:
         elif executor is None:
             self.future.set_result(_solve_chunk(job, todo))
         else:
-            self.future = executor.submit(_solve_chunk, job, todo)
+            packed = pickle.dumps(todo, pickle.HIGHEST_PROTOCOL)
+            self.future = executor.submit(_solve_packed, job, packed)
 
     def results(self, job: Job, hand: Hand) -> list[IKResult | dict[str, Any]]:
-        solved = iter(self.future.result())
+        done = self.future.result()
+        solved = iter(pickle.loads(done) if isinstance(done, bytes) else done)
         return [
             next(solved) if isinstance(p, GraspTarget) else _invalid(job, hand, p.name, p.detail)
             for p, _, _ in self.chunk
@@ -341,7 +358,8 @@ def solve_many(
     from sahgrasp.sequence.executors import open_executor
 
     count = 1 if executor is not None else workers
-    size = max(1, min(CHUNK_SIZE, math.ceil(len(items) / (CHUNKS_IN_FLIGHT * count))))
+    largest = CHUNK_SIZE if executor is None else CLUSTER_CHUNK_SIZE
+    size = max(1, min(largest, math.ceil(len(items) / (CHUNKS_IN_FLIGHT * count))))
     with open_executor(executor, None if executor is not None else workers) as pool:
         stream = solve_stream(hand, items, settings, sequence, pool, "result", size)
         return list(stream)  # type: ignore[arg-type]
