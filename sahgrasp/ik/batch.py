@@ -220,7 +220,7 @@ class _Batch:
     def __init__(self, chunk: list[Item], job: Job, executor: Executor | None) -> None:
         self.chunk = chunk
         todo = [item for item in chunk if isinstance(item[0], GraspTarget)]
-        self.future: Future[list[Any]] = Future()
+        self.future: Future[bytes | list[Any]] = Future()
         if not todo:
             self.future.set_result([])
         elif executor is None:
