@@ -6,8 +6,10 @@ are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` 
 S^3 <= 5 s). For the planar hand the targets are an atlas in <= 0.1 s and the three indices over
 all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
 compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
-k = 2, is 10x that rate. Each case reports its best wall time over ``repeats`` builds and the CPU
-time of that build (steadier on a shared machine).
+k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are the paper's
+sizes in scaled coordinates. Each case reports its best wall time over ``repeats`` builds and the
+CPU time of that build (steadier on a shared machine). :func:`stage_profile` tells where one
+build's time goes.
 """
 
 from __future__ import annotations
