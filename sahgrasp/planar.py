@@ -123,6 +123,66 @@ def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
     return jac.reshape(-1), rows * N_VARS + cols
 
 
+_N_FEATURES = 50  # x (19), its squares (19), cos u, sin u, cos u v_2y, sin u v_2x (3 each)
+
+
+def _grasp_features(x: FloatArray) -> FloatArray:
+    """The terms the grasp equations are linear in (..., 50) (see :func:`_grasp_residual_map`)."""
+    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])  # w(u_i), Eq. (24)
+    distal_x, distal_y = x[..., 2:12:4], x[..., 3:12:4]
+    return np.concatenate((x, x * x, cu, su, cu * distal_y, su * distal_x), axis=-1)
+
+
+@functools.cache
+def _grasp_residual_map(hand: PlanarHand) -> tuple[FloatArray, FloatArray]:
+    """The grasp equations as ``_grasp_features(x) @ M.T + c``: M (16, 50), c (16,).
+
+    The part linear in ``x`` is the constant part of the Jacobian (Eqs. (21), (23)); the rest:
+    Eq. (19) (``|v_{i,j}|^2 - 1``), Eq. (20), the circle term ``-l_{i,3} w(u_i)`` of Eq. (23),
+    the anchors ``a_i`` of Eq. (21) and Eq. (8) as ``w(u_i) x v_{i,2}``.
+    """
+    constant, _ = _jacobian_layout(hand)
+    M, c = np.zeros((16, _N_FEATURES)), np.zeros(16)
+    M[:, :N_VARS] = constant.reshape(16, N_VARS)
+    pairs = np.concatenate((np.arange(12), [14, 15])).reshape(7, 2)  # v_{i,j} (6), then v_o
+    M[np.arange(7)[:, None], N_VARS + pairs] = 1.0  # Eqs. (19), (20): squared norms
+    c[:7] = -1.0
+    fingers = np.arange(3)
+    M[7 + 2 * fingers, 2 * N_VARS + fingers] = -hand.radii  # Eq. (23): l_{i,3} cos u_i
+    M[8 + 2 * fingers, 2 * N_VARS + 3 + fingers] = -hand.radii  # l_{i,3} sin u_i
+    c[7:13:2], c[8:13:2] = hand.anchors[:, 0], hand.anchors[:, 1]  # Eq. (21)
+    M[13 + fingers, 2 * N_VARS + 6 + fingers] = 1.0  # Eq. (8): cos u v_2y - sin u v_2x
+    M[13 + fingers, 2 * N_VARS + 9 + fingers] = -1.0
+    return M, c
+
+
+def _grasp_jacobian_values(hand: PlanarHand, x: FloatArray) -> FloatArray:
+    """The 29 variable entries of the grasp Jacobian (..., 29), in the order of the layout."""
+    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])
+    v2x, v2y = x[..., 2:12:4], x[..., 3:12:4]  # distal phalanges
+    return np.concatenate(
+        (
+            2.0 * x[..., :12],  # Eq. (19)
+            2.0 * x[..., _VO],  # Eq. (20)
+            hand.radii * su,  # Eq. (7), d/du_i, x then y
+            -hand.radii * cu,
+            -su,  # Eq. (8), d/dv_{i,2} x, y and d/du_i
+            cu,
+            -su * v2y - cu * v2x,
+        ),
+        axis=-1,
+    )
+
+
+def _assemble(
+    constant: FloatArray, where: NDArray[np.intp], values: FloatArray, rows: int
+) -> FloatArray:
+    """A Jacobian (..., rows, 19): the flattened ``constant`` with ``values`` put at ``where``."""
+    jac = np.broadcast_to(constant, (*values.shape[:-1], constant.size)).copy()
+    jac[..., where] = values
+    return jac.reshape(*values.shape[:-1], rows, N_VARS)
+
+
 @dataclass(frozen=True, eq=False)
 class PlanarHand:
     """Geometry of the hand and the object of Fig. 8 (SI units).
@@ -251,61 +311,62 @@ class PlanarGraspProblem:
         """The initial grasp ``x_1``, where the atlas starts."""
         return self.x1
 
-    def grasp_residual(self, x: ArrayLike) -> FloatArray:
-        """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8).
+    @functools.cached_property
+    def _residual_map(self) -> tuple[FloatArray, FloatArray]:
+        """``F(x) = features @ M.T + c``: M (16 + s, 56) and c (16 + s,) (see :meth:`F`)."""
+        grasp, offset = _grasp_residual_map(self.hand)
+        s = self.synergy.shape[1]
+        M = np.zeros((16 + s, _N_FEATURES + 6))
+        M[:16, :_N_FEATURES] = grasp
+        M[16:, _N_FEATURES:] = (_JOINTS_FROM_PHALANGES.T @ self.synergy).T  # Eq. (13)
+        return M, np.concatenate((offset, np.zeros(s)))
 
-        Written on strided views of ``x`` (finger-wise x and y components) to keep the number of
-        numpy calls, which dominates the cost of one evaluation, small.
+    @functools.cached_property
+    def _jacobian_map(self) -> tuple[FloatArray, NDArray[np.intp], FloatArray]:
+        """Constant part of J (flattened), where its variable entries go, and ``E_s^T J_a``.
+
+        ``E_s^T J_a`` is ``rates * (angle gradients)`` with ``rates`` (s, 12) the joint motions
+        per phalanx-vector component (see :func:`_angle_gradients`).
         """
-        x = np.asarray(x, dtype=np.float64)
-        h = self.hand
-        out = np.empty((*x.shape[:-1], 16))
-        squares = x[..., :12] ** 2
-        out[..., :6] = squares[..., 0::2] + squares[..., 1::2] - 1.0  # Eq. (19)
-        s, c = x[..., 14:15], x[..., 15:16]
-        out[..., 6] = (s * s + c * c - 1.0)[..., 0]  # Eq. (20)
-        cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])  # w(u_i), Eq. (24)
-        (l1, l2), (cx, cy) = h.phalanges.T, h.centres.T
-        v1x, v1y, v2x, v2y = x[..., 0:12:4], x[..., 1:12:4], x[..., 2:12:4], x[..., 3:12:4]
-        # q_i - o_i with q_i of Eq. (21) and o_i of Eq. (23): Eq. (7)
-        out[..., 7:13:2] = h.anchors[:, 0] + l1 * v1x + l2 * v2x
-        out[..., 7:13:2] -= x[..., 12:13] + c * cx - s * cy + h.radii * cu
-        out[..., 8:13:2] = h.anchors[:, 1] + l1 * v1y + l2 * v2y
-        out[..., 8:13:2] -= x[..., 13:14] + s * cx + c * cy + h.radii * su
-        out[..., 13:16] = cu * v2y - su * v2x  # Eq. (8) as w(u_i) x v_{i,2} = 0
-        return out
+        constant, where = _jacobian_layout(self.hand)
+        s = self.synergy.shape[1]
+        rows = 16 + np.arange(s)[:, None]
+        motion_where = (rows * N_VARS + np.arange(12)).reshape(-1)
+        rates = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
+        full = np.concatenate((constant, np.zeros(s * N_VARS)))
+        return full, np.concatenate((where, motion_where)), rates
+
+    def grasp_residual(self, x: ArrayLike) -> FloatArray:
+        """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8)."""
+        return self.F(x)[..., :16]
 
     def grasp_jacobian(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`grasp_residual`, (..., 16, 19): a constant part plus 29 entries."""
         x = np.asarray(x, dtype=np.float64)
-        cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])
-        v2x, v2y = x[..., 2:12:4], x[..., 3:12:4]  # distal phalanges
-        values = np.empty((*x.shape[:-1], 29))
-        values[..., :12] = 2.0 * x[..., :12]  # Eq. (19)
-        values[..., 12:14] = 2.0 * x[..., _VO]  # Eq. (20)
-        values[..., 14:17] = self.hand.radii * su  # Eq. (7), d/du_i, x then y
-        values[..., 17:20] = -self.hand.radii * cu
-        values[..., 20:23] = -su  # Eq. (8), d/dv_{i,2} x, y and d/du_i
-        values[..., 23:26] = cu
-        values[..., 26:29] = -su * v2y - cu * v2x
         constant, where = _jacobian_layout(self.hand)
-        jac = np.broadcast_to(constant, (*x.shape[:-1], 16 * N_VARS)).copy()
-        jac[..., where] = values
-        return jac.reshape(*x.shape[:-1], 16, N_VARS)
+        return _assemble(constant, where, _grasp_jacobian_values(self.hand, x), 16)
 
     def F(self, x: ArrayLike) -> FloatArray:
-        """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s)."""
+        """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s).
+
+        Every equation is linear in a few features of ``x`` (``x``, its squares, ``cos u_i``,
+        ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is a
+        handful of numpy calls and one matrix product, which matters in Newton's method.
+        """
         x = np.asarray(x, dtype=np.float64)
-        motion = self.joint_motion(x) @ self.synergy  # Eq. (13): E_s^T (theta - theta_1) = 0
-        return np.concatenate((self.grasp_residual(x), motion), axis=-1)
+        M, offset = self._residual_map
+        features = np.concatenate((_grasp_features(x), self._turns(x)), axis=-1)
+        return features @ M.T + offset
 
     def J(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`F`, (..., 16 + s, 19)."""
         x = np.asarray(x, dtype=np.float64)
-        motion = np.zeros((*x.shape[:-1], self.synergy.shape[1], N_VARS))
-        motion[..., :12] = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
-        motion[..., :12] *= _angle_gradients(x)[..., None, :]  # E_s^T J_a
-        return np.concatenate((self.grasp_jacobian(x), motion), axis=-2)
+        constant, where, rates = self._jacobian_map
+        motion = rates * _angle_gradients(x)[..., None, :]  # E_s^T J_a
+        values = np.concatenate(
+            (_grasp_jacobian_values(self.hand, x), motion.reshape(*x.shape[:-1], -1)), axis=-1
+        )
+        return _assemble(constant, where, values, 16 + rates.shape[0])
 
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """Box bounds on ``x``: the joint limits and the arcs ``[a_i, b_i]`` of the contacts."""
@@ -322,11 +383,13 @@ class PlanarGraspProblem:
 
     def joint_motion(self, x: ArrayLike) -> FloatArray:
         """Joint angles minus those of ``x_1`` (..., 6) [rad], smooth while under pi in size."""
-        x = np.asarray(x, dtype=np.float64)
+        return self._turns(np.asarray(x, dtype=np.float64)) @ _JOINTS_FROM_PHALANGES.T
+
+    def _turns(self, x: FloatArray) -> FloatArray:
+        """Angle of each phalanx from its angle at ``x_1`` (..., 6) [rad]."""
         vx, vy = x[..., 0:12:2], x[..., 1:12:2]
         rx, ry = self.x1[0:12:2], self.x1[1:12:2]
-        turn = np.arctan2(rx * vy - ry * vx, rx * vx + ry * vy)  # per phalanx, from x_1
-        return turn @ _JOINTS_FROM_PHALANGES.T
+        return np.arctan2(rx * vy - ry * vx, rx * vx + ry * vy)
 
     def joint_jacobian(self, x: ArrayLike) -> FloatArray:
         """``J_a``: joint angle rates from ``dx``, (..., 6, 19)."""

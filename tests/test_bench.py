@@ -115,6 +115,17 @@ def test_bench_atlas_reports_each_case_and_tables_them() -> None:
         bench_atlas.run(cases=["S4"])
 
 
+def test_stage_profile_gives_nested_shares_of_one_build() -> None:
+    shares = bench_atlas.stage_profile("S2")
+    assert shares.pop("charts") == 1255  # the same atlas as the timed build
+    assert set(shares) == set(bench_atlas.STAGES)
+    assert all(0.0 < share < 1.0 for share in shares.values())
+    parts = ("neighbour search", "branch test of the neighbours")
+    assert shares["adding a chart (all of the above)"] > sum(shares[p] for p in parts)
+    with pytest.raises(InvalidSettingsError, match="S2"):
+        bench_atlas.stage_profile("S4")
+
+
 def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
     capsys: pytest.CaptureFixture[str],
 ) -> None:

@@ -110,13 +110,14 @@ class _Builder:
         similar = self._similar(bases, phi)
         if not similar.all():
             nbrs, bases = nbrs[similar], bases[similar]
-        diff = self.X[nbrs] - x
+        diff = x - self.X[nbrs]
         # Neighbour centres in each chart's parameters; the sphere |w| = r and the sphere of
-        # radius r around u meet on the plane u . w = |u|^2 / 2.
-        U = diff @ phi
-        Uc = np.einsum("qnk,qn->qk", bases, -diff)
-        B = 0.5 * np.einsum("ij,ij->i", U, U)
-        Bc = 0.5 * np.einsum("ij,ij->i", Uc, Uc)
+        # radius r around u meet on the plane u . w = |u|^2 / 2. (matmul: einsum costs twice as
+        # much per call on these small stacks.)
+        U = -diff @ phi
+        Uc = np.matmul(diff[:, None, :], bases)[:, 0]
+        B = 0.5 * (U * U).sum(axis=1)
+        Bc = 0.5 * (Uc * Uc).sum(axis=1)
         far = self.tol * self.r < B  # a neighbour straight along the normal gives no plane
         self.X[j], self.PHI[j] = x, phi
         self.charts.append(_Chart(point.sign, parent, nbrs, U[far].tolist(), B[far].tolist()))
@@ -135,9 +136,9 @@ class _Builder:
         crossing, a cone's apex) and must not bound each other, so that the continuation passes
         through. ``|M|_F^2 - (k - 1)`` bounds the squared smallest singular value of M from below.
         """
-        M = np.einsum("qnk,nl->qkl", bases, phi)
+        M = np.matmul(phi.T, bases)  # (q, k, k): phi^T Phi_c, the transpose has the same norms
         threshold = max(2.0 * (1.0 - self.settings.epsilon) ** 2 - 1.0, 0.0) ** 2  # cos(2 theta)^2
-        unsure = np.einsum("qkl,qkl->q", M, M) - (self.k - 1) < threshold
+        unsure = (M * M).sum(axis=(1, 2)) - (self.k - 1) < threshold
         if unsure.any():
             sigma = np.linalg.svd(M[unsure], compute_uv=False)[:, -1]
             unsure[unsure] = sigma**2 < threshold

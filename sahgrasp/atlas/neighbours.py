@@ -22,7 +22,7 @@ class NeighbourIndex:
     def query(self, points: FloatArray, count: int, x: FloatArray, radius: float) -> IndexArray:
         """Indices ``< count`` of ``points`` closer than ``radius`` to ``x``."""
         pending = points[self._n_tree : count] - x
-        near = self._n_tree + np.flatnonzero(np.einsum("ij,ij->i", pending, pending) < radius**2)
+        near = self._n_tree + np.flatnonzero((pending * pending).sum(axis=1) < radius**2)
         if self._tree is None:
             return near
         found = np.asarray(self._tree.query_ball_point(x, radius, return_sorted=False), np.int64)

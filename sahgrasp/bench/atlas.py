@@ -6,13 +6,18 @@ are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` 
 S^3 <= 5 s). For the planar hand the targets are an atlas in <= 0.1 s and the three indices over
 all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
 compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
-k = 2, is 10x that rate. Each case reports its best wall time over ``repeats`` builds and the CPU
-time of that build (steadier on a shared machine).
+k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are the paper's
+sizes in scaled coordinates. Each case reports its best wall time over ``repeats`` builds and the
+CPU time of that build (steadier on a shared machine). :func:`stage_profile` tells where one
+build's time goes.
 """
 
 from __future__ import annotations
 
+import cProfile
 import functools
+import os
+import pstats
 import time
 from collections.abc import Callable, Sequence
 from math import gamma, pi
@@ -28,7 +33,7 @@ from sahgrasp.fileio import write_json_atomic
 from sahgrasp.planar import make_planar_problem
 from sahgrasp.progress import ProgressCallback
 
-__all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "run"]
+__all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "STAGES", "run", "stage_profile"]
 
 BASELINES: dict[str, dict[str, float]] = {
     "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
@@ -45,14 +50,18 @@ SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
 }
 """The paper's SAH atlases by (experiment, k): dimension t of F, charts and atlas seconds."""
 
-SAH_CASES: tuple[tuple[str, int, float, bool], ...] = (
-    ("can", 2, 0.1, True),
-    ("can", 2, 0.03, True),
-    ("bottle", 2, 0.1, True),
-    ("bottle", 2, 0.03, True),
-    ("bottle", 3, 0.05, False),
+SAH_CASES: tuple[tuple[str, int, float, bool, float | None], ...] = (
+    ("can", 2, 0.1, True, None),
+    ("can", 2, 0.03, True, None),
+    ("bottle", 2, 0.1, True, None),
+    ("bottle", 2, 0.03, True, None),
+    ("bottle", 3, 0.05, False, None),
+    ("can", 2, 0.0155, False, 0.1),
+    ("bottle", 2, 0.0088, False, 0.1),
 )
-"""SAH cases: experiment, k, chart radius r, and whether to repeat the build (else once)."""
+"""SAH cases: experiment, k, chart radius r, whether to repeat the build (else once) and the
+length scale [m] of scaled coordinates (None: unscaled). The scaled ones give atlases of the
+paper's sizes (about 4800 can and 1400 bottle charts, docs/atlas.md "Scaled coordinates")."""
 
 _SAH_SPEEDUP = 10.0  # target chart rate over the paper's (SAH can, k = 2)
 _SAH_MAX_CHARTS = 20_000
@@ -79,12 +88,71 @@ def _best_build(build: Callable[[], Atlas], repeats: int) -> tuple[Atlas, float,
     return min((_timed(build) for _ in range(max(repeats, 1))), key=lambda row: row[1])
 
 
-def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any]:
-    x0 = np.eye(n)[0]
+def _sphere_build(n: int, radius: float) -> Callable[[], Atlas]:
+    """The build of the unit sphere S^(n-1) in R^n from ``e_1``."""
     settings = AtlasSettings(radius=radius)
-    atlas, seconds, cpu = _best_build(
-        lambda: build_atlas(_sphere_residual, _sphere_jacobian, x0, n - 1, settings), repeats
+    x0 = np.eye(n)[0]
+    return lambda: build_atlas(_sphere_residual, _sphere_jacobian, x0, n - 1, settings)
+
+
+def _planar_build() -> Callable[[], Atlas]:
+    """The build of the planar hand at the paper's settings (r = 0.125, epsilon = 0.4)."""
+    problem = make_planar_problem()
+    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
+    return lambda: build_atlas(
+        problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds()
     )
+
+
+STAGES: dict[str, tuple[str, str]] = {
+    "neighbour search": ("neighbours.py", "query"),
+    "branch test of the neighbours": ("builder.py", "_similar"),
+    "planes given to neighbours (cuts)": ("builder.py", "_give_plane"),
+    "adding a chart (all of the above)": ("builder.py", "add_chart"),
+    "polytope built": ("builder.py", "_polytope"),
+    "Newton projection (with F, J)": ("builder.py", "_project"),
+    "tangent space, Eq. (18) (with J)": ("builder.py", "_accept"),
+    "branch-crossing sign": ("projection.py", "crossing_sign"),
+}
+"""Stages of a build: (file, function) whose cumulative time :func:`stage_profile` reports."""
+
+
+def stage_profile(case: str) -> dict[str, float]:
+    """Share of one build's time in each stage of :data:`STAGES`, under ``cProfile``.
+
+    The profiler slows every Python call alike, so shares are reported rather than seconds; the
+    stages nest (``add_chart`` holds the first three).
+
+    Args:
+        case: ``"S2"``, ``"S3"`` (r = 0.1) or ``"planar"``.
+
+    Returns:
+        Stage name -> fraction of the build's profiled time, plus ``"charts"``.
+
+    Raises:
+        InvalidSettingsError: Another case name.
+    """
+    builds = {"S2": lambda: _sphere_build(3, 0.1), "S3": lambda: _sphere_build(4, 0.1)}
+    builds["planar"] = _planar_build
+    if case not in builds:
+        raise InvalidSettingsError(f"stage_profile knows {sorted(builds)}, got {case!r}")
+    build = builds[case]()
+    profiler = cProfile.Profile()
+    atlas = profiler.runcall(build)
+    stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]
+    cumulative: dict[tuple[str, str], float] = {}
+    total = 0.0
+    for (path, _, function), (_, _, _, seconds, _) in stats.items():
+        key = (os.path.basename(path), function)
+        cumulative[key] = cumulative.get(key, 0.0) + seconds
+        if function == "build_atlas":
+            total = seconds
+    shares = {stage: cumulative.get(key, 0.0) / total for stage, key in STAGES.items()}
+    return {"charts": float(atlas.n_charts), **shares}
+
+
+def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any]:
+    atlas, seconds, cpu = _best_build(_sphere_build(n, radius), repeats)
     volume = 2.0 * pi ** (n / 2) / gamma(n / 2)  # of the unit sphere S^(n-1)
     expected = volume / radius ** (n - 1)
     baseline = BASELINES[name]
@@ -107,13 +175,7 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
 
 def _planar_row(repeats: int) -> dict[str, Any]:
     problem = make_planar_problem()
-    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
-    atlas, seconds, cpu = _best_build(
-        lambda: build_atlas(
-            problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds()
-        ),
-        repeats,
-    )
+    atlas, seconds, cpu = _best_build(_planar_build(), repeats)
     quality_seconds = float("inf")
     for _ in range(repeats):
         start = time.perf_counter()
@@ -135,9 +197,13 @@ def _planar_row(repeats: int) -> dict[str, Any]:
     }
 
 
-def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
+def _sah_row(
+    name: str, k: int, radius: float, repeats: int, length_scale_m: float | None
+) -> dict[str, Any]:
     """Algorithm 1 once (IK, principal motions, atlas, index), then the atlas timed again."""
-    result = run_experiment(name, k=k, radius=radius, max_charts=_SAH_MAX_CHARTS)
+    result = run_experiment(
+        name, k=k, radius=radius, max_charts=_SAH_MAX_CHARTS, length_scale_m=length_scale_m
+    )
     p = result.problem
     atlas_settings = result.settings.atlas_settings()
     atlas, seconds, cpu = _best_build(
@@ -150,8 +216,10 @@ def _sah_row(name: str, k: int, radius: float, repeats: int) -> dict[str, Any]:
         "t": p.t,
         "n": result.atlas.ambient_dim,
         "radius": radius,
+        "length_scale_m": length_scale_m,
         "epsilon": atlas_settings.epsilon,
         "charts": atlas.n_charts,
+        "valid": int(result.valid.sum()),
         "complete": atlas.complete,
         "seconds": seconds,
         "cpu_seconds": cpu,
@@ -175,10 +243,9 @@ def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
         "S3": lambda: _sphere_row("S3", 4, 0.1, repeats),
         "planar": lambda: _planar_row(repeats),
     }
-    for name, k, radius, again in SAH_CASES:
-        cases[f"sah_{name}_k{k}_r{radius:g}"] = functools.partial(
-            _sah_row, name, k, radius, repeats if again else 1
-        )
+    for name, k, radius, again, scale in SAH_CASES:
+        label = f"sah_{name}_k{k}_r{radius:g}" + ("" if scale is None else f"_L{scale:g}")
+        cases[label] = functools.partial(_sah_row, name, k, radius, repeats if again else 1, scale)
     return cases
 
 
