@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
 
 import coal
 import numpy as np
@@ -22,7 +24,14 @@ from numpy.typing import ArrayLike
 
 from sahgrasp.objects.frames import FloatArray, transform_points
 
-__all__ = ["COARSE_CELL_M", "CollisionShape", "PieceTree", "convex_hull", "signed_distances"]
+__all__ = [
+    "COARSE_CELL_M",
+    "BuiltOnce",
+    "CollisionShape",
+    "PieceTree",
+    "convex_hull",
+    "signed_distances",
+]
 
 COARSE_CELL_M = 0.02
 """Grid cell [m] of :class:`PieceTree`'s coarse level: the pieces whose centres share a cell are
@@ -47,6 +56,23 @@ class CollisionShape:
         """Return the shape's coal transform in the world, given the object's placement."""
         T = T_world_object @ self.placement
         return coal.Transform3s(T[:3, :3], T[:3, 3])
+
+
+class BuiltOnce:
+    """Mixin of solids whose collision pieces are built once (``functools.cached_property``).
+
+    Coal shapes cannot be pickled, and a solid goes to worker processes as plain data: pickling
+    leaves out every cached property, and the worker builds it again on first use.
+    """
+
+    def __getstate__(self) -> dict[str, Any]:
+        cached = {
+            name
+            for cls in type(self).__mro__
+            for name, value in vars(cls).items()
+            if isinstance(value, cached_property)
+        }
+        return {k: v for k, v in self.__dict__.items() if k not in cached}
 
 
 def convex_hull(points_m: ArrayLike) -> CollisionShape:
