@@ -55,6 +55,12 @@ def check_obstacle(obj: object) -> None:
 class Obstacle:
     """An object at its placement, the fingers in contact with it and their allowance.
 
+    One definition decides whether a configuration is inside the object, for the solver's
+    acceptance test and for the clearance it reports: :meth:`HandObjectClearance.clearance`
+    with the contact fingers and the allowance. :meth:`penetrated` is that clearance below zero,
+    and the clearance of the last configuration asked about is kept, so the result's clearance
+    of an accepted start costs no second query.
+
     Args:
         hand: The hand.
         obj: The object (a :class:`sahgrasp.objects.GraspObject`, placed in the world).
@@ -72,7 +78,7 @@ class Obstacle:
         self.checker = _checker(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
-        self._last: tuple[bytes, bool] = (b"", False)
+        self._last: tuple[bytes, Clearance | None] = (b"", None)
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Links closer to the object than ``margin_m`` [m] (contact tips: deeper than allowed)."""
@@ -80,12 +86,14 @@ class Obstacle:
 
     def penetrated(self, q: NDArray[np.float64]) -> bool:
         """True if a link is inside the object (contact tips: deeper than the allowance)."""
-        # The inner solver and Algorithm 1's Step 8 both ask about each converged start.
-        key = q.tobytes()
-        if self._last[0] != key:
-            self._last = (key, bool(self.penetrations(q, 0.0)))
-        return self._last[1]
+        return not self.clearance(q).clear()
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
-        """Smallest signed distance [m] of a link to the object and that link."""
-        return self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
+        """Smallest signed distance [m] of a link to the object and that link (kept for ``q``)."""
+        # The inner solver, Algorithm 1's Step 8 and the result all ask about the accepted q.
+        key = q.tobytes()
+        last = self._last[1]
+        if self._last[0] != key or last is None:
+            last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
+            self._last = (key, last)
+        return last

@@ -20,7 +20,7 @@ from typing import Any
 
 import coal
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.objects.frames import FloatArray, transform_points
 
@@ -122,10 +122,13 @@ class PieceTree:
         coarse_centres_m: Centre of a ball about each coarse hull, object frame (K, 3) [m].
         coarse_radii_m: Radius of each such ball (K,) [m].
         boxes_m: Each piece's axis-aligned box in the object frame, (N, 2, 3): low, high [m].
+        coarse_boxes_m: Each coarse hull's box in the object frame, (K, 2, 3) [m].
+        cells: The coarse hull holding each piece, (N,).
     """
 
     def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
-        coarse = _coarse_pieces(shapes, cell_m)
+        self.cells = _cells(shapes, cell_m)
+        coarse = _coarse_pieces(shapes, self.cells)
         # The trees hold raw pointers to the collision objects: keep them (and their shapes).
         self._shapes = (tuple(shapes), tuple(coarse))
         self._objects = tuple([_collision_object(s) for s in level] for level in self._shapes)
@@ -133,6 +136,7 @@ class PieceTree:
         self.coarse_centres_m = np.array([s.placement[:3, 3] for s in coarse]).reshape(-1, 3)
         self.coarse_radii_m = np.array([s.bounding_radius_m for s in coarse])
         self.boxes_m = _boxes(self._objects[0])
+        self.coarse_boxes_m = _boxes(self._objects[1])
         self._callback = coal.CollisionCallBackDefault()
 
     def clear_of(self, link: coal.CollisionObject, threshold_m: float) -> bool:
@@ -180,15 +184,24 @@ def _manager(objects: list[coal.CollisionObject]) -> coal.BroadPhaseCollisionMan
     return manager
 
 
-def _coarse_pieces(shapes: Sequence[CollisionShape], cell_m: float) -> list[CollisionShape]:
+def _cells(shapes: Sequence[CollisionShape], cell_m: float) -> NDArray[np.intp]:
+    """The grid cell of each piece's centre, numbered from 0, (N,)."""
+    if not shapes:
+        return np.zeros(0, dtype=np.intp)
+    centres = np.array([s.placement[:3, 3] for s in shapes])
+    _, cells = np.unique(np.floor(centres / cell_m), axis=0, return_inverse=True)
+    return np.asarray(cells, dtype=np.intp).ravel()
+
+
+def _coarse_pieces(
+    shapes: Sequence[CollisionShape], cells: NDArray[np.intp]
+) -> list[CollisionShape]:
     """One convex hull per grid cell of the pieces' centres, holding that cell's pieces."""
     if not shapes:
         return []
-    centres = np.array([s.placement[:3, 3] for s in shapes])
-    _, cells = np.unique(np.floor(centres / cell_m), axis=0, return_inverse=True)
     out = []
     for cell in range(int(cells.max()) + 1):
-        members = [shapes[int(i)] for i in np.flatnonzero(cells.ravel() == cell)]
+        members = [shapes[int(i)] for i in np.flatnonzero(cells == cell)]
         if len(members) == 1:
             out.append(members[0])
         else:
