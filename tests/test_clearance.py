@@ -345,3 +345,21 @@ def test_reported_clearance_is_the_accepted_one(sah: Hand) -> None:
     )
     assert result.object_clearance_m >= 0.0
     assert result.time_s >= result.attempt_seconds[-1]  # the final query is in the time
+
+
+def test_one_penetration_per_link_names_the_same_links(
+    sah: Hand, near_grasps: list[tuple[GraspObject, np.ndarray]]
+) -> None:
+    """The IK's repair asks for one pair per link: the same links as every pair, each once."""
+    contacts = ("thumb", "index")
+    counts = []
+    for obj, q in near_grasps:
+        checker = HandObjectClearance(sah, obj)
+        every = checker.penetrations(q, 2e-3, contacts)
+        one = checker.penetrations(q, 2e-3, contacts, one_per_link=True)
+        assert {p.joint_b for p in one} == {p.joint_b for p in every}
+        assert len(one) <= len(checker.links)
+        found = {(p.joint_b, round(p.depth_m, 9)) for p in every}
+        assert all((p.joint_b, round(p.depth_m, 9)) in found for p in one)
+        counts.append((len(one), len(every)))
+    assert any(n < m for n, m in counts)  # some link overlapped several pieces

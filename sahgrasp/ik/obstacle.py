@@ -81,8 +81,14 @@ class Obstacle:
         self._last: tuple[bytes, Clearance | None] = (b"", None)
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
-        """Links closer to the object than ``margin_m`` [m] (contact tips: deeper than allowed)."""
-        return self.checker.penetrations(q, margin_m, self.contacts, self.allowance_m)
+        """Links closer to the object than ``margin_m`` [m] (contact tips: deeper than allowed).
+
+        One per link (``HandObjectClearance.penetrations(one_per_link=True)``): one separation
+        row per link for the repair.
+        """
+        return self.checker.penetrations(
+            q, margin_m, self.contacts, self.allowance_m, one_per_link=True
+        )
 
     def penetrated(self, q: NDArray[np.float64]) -> bool:
         """True if a link is inside the object (contact tips: deeper than the allowance)."""
