@@ -347,19 +347,20 @@ def test_reported_clearance_is_the_accepted_one(sah: Hand) -> None:
     assert result.time_s >= result.attempt_seconds[-1]  # the final query is in the time
 
 
-def test_one_penetration_per_link_names_the_same_links(
+def test_a_few_penetrations_per_link_name_the_same_links(
     sah: Hand, near_grasps: list[tuple[GraspObject, np.ndarray]]
 ) -> None:
-    """The IK's repair asks for one pair per link: the same links as every pair, each once."""
+    """The IK's repair asks for a few pairs per link: the same links as every pair."""
     contacts = ("thumb", "index")
     counts = []
     for obj, q in near_grasps:
         checker = HandObjectClearance(sah, obj)
         every = checker.penetrations(q, 2e-3, contacts)
-        one = checker.penetrations(q, 2e-3, contacts, one_per_link=True)
-        assert {p.joint_b for p in one} == {p.joint_b for p in every}
-        assert len(one) <= len(checker.links)
         found = {(p.joint_b, round(p.depth_m, 9)) for p in every}
-        assert all((p.joint_b, round(p.depth_m, 9)) in found for p in one)
-        counts.append((len(one), len(every)))
-    assert any(n < m for n, m in counts)  # some link overlapped several pieces
+        for per_link in (1, 4):
+            few = checker.penetrations(q, 2e-3, contacts, per_link=per_link)
+            assert {p.joint_b for p in few} == {p.joint_b for p in every}
+            assert len(few) <= per_link * len(checker.links)
+            assert all((p.joint_b, round(p.depth_m, 9)) in found for p in few)
+            counts.append((len(few), len(every)))
+    assert any(n < m for n, m in counts)  # some link overlapped more pieces than asked for

@@ -200,7 +200,7 @@ class HandObjectClearance:
         contacts: Iterable[str] = (),
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
-        one_per_link: bool = False,
+        per_link: int | None = None,
     ) -> list[Penetration]:
         """Every (link shape, object piece) pair closer than required at ``q``.
 
@@ -210,13 +210,11 @@ class HandObjectClearance:
         ``point_a`` on the object, ``normal`` from the object towards the link, and ``depth_m``
         how far the link must move along ``normal`` to reach its required distance.
 
-        ``one_per_link``: one pair per link shape, the first piece found closer than required,
-        pieces taken by increasing lower bound of their distance (so usually among the deepest).
-        The IK's repair asks for this: a link deep in a finely cut object overlaps hundreds of
-        pieces, and a row per pair would cost hundreds of GJK calls and Jacobians per step for
-        normals that mostly agree (measured on 10 sampled sets each of the coffee cup, the mug
-        mesh and the can: as many solved, 17 against 16 for the deepest piece per link, in
-        about half the CPU time).
+        ``per_link``: at most this many pairs per link shape, the first ones found closer than
+        required, pieces taken by increasing lower bound of their distance (None: all). The
+        IK's repair asks for a few: a link deep in a finely cut object overlaps hundreds of
+        pieces, and a row per pair costs a GJK call and a Jacobian each, for normals that
+        mostly agree (module docstring of :mod:`sahgrasp.ik.obstacle`).
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
@@ -225,7 +223,7 @@ class HandObjectClearance:
         thresholds = self._thresholds(contacts, margin_m, allowance_m)
         T = self._place(q, T_world_object)
         near = self._screen(T, thresholds, range(len(self._links)))
-        pairs = self._pairs(T, thresholds, one_per_link, near, first_below=one_per_link)
+        pairs = self._pairs(T, thresholds, False, near, per_link=per_link)
         return [
             Penetration(
                 0,
@@ -533,15 +531,15 @@ class HandObjectClearance:
         geometries: Sequence[int],
         stop_below_m: float = -math.inf,
         pieces: NDArray[np.intp] | None = None,
-        first_below: bool = False,
+        per_link: int | None = None,
     ) -> list[_Pair]:
         """Signed distances of hand geometries to the object pieces that may matter.
 
         The hand is placed (:meth:`_place`), its ``geometries`` posed (:meth:`_pose_links`) and
         the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
-        than the geometry's threshold (else some pair at least that far, or none); with
-        ``first_below``, the first piece found closer than the threshold instead. Otherwise
-        every pair whose bounds come closer than the threshold. The search ends at the first
+        than the geometry's threshold (else some pair at least that far, or none). Otherwise
+        every pair whose bounds come closer than the threshold, or the first ``per_link`` of
+        them found closer than it. The search ends at the first
         pair closer than ``stop_below_m``. ``pieces``: only these pieces (default: all).
         """
         placements = self._geometry_data.oMg
@@ -563,6 +561,7 @@ class HandObjectClearance:
             bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
             best: _Pair | None = None
+            found = 0
             for i in near[np.argsort(bounds[near])]:
                 limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
                 if bounds[i] >= limit:
@@ -574,10 +573,11 @@ class HandObjectClearance:
                     return [*out, pair]
                 if nearest_only:
                     best = pair if best is None or pair.distance_m < best.distance_m else best
-                    if first_below and best.distance_m < thresholds[g]:
-                        break
                 else:
                     out.append(pair)
+                    found += pair.distance_m < thresholds[g]
+                    if per_link is not None and found >= per_link:
+                        break
             if best is not None:
                 out.append(best)
         return out
