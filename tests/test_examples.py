@@ -202,6 +202,7 @@ def test_demo_draws_every_problem_of_a_targets_file_with_its_object(
         _placed_grasp("can", can["xyz"], "can grasp"),
         {**_placed_grasp("fork", fork["xyz"], "fork/grasp"), "object": fork},
         {**_placed_grasp("fork", fork["xyz"], "bare"), "object": None},
+        {**_placed_grasp("fork", fork["xyz"], "bare"), "object": None},
     ]
     targets = _targets_file(tmp_path, problems, object=can)
     html = tmp_path / "scene.html"
@@ -220,7 +221,7 @@ def test_demo_draws_every_problem_of_a_targets_file_with_its_object(
     assert placed["/meshcat/grasps/can_grasp/object"] == pytest.approx(can["xyz"])
     assert placed["/meshcat/grasps/fork_grasp/object"] == pytest.approx(fork["xyz"])
     drawn = {c["path"] for c in commands if c["type"] == "set_object"}
-    for grasp in ("can_grasp", "fork_grasp", "bare"):
+    for grasp in ("can_grasp", "fork_grasp", "bare", "bare-2"):  # a name drawn twice
         assert f"/meshcat/grasps/{grasp}/contacts/thumb/disk" in drawn
         assert any(p.startswith(f"/meshcat/grasps/{grasp}/hand/visuals/") for p in drawn)
 

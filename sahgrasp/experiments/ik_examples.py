@@ -111,7 +111,9 @@ def solve_problems(
     solved = []
     for problem in problems:
         spec = problem.object_spec
-        obj = None if spec is None else objects.setdefault(spec.key(), spec.load())
+        if spec is not None and spec.key() not in objects:
+            objects[spec.key()] = spec.load()
+        obj = None if spec is None else objects[spec.key()]
         result = solve_ik(hand, problem, settings, obstacle=obj, record_history=True)
         solved.append(SolvedGrasp(problem.name, obj, problem, result))
     return solved
@@ -195,7 +197,10 @@ def show_examples(
             object at its placement relative to the hand; grasps are only shifted along x.
     """
     extents, cursor = [], 0.0
+    paths: set[str] = set()
     for ex in examples:
+        path = _unused(f"grasps/{scene_name(ex.name)}", paths)
+        paths.add(path)
         T = _facing_placement(ex) if facing else np.eye(4)
         extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
@@ -203,7 +208,7 @@ def show_examples(
         extent[:, 0] += shift
         cursor = extent[:, 0].max() + EXAMPLE_GAP_M
         show_grasp(
-            viewer, f"grasps/{scene_name(ex.name)}", hand, ex.result.q, ex.obj, ex.target,
+            viewer, path, hand, ex.result.q, ex.obj, ex.target,
             history=ex.result.history, T_scene=T,
         )  # fmt: skip
         extents.append(extent)
@@ -221,9 +226,19 @@ _ROW_VIEW = np.array([0.1, -1.0, 0.7])
 def scene_name(name: str) -> str:
     """``name`` as one meshcat path element (a ``/`` would nest the grasp).
 
-    Characters other than letters, digits and ``._-`` become ``_``.
+    Characters other than letters, digits and ``._-`` become ``_``; :func:`show_examples` adds
+    ``-2``, ``-3``... to a name drawn before.
     """
     return re.sub(r"[^A-Za-z0-9._-]", "_", name) or "_"
+
+
+def _unused(path: str, used: set[str]) -> str:
+    """``path``, or ``path-2``, ``path-3``... the first not in ``used``."""
+    candidate, k = path, 1
+    while candidate in used:
+        k += 1
+        candidate = f"{path}-{k}"
+    return candidate
 
 
 def _facing_placement(example: SolvedGrasp) -> NDArray[np.float64]:
