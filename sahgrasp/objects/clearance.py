@@ -148,6 +148,7 @@ class HandObjectClearance:
         self._shapes = self.object.collision_shapes()
         self._piece_centres = np.array([s.placement[:3, 3] for s in self._shapes]).reshape(-1, 3)
         self._piece_radii = np.array([s.bounding_radius_m for s in self._shapes])
+        self._all_pieces = np.arange(len(self._shapes))
         centres, radii, halves = [], [], []
         for g in geometries:
             g.geometry.computeLocalAABB()
@@ -180,8 +181,8 @@ class HandObjectClearance:
         for g, shape in enumerate(shapes):
             if isinstance(shape, coal.Box):
                 self._half_m[g] = shape.halfSide
-            elif isinstance(shape, coal.Cylinder):
-                self._half_m[g, :2] = shape.radius, shape.halfLength
+            elif isinstance(shape, coal.Cylinder):  # measured as (radial, axial, none)
+                self._half_m[g] = shape.radius, shape.halfLength, np.inf
             elif isinstance(shape, coal.Sphere):
                 self._rounding_m[g] = shape.radius
             else:
@@ -516,12 +517,13 @@ class HandObjectClearance:
         (a piece's centre lies inside it); only hulls bounded below that, and ``limit_m``, can
         hold the nearest piece.
         """
-        tree = self._tree
+        members = self._tree.members
         if not self._other[g]:
-            first = np.flatnonzero(tree.cells == int(np.argmin(cell_bounds)))
+            first = members[int(np.argmin(cell_bounds))]
             centres, _ = self._placed_pieces(T)
             limit_m = min(limit_m, float(self._shape_gaps(np.array([g]), centres[first]).min()))
-        return np.flatnonzero(cell_bounds[tree.cells] <= limit_m)
+        cells = np.flatnonzero(cell_bounds <= limit_m)
+        return np.concatenate([members[c] for c in cells]) if len(cells) else cells
 
     def _pairs(
         self,
@@ -548,27 +550,28 @@ class HandObjectClearance:
         for g in geometries:
             M = placements[g]
             geometry = self._geometry_model.geometryObjects[g].geometry
-            chosen = np.arange(len(self._shapes)) if pieces is None else pieces
+            chosen = self._all_pieces if pieces is None else pieces
             to_centres = self._shape_gaps(np.array([g]), piece_centres[chosen])[0]
-            bounds = np.full(len(self._shapes), np.inf)
-            bounds[chosen] = to_centres - self._piece_radii[chosen]
+            bounds = to_centres - self._piece_radii[chosen]
             limit = thresholds[g]
             if nearest_only and not self._other[g] and len(chosen):
                 # A piece's centre lies inside it, so the link is no farther from the object
                 # than from the nearest centre: no piece bounded above that can be the nearest.
                 limit = min(limit, float(to_centres.min()))
-            near = np.flatnonzero(bounds <= limit)  # no other piece can be kept
-            bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
+            kept = bounds <= limit  # no other piece can be kept
+            near, bounds = chosen[kept], bounds[kept]
+            bounds = np.maximum(bounds, self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
             best: _Pair | None = None
             found = 0
-            for i in near[np.argsort(bounds[near])]:
+            order = np.argsort(bounds)
+            for i, bound in zip(near[order].tolist(), bounds[order].tolist(), strict=True):
                 limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
-                if bounds[i] >= limit:
+                if bound >= limit:
                     break
                 if transforms[i] is None:
                     transforms[i] = self._shapes[i].transform(T)
-                pair = self._distance(g, geometry, at_link, int(i), transforms[i])
+                pair = self._distance(g, geometry, at_link, i, transforms[i])
                 if pair.distance_m < stop_below_m:
                     return [*out, pair]
                 if nearest_only:
@@ -592,15 +595,15 @@ class HandObjectClearance:
         """
         R, t = self._link_R[geometries], self._link_t[geometries]
         local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
-        half = self._half_m[geometries][:, None]
-        excess = np.abs(local) - half  # box (a sphere is a box of no size, rounded)
+        coords = np.abs(local)  # box (a sphere is a box of no size, rounded)
         cylinder = self._cylinder[geometries]
-        if cylinder.any():  # axis z: (radial, axial) excess
-            excess[cylinder, :, 0] = np.hypot(local[cylinder, :, 0], local[cylinder, :, 1])
-            excess[cylinder, :, 0] -= half[cylinder, :, 0]
-            excess[cylinder, :, 1] = np.abs(local[cylinder, :, 2]) - half[cylinder, :, 1]
-            excess[cylinder, :, 2] = -np.inf
-        gaps = np.sqrt(np.square(np.maximum(excess, 0.0)).sum(axis=2))
+        if cylinder.any():  # axis z: (radial, axial); the third half extent is infinite
+            axial = local[cylinder]
+            coords[cylinder, :, 0] = np.hypot(axial[..., 0], axial[..., 1])
+            coords[cylinder, :, 1] = coords[cylinder, :, 2]
+        excess = coords - self._half_m[geometries][:, None]
+        outside = np.maximum(excess, 0.0)
+        gaps = np.sqrt(np.einsum("gni,gni->gn", outside, outside))
         gaps += np.minimum(excess.max(axis=2), 0.0) - self._rounding_m[geometries][:, None]
         other = self._other[geometries]
         if other.any():

@@ -124,10 +124,14 @@ class PieceTree:
         boxes_m: Each piece's axis-aligned box in the object frame, (N, 2, 3): low, high [m].
         coarse_boxes_m: Each coarse hull's box in the object frame, (K, 2, 3) [m].
         cells: The coarse hull holding each piece, (N,).
+        members: The pieces of each coarse hull, in hull order (K arrays of indices).
     """
 
     def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
         self.cells = _cells(shapes, cell_m)
+        order = np.argsort(self.cells, kind="stable")
+        splits = np.flatnonzero(np.diff(self.cells[order])) + 1
+        self.members = tuple(np.split(order, splits)) if len(order) else ()
         coarse = _coarse_pieces(shapes, self.cells)
         # The trees hold raw pointers to the collision objects: keep them (and their shapes).
         self._shapes = (tuple(shapes), tuple(coarse))
