@@ -215,7 +215,7 @@ class HandObjectClearance:
         required, pieces taken by increasing lower bound of their distance (None: all). The
         IK's repair asks for a few: a link deep in a finely cut object overlaps hundreds of
         pieces, and a row per pair costs a GJK call and a Jacobian each, for normals that
-        mostly agree (module docstring of :mod:`sahgrasp.ik.obstacle`).
+        mostly agree (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
@@ -480,8 +480,8 @@ class HandObjectClearance:
     def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
-        Geometries are taken by increasing lower bound (their own shapes against the coarse
-        hulls' balls) until the bound exceeds the smallest distance found. A contact tip the
+        Geometries are taken by increasing lower bound (:meth:`_coarse_bounds`) until the bound
+        exceeds the smallest distance found. A contact tip the
         piece tree finds within its allowance is excepted; the others are measured against the
         pieces whose bounds are below that distance, so a far link costs no GJK call. Only the
         geometries taken are posed in the object frame.
@@ -541,8 +541,8 @@ class HandObjectClearance:
         the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
         than the geometry's threshold (else some pair at least that far, or none). Otherwise
         every pair whose bounds come closer than the threshold, or the first ``per_link`` of
-        them found closer than it. The search ends at the first
-        pair closer than ``stop_below_m``. ``pieces``: only these pieces (default: all).
+        them found closer than it. The search ends at the first pair closer than
+        ``stop_below_m``. ``pieces``: only these pieces (default: all).
         """
         placements = self._geometry_data.oMg
         piece_centres, transforms = self._placed_pieces(T)
