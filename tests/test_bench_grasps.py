@@ -19,11 +19,12 @@ from sahgrasp.objects import load_object, paper_grasp, placement
 
 ROW_FIELDS = {
     "object", "contact_set_seed", "sampling_s", "runs", "time_ratio_mean", "time_ratio_median",
+    "same_starts",
 }  # fmt: skip
 RUN_FIELDS = {
     "problems", "solved", "success_rate", "first_start_success_rate", "mean_starts",
     "mean_starts_solved", "median_time_ms", "mean_time_ms", "p95_time_ms", "mean_iterations",
-    "reasons", "penetration",
+    "reasons", "penetration", "median_cpu_ms", "mean_cpu_ms",
 }  # fmt: skip
 PENETRATION_FIELDS = {
     "claimed", "penetrating", "penetrating_rate", "usable_rate", "median_penetrating_depth_mm",
@@ -53,6 +54,9 @@ def test_bench_on_three_problems_returns_and_writes_the_documented_fields(tmp_pa
         assert stats["problems"] == 3 and sum(stats["reasons"].values()) == 3
         assert stats["penetration"]["claimed"] == stats["solved"]
         assert 0.0 <= stats["first_start_success_rate"] <= stats["success_rate"] <= 1.0
+    alike = row["same_starts"]
+    assert set(alike) == {"sets", "cpu_ratio_total", "cpu_ratio_median"}
+    assert 0 <= alike["sets"] <= 3 and (alike["sets"] == 0) == (alike["cpu_ratio_total"] is None)
     # Checked independently of the solver: no claimed solution with the object penetrates it.
     assert row["runs"]["with_object"]["penetration"]["penetrating"] == 0
     table = format_table(document).splitlines()

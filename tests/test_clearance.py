@@ -307,3 +307,60 @@ def test_broad_phase_misses_no_pair(
         closest = checker.clearance(q, contacts, all_links=False)
         assert (closest.distance_m, closest.link) == (full.distance_m, full.link)
         assert all(full.links_m[link] == d for link, d in closest.links_m.items())
+
+
+def test_solver_and_clearance_share_one_definition(
+    sah: Hand, near_grasps: list[tuple[GraspObject, np.ndarray]]
+) -> None:
+    """The IK's acceptance test, its repair's penetrations and the clearance agree everywhere.
+
+    Contact tips within the allowance, beyond it, and links clear or inside the object.
+    """
+    from sahgrasp.ik.obstacle import Obstacle
+
+    q_mid = _mid_hand(sah)
+    cases = [(obj, q, ("thumb", "index")) for obj, q in near_grasps]
+    cases += [(_tip_probe(sah, q_mid, d), q_mid, ("index",)) for d in (1.0e-3, 2.5e-3)]
+    cases += [(_tip_probe(sah, q_mid, 1.0e-3), q_mid, ())]
+    verdicts = []
+    for obj, q, contacts in cases:
+        checker = HandObjectClearance(sah, obj)
+        inside = not checker.clearance(q, contacts, all_links=False).clear()
+        assert bool(checker.penetrations(q, 0.0, contacts)) == inside
+        assert Obstacle(sah, obj, contacts, 1.5e-3).penetrated(q) == inside
+        verdicts.append(inside)
+    assert True in verdicts and False in verdicts  # both sides of the boundary were tried
+
+
+def test_reported_clearance_is_the_accepted_one(sah: Hand) -> None:
+    from sahgrasp.objects import paper_grasp
+
+    cup = load_object("coffee_cup")
+    result = solve_ik(sah, paper_grasp("coffee_cup"), obstacle=cup)
+    assert result.success and result.object_clearance_m is not None
+    clearance = HandObjectClearance(sah, cup).clearance(result.q, contacts=sah.fingers)
+    assert (result.object_clearance_m, result.closest_link) == (
+        pytest.approx(clearance.distance_m, abs=1e-12),
+        clearance.link,
+    )
+    assert result.object_clearance_m >= 0.0
+    assert result.time_s >= result.attempt_seconds[-1]  # the final query is in the time
+
+
+def test_a_few_penetrations_per_link_name_the_same_links(
+    sah: Hand, near_grasps: list[tuple[GraspObject, np.ndarray]]
+) -> None:
+    """The IK's repair asks for a few pairs per link: the same links as every pair."""
+    contacts = ("thumb", "index")
+    counts = []
+    for obj, q in near_grasps:
+        checker = HandObjectClearance(sah, obj)
+        every = checker.penetrations(q, 2e-3, contacts)
+        found = {(p.joint_b, round(p.depth_m, 9)) for p in every}
+        for per_link in (1, 4):
+            few = checker.penetrations(q, 2e-3, contacts, per_link=per_link)
+            assert {p.joint_b for p in few} == {p.joint_b for p in every}
+            assert len(few) <= per_link * len(checker.links)
+            assert all((p.joint_b, round(p.depth_m, 9)) in found for p in few)
+            counts.append((len(few), len(every)))
+    assert any(n < m for n, m in counts)  # some link overlapped more pieces than asked for

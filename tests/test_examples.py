@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
 import signal
 import subprocess
@@ -11,11 +12,13 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+import numpy as np
 import psutil
 import pytest
 from polling import gone, until
 
-from sahgrasp.cli import demo
+from sahgrasp.cli import demo, main
+from sahgrasp.objects import paper_grasp
 from sahgrasp.viz import scene_commands
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -175,3 +178,64 @@ def test_a_missing_mesh_file_is_one_usage_error(
     assert stop.value.code == 2
     assert "mesh file not found" in capsys.readouterr().err
     assert not (tmp_path / "x.html").exists()
+
+
+def _targets_file(folder: Path, problems: list[dict[str, object]], **top: object) -> Path:
+    path = folder / "targets.json"
+    path.write_text(json.dumps({"hand": "sah", **top, "problems": problems}), encoding="utf-8")
+    return path
+
+
+def _placed_grasp(name: str, xyz: list[float], problem: str) -> dict[str, object]:
+    T = np.eye(4)
+    T[:3, 3] = xyz
+    return {**paper_grasp(name, T).to_dict(), "name": problem}
+
+
+def test_demo_draws_every_problem_of_a_targets_file_with_its_object(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The file's default object, a problem's own object and a problem without one."""
+    can = {"name": "can", "xyz": [0.1, 0.0, 0.0], "quat": [0.0, 0.0, 0.0, 1.0]}
+    fork = {"name": "fork", "xyz": [0.0, 0.2, 0.0], "quat": [0.0, 0.0, 0.0, 1.0]}
+    problems = [
+        _placed_grasp("can", can["xyz"], "can grasp"),
+        {**_placed_grasp("fork", fork["xyz"], "fork/grasp"), "object": fork},
+        {**_placed_grasp("fork", fork["xyz"], "bare"), "object": None},
+        {**_placed_grasp("fork", fork["xyz"], "bare"), "object": None},
+    ]
+    targets = _targets_file(tmp_path, problems, object=can)
+    html = tmp_path / "scene.html"
+    assert main(["demo", "--targets", str(targets), "--html", str(html)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split()[:2] for line in printed[1:4]] == [
+        ["can", "grasp"], ["fork/grasp", "fork"], ["bare", "-"],
+    ]  # fmt: skip
+    commands = scene_commands(html.read_text(encoding="utf-8"))
+    placed = {
+        c["path"]: np.reshape(c["matrix"], (4, 4)).T[:3, 3]
+        for c in commands
+        if c["type"] == "set_transform" and c["path"].endswith("/object")
+    }
+    assert set(placed) == {"/meshcat/grasps/can_grasp/object", "/meshcat/grasps/fork_grasp/object"}
+    assert placed["/meshcat/grasps/can_grasp/object"] == pytest.approx(can["xyz"])
+    assert placed["/meshcat/grasps/fork_grasp/object"] == pytest.approx(fork["xyz"])
+    drawn = {c["path"] for c in commands if c["type"] == "set_object"}
+    for grasp in ("can_grasp", "fork_grasp", "bare", "bare-2"):  # a name drawn twice
+        assert f"/meshcat/grasps/{grasp}/contacts/thumb/disk" in drawn
+        assert any(p.startswith(f"/meshcat/grasps/{grasp}/hand/visuals/") for p in drawn)
+
+
+def test_demo_targets_exit_codes(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    html = str(tmp_path / "scene.html")
+    far = _placed_grasp("can", [0.0, 0.0, 0.0], "far")
+    far["contacts"][0]["point"] = [1.0, 0.0, 0.0]  # type: ignore[index]
+    unsolved = _targets_file(tmp_path, [far])
+    assert main(["demo", "--targets", str(unsolved), "--html", html, "--inits", "1"]) == 1
+    assert "no (" in capsys.readouterr().out
+    missing_mesh = {"mesh": "none.stl"}
+    bad = _targets_file(tmp_path, [_placed_grasp("can", [0, 0, 0], "x")], object=missing_mesh)
+    assert main(["demo", "--targets", str(bad), "--html", html]) == 2
+    assert main(["demo", "--targets", str(tmp_path / "none.json"), "--html", html]) == 2
+    errors = capsys.readouterr().err
+    assert errors.count("sahgrasp: error:") == 2 and "Traceback" not in errors

@@ -18,6 +18,7 @@ import zlib
 from collections import Counter
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +43,7 @@ __all__ = [
     "PENETRATION_TOLERANCE_M",
     "RUNS",
     "ObjectPenetration",
+    "Timed",
     "format_table",
     "run",
 ]
@@ -129,21 +131,46 @@ RUNS = ("without_object", "with_object")
 """The IK runs per contact set: contacts only, and with ``obstacle=`` the object."""
 
 
+@dataclass(frozen=True)
+class Timed:
+    """One IK solve of the benchmark and the CPU time it took.
+
+    Attributes:
+        result: The solver's result (its ``time_s`` is wall time).
+        cpu_s: CPU time [s] of the process over the ``solve_ik`` call: on a shared machine,
+            less affected by other jobs than wall time.
+    """
+
+    result: IKResult
+    cpu_s: float
+
+
+def _timed_solve(hand: Hand, target: GraspTarget, obj: GraspObject | None) -> Timed:
+    start = time.process_time()
+    result = solve_ik(hand, target, IKSettings(), obstacle=obj)
+    return Timed(result, time.process_time() - start)
+
+
 def _solve_chunk(
     hand: Hand, targets: list[GraspTarget], obj: GraspObject | None
-) -> list[tuple[IKResult, ...]]:
+) -> list[tuple[Timed, ...]]:
     """Solve each target without the object, then (if ``obj``) with it, one after the other.
 
     Solving each problem in both runs back to back lets a change of machine load affect both
-    alike. The solver builds the object's collision pieces once per object instance, outside its
-    timer.
+    alike. The object's collision pieces and their tree are built once per object instance
+    (:func:`_prepare`), before any timed solve.
     """
-    settings = IKSettings()
     return [
-        (solve_ik(hand, t, settings),)
-        + (() if obj is None else (solve_ik(hand, t, settings, obstacle=obj),))
+        (_timed_solve(hand, t, None),) + (() if obj is None else (_timed_solve(hand, t, obj),))
         for t in targets
     ]
+
+
+def _prepare(hand: Hand, obj: GraspObject) -> None:
+    """Build what the IK keeps per (hand, object) -- pieces, their tree -- outside the timing."""
+    from sahgrasp.ik.obstacle import Obstacle
+
+    Obstacle(hand, obj, (), 0.0)
 
 
 _POOL_OBJECTS: dict[str, GraspObject] = {}
@@ -155,18 +182,23 @@ def _pool_task(
     digest: str,
     targets: list[GraspTarget],
     obj: GraspObject | None,
-) -> list[tuple[IKResult, ...]]:
+) -> list[tuple[Timed, ...]]:
     """:func:`_solve_chunk` in a worker, on one unpickled instance of the object per process."""
+    hand = worker_hand(description, digest)
     if obj is not None:
+        if obj.name not in _POOL_OBJECTS:
+            _prepare(hand, obj)
         obj = _POOL_OBJECTS.setdefault(obj.name, obj)
-    return _solve_chunk(worker_hand(description, digest), targets, obj)
+    return _solve_chunk(hand, targets, obj)
 
 
 def _solve(
     hand: Hand, targets: list[GraspTarget], obj: GraspObject | None, workers: int, bar: tqdm[Any]
-) -> list[tuple[IKResult, ...]]:
-    results: list[tuple[IKResult, ...]] = []
+) -> list[tuple[Timed, ...]]:
+    results: list[tuple[Timed, ...]] = []
     if workers <= 1:
+        if obj is not None:
+            _prepare(hand, obj)
         for target in targets:
             results += _solve_chunk(hand, [target], obj)
             bar.update()
@@ -212,8 +244,10 @@ def _penetration_summary(
     }
 
 
-def _summary(results: Sequence[IKResult]) -> dict[str, Any]:
+def _summary(timed: Sequence[Timed]) -> dict[str, Any]:
+    results = [t.result for t in timed]
     times_ms = np.array([r.time_s for r in results]) * 1e3
+    cpu_ms = np.array([t.cpu_s for t in timed]) * 1e3
     starts = np.array([r.inits_used for r in results])
     solved = np.array([r.success for r in results])
     return {
@@ -226,6 +260,8 @@ def _summary(results: Sequence[IKResult]) -> dict[str, Any]:
         "median_time_ms": float(np.median(times_ms)),
         "mean_time_ms": float(times_ms.mean()),
         "p95_time_ms": float(np.percentile(times_ms, 95)),
+        "median_cpu_ms": float(np.median(cpu_ms)),
+        "mean_cpu_ms": float(cpu_ms.mean()),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
         "reasons": dict(Counter(r.reason for r in results)),
     }
@@ -255,7 +291,8 @@ def _bench_object(
         runs = {}
         for label, run_results in zip(RUNS, results, strict=False):
             runs[label] = _summary(run_results)
-            runs[label]["penetration"] = _penetration_summary(hand, obj, run_results, bar)
+            claimed = [t.result for t in run_results]
+            runs[label]["penetration"] = _penetration_summary(hand, obj, claimed, bar)
     row: dict[str, Any] = {
         "object": obj.name,
         "contact_set_seed": object_seed,
@@ -266,7 +303,29 @@ def _bench_object(
         for stat in ("mean", "median"):
             key = f"{stat}_time_ms"
             row[f"time_ratio_{stat}"] = runs[RUNS[1]][key] / runs[RUNS[0]][key]
+        row["same_starts"] = _same_starts(results[0], results[1])
     return row, targets
+
+
+def _same_starts(without: Sequence[Timed], with_object: Sequence[Timed]) -> dict[str, Any]:
+    """The cost of the object checks: CPU time with / without on the sets solved alike.
+
+    The sets both runs solve with the same number of starts: the same search, plus the object's
+    queries. (Over all sets, the ratio also counts the starts the object rejects: other work.)
+    """
+    pairs = [
+        (a.cpu_s, b.cpu_s)
+        for a, b in zip(without, with_object, strict=True)
+        if a.result.success and b.result.success and a.result.inits_used == b.result.inits_used
+    ]
+    if not pairs:
+        return {"sets": 0, "cpu_ratio_total": None, "cpu_ratio_median": None}
+    plain, checked = np.array(pairs).T
+    return {
+        "sets": len(pairs),
+        "cpu_ratio_total": float(checked.sum() / plain.sum()),
+        "cpu_ratio_median": float(np.median(checked / np.maximum(plain, 1e-9))),
+    }
 
 
 def run(
@@ -343,24 +402,31 @@ def format_table(document: dict[str, Any]) -> str:
     """A Markdown table of :func:`run`'s document, one row per object and IK run."""
     lines = [
         "| object | IK | solved | 1st start | mean starts | median / mean / p95 ms "
-        "| time with / without object (median, mean) | claimed penetrating "
+        "| time with / without object (median, mean) "
+        "| CPU with / without, same starts (total, median; sets) | claimed penetrating "
         "| depth median / max mm | solved, not penetrating |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in document["objects"]:
         for label, stats in row["runs"].items():
             pen = stats["penetration"]
-            ratio = (
-                f"{row['time_ratio_median']:.2f}x, {row['time_ratio_mean']:.2f}x"
-                if label == RUNS[1]
-                else ""
-            )
+            ratio, same = "", ""
+            if label == RUNS[1]:
+                ratio = f"{row['time_ratio_median']:.2f}x, {row['time_ratio_mean']:.2f}x"
+                alike = row["same_starts"]
+                same = f"- ({alike['sets']})"
+                if alike["sets"]:
+                    same = (
+                        f"{alike['cpu_ratio_total']:.2f}x, {alike['cpu_ratio_median']:.2f}x "
+                        f"({alike['sets']})"
+                    )
             lines.append(
                 f"| {row['object']} | {label.replace('_', ' ')} | "
                 f"{100 * stats['success_rate']:.1f}% ({stats['solved']}/{stats['problems']}) | "
                 f"{100 * stats['first_start_success_rate']:.1f}% | {stats['mean_starts']:.2f} | "
                 f"{stats['median_time_ms']:.1f} / {stats['mean_time_ms']:.1f} / "
-                f"{stats['p95_time_ms']:.1f} | {ratio} | {100 * pen['penetrating_rate']:.1f}% "
+                f"{stats['p95_time_ms']:.1f} | {ratio} | {same} | "
+                f"{100 * pen['penetrating_rate']:.1f}% "
                 f"({pen['penetrating']}/{pen['claimed']}) | "
                 f"{pen['median_penetrating_depth_mm']:.1f} / {pen['max_link_depth_mm']:.1f} | "
                 f"{100 * pen['usable_rate']:.1f}% |"

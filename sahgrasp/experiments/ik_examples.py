@@ -10,6 +10,7 @@ The paper's counts are :data:`sahgrasp.objects.PAPER_IK_REPORT`.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -38,9 +39,13 @@ __all__ = [
     "EXAMPLE_NAMES",
     "ROW_ASPECT",
     "GraspExample",
+    "SolvedGrasp",
     "format_report",
+    "format_solved",
+    "scene_name",
     "show_examples",
     "solve_example",
+    "solve_problems",
 ]
 
 EXAMPLE_NAMES = GRASP_NAMES
@@ -54,7 +59,29 @@ ROW_ASPECT = 1.5
 
 
 @dataclass(frozen=True)
-class GraspExample:
+class SolvedGrasp:
+    """A grasp problem and the IK's result, as :func:`show_examples` draws it.
+
+    Attributes:
+        name: Problem name.
+        obj: The object grasped (world frame), or None.
+        target: The contact targets (world frame).
+        result: The IK result (iterates recorded to animate the hand).
+    """
+
+    name: str
+    obj: GraspObject | None
+    target: GraspTarget
+    result: IKResult
+
+    @property
+    def contact_centre_m(self) -> NDArray[np.float64]:
+        """Mean of the contact points [m]."""
+        return np.mean([c.point for c in self.target.contacts], axis=0)
+
+
+@dataclass(frozen=True)
+class GraspExample(SolvedGrasp):
     """A paper example, solved.
 
     Attributes:
@@ -65,16 +92,31 @@ class GraspExample:
         paper: What the paper reports for it.
     """
 
-    name: str
-    obj: GraspObject
-    target: GraspTarget
-    result: IKResult
     paper: IKReport
 
-    @property
-    def contact_centre_m(self) -> NDArray[np.float64]:
-        """Mean of the contact points [m]."""
-        return np.mean([c.point for c in self.target.contacts], axis=0)
+
+def solve_problems(
+    hand: Hand, problems: Iterable[GraspTarget], settings: IKSettings | None = None
+) -> list[SolvedGrasp]:
+    """Solve the problems of a targets file, each with its object as the IK's obstacle.
+
+    Each distinct object (same catalog name or mesh file and placement) is built once, so the
+    IK builds its collision pieces once per object. Iterates are recorded.
+
+    Raises:
+        MeshFileError: A problem's mesh file cannot be read.
+        InvalidTargetError: A problem the solver refuses (e.g. fingers the hand lacks).
+    """
+    objects: dict[str, GraspObject] = {}
+    solved = []
+    for problem in problems:
+        spec = problem.object_spec
+        if spec is not None and spec.key() not in objects:
+            objects[spec.key()] = spec.load()
+        obj = None if spec is None else objects[spec.key()]
+        result = solve_ik(hand, problem, settings, obstacle=obj, record_history=True)
+        solved.append(SolvedGrasp(problem.name, obj, problem, result))
+    return solved
 
 
 def solve_example(hand: Hand, name: str, settings: IKSettings | None = None) -> GraspExample:
@@ -113,22 +155,60 @@ def format_report(examples: Iterable[GraspExample]) -> str:
     return format_table(_HEADERS, rows)
 
 
-def show_examples(viewer: Viewer, hand: Hand, examples: Sequence[GraspExample]) -> None:
-    """Draw the examples in a row along x (``grasps/<name>``), hands animated; frame them.
+_SOLVED_HEADERS = ("problem", "object", "solved", "inits", "iterations", "time [ms]",
+                   "max error [mm]", "object clearance [mm]")  # fmt: skip
 
-    Each grasp is turned so that its palm lies behind the object (+y) as the camera, in front
-    (-y) and above, sees it.
+
+def _clearance_cell(result: IKResult) -> str:
+    if result.object_clearance_m is None:
+        return "-"
+    return f"{result.object_clearance_m * 1e3:.2f} ({result.closest_link})"
+
+
+def format_solved(solved: Iterable[SolvedGrasp]) -> str:
+    """A table of solved problems, one row each: the object and the clearance the IK kept."""
+    rows = [
+        (
+            ex.name,
+            "-" if ex.obj is None else ex.obj.name,
+            "yes" if ex.result.success else f"no ({ex.result.reason})",
+            str(ex.result.inits_used),
+            str(ex.result.iterations),
+            f"{ex.result.time_s * 1e3:.1f}",
+            f"{ex.result.max_error_m * 1e3:.3f}",
+            _clearance_cell(ex.result),
+        )
+        for ex in solved
+    ]
+    return format_table(_SOLVED_HEADERS, rows)
+
+
+def show_examples(
+    viewer: Viewer, hand: Hand, examples: Sequence[SolvedGrasp], facing: bool = True
+) -> None:
+    """Draw the grasps in a row along x (``grasps/<name>``), hands animated; frame them.
+
+    Args:
+        viewer: The scene.
+        hand: The hand.
+        examples: The solved grasps.
+        facing: Turn each grasp so that its palm lies behind the object (+y) as the camera, in
+            front (-y) and above, sees it. False: each grasp keeps its world orientation, the
+            object at its placement relative to the hand; grasps are only shifted along x.
     """
     extents, cursor = [], 0.0
+    paths: set[str] = set()
     for ex in examples:
-        T = _facing_placement(ex)
+        path = _unused(f"grasps/{scene_name(ex.name)}", paths)
+        paths.add(path)
+        T = _facing_placement(ex) if facing else np.eye(4)
         extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
         T[0, 3] += shift
         extent[:, 0] += shift
         cursor = extent[:, 0].max() + EXAMPLE_GAP_M
         show_grasp(
-            viewer, f"grasps/{ex.name}", hand, ex.result.q, ex.obj, ex.target,
+            viewer, path, hand, ex.result.q, ex.obj, ex.target,
             history=ex.result.history, T_scene=T,
         )  # fmt: skip
         extents.append(extent)
@@ -143,7 +223,25 @@ _SINGLE_VIEW = np.array([0.5, -1.0, 0.8])
 _ROW_VIEW = np.array([0.1, -1.0, 0.7])
 
 
-def _facing_placement(example: GraspExample) -> NDArray[np.float64]:
+def scene_name(name: str) -> str:
+    """``name`` as one meshcat path element (a ``/`` would nest the grasp).
+
+    Characters other than letters, digits and ``._-`` become ``_``; :func:`show_examples` adds
+    ``-2``, ``-3``... to a name drawn before.
+    """
+    return re.sub(r"[^A-Za-z0-9._-]", "_", name) or "_"
+
+
+def _unused(path: str, used: set[str]) -> str:
+    """``path``, or ``path-2``, ``path-3``... the first not in ``used``."""
+    candidate, k = path, 1
+    while candidate in used:
+        k += 1
+        candidate = f"{path}-{k}"
+    return candidate
+
+
+def _facing_placement(example: SolvedGrasp) -> NDArray[np.float64]:
     """Placement turning a grasp so that its palm is behind the object (+y), centred.
 
     A grasp from the side turns about the vertical (the object stays upright); a grasp from above

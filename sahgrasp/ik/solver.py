@@ -658,7 +658,7 @@ def run_algorithm1(
             attempt = attempt_fn(
                 hand, problem, x if kind == "coords" else hand.finger_part(x), settings
             )
-        attempt = _checked(problem, attempt, free_fingers, obstacle)
+        attempt = _checked(problem, attempt, free_fingers)
         attempt = replace(attempt, seconds=time.perf_counter() - start)
         attempts.append(attempt)
         if attempt.outcome == "converged":
@@ -667,12 +667,7 @@ def run_algorithm1(
     return _result(hand, problem, best, attempts, False)
 
 
-def _checked(
-    problem: ContactProblem,
-    attempt: Attempt,
-    free_fingers: tuple[str, ...],
-    obstacle: GraspObject | None,
-) -> Attempt:
+def _checked(problem: ContactProblem, attempt: Attempt, free_fingers: tuple[str, ...]) -> Attempt:
     """``attempt`` after Step 8: a converged ``q`` that collides is refused, free fingers placed."""
     if attempt.outcome != "converged":
         return attempt
@@ -680,15 +675,12 @@ def _checked(
     if rejected is not None:
         return replace(attempt, outcome=rejected)
     if free_fingers:
-        return replace(attempt, q=_place_free_fingers(problem, attempt.q, free_fingers, obstacle))
+        return replace(attempt, q=_place_free_fingers(problem, attempt.q, free_fingers))
     return attempt
 
 
 def _place_free_fingers(
-    problem: ContactProblem,
-    q: NDArray[np.float64],
-    free_fingers: tuple[str, ...],
-    obstacle: GraspObject | None,
+    problem: ContactProblem, q: NDArray[np.float64], free_fingers: tuple[str, ...]
 ) -> NDArray[np.float64]:
     """``q`` with the fingers without a contact moved clear of the object and the other links.
 
@@ -697,7 +689,12 @@ def _place_free_fingers(
     """
     from sahgrasp.objects.clearance import HandObjectClearance  # objects imports the hand only
 
-    placed = HandObjectClearance(problem.hand, obstacle).place_free_fingers(q, free_fingers).q
+    # With an obstacle, its checker: built once per (hand, object), not once per solve.
+    checker = (
+        HandObjectClearance(problem.hand, None) if problem.obstacle is None
+        else problem.obstacle.checker
+    )  # fmt: skip
+    placed = checker.place_free_fingers(q, free_fingers).q
     return placed if problem.collision(placed) is None else q
 
 
@@ -740,7 +737,9 @@ def _result(
         collision_free = not hand.in_collision(chosen.q)
         # An inner solver plugged in by a benchmark may name other outcomes: out of starts.
         reason = _FAILURE_REASONS.get(chosen.outcome, "max_inits")
+    begin = time.perf_counter()  # the final clearance is part of the solve's time
     clearance = problem.obstacle.clearance(chosen.q) if problem.obstacle is not None else None
+    seconds = attempts[-1].seconds + (time.perf_counter() - begin)
     return IKResult(
         name=problem.target.name,
         success=success,
@@ -750,7 +749,7 @@ def _result(
         centre_errors_m=cen,
         inits_used=len(attempts),
         iterations=sum(a.iterations for a in attempts),
-        time_s=attempts[-1].seconds,
+        time_s=seconds,
         collision_free=collision_free,
         fingers=problem.fingers,
         attempts=tuple(a.outcome for a in attempts),

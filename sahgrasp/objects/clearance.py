@@ -148,13 +148,19 @@ class HandObjectClearance:
         self._shapes = self.object.collision_shapes()
         self._piece_centres = np.array([s.placement[:3, 3] for s in self._shapes]).reshape(-1, 3)
         self._piece_radii = np.array([s.bounding_radius_m for s in self._shapes])
-        centres, radii = [], []
+        self._all_pieces = np.arange(len(self._shapes))
+        centres, radii, halves = [], [], []
         for g in geometries:
             g.geometry.computeLocalAABB()
             centres.append(np.asarray(g.geometry.aabb_center, dtype=np.float64))
             radii.append(float(g.geometry.aabb_radius))
+            box = g.geometry.aabb_local
+            halves.append((np.asarray(box.max_) - np.asarray(box.min_)) / 2.0)
         self._link_centres = np.array(centres)
         self._link_radii = np.array(radii)
+        self._link_halves = np.array(halves)  # local box half extents [m]
+        self._link_R = np.zeros((len(geometries), 3, 3))  # placements at the last _place
+        self._link_t = np.zeros((len(geometries), 3))
         self._link_objects = [
             coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
         ]
@@ -175,8 +181,8 @@ class HandObjectClearance:
         for g, shape in enumerate(shapes):
             if isinstance(shape, coal.Box):
                 self._half_m[g] = shape.halfSide
-            elif isinstance(shape, coal.Cylinder):
-                self._half_m[g, :2] = shape.radius, shape.halfLength
+            elif isinstance(shape, coal.Cylinder):  # measured as (radial, axial, none)
+                self._half_m[g] = shape.radius, shape.halfLength, np.inf
             elif isinstance(shape, coal.Sphere):
                 self._rounding_m[g] = shape.radius
             else:
@@ -195,6 +201,7 @@ class HandObjectClearance:
         contacts: Iterable[str] = (),
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
+        per_link: int | None = None,
     ) -> list[Penetration]:
         """Every (link shape, object piece) pair closer than required at ``q``.
 
@@ -204,6 +211,12 @@ class HandObjectClearance:
         ``point_a`` on the object, ``normal`` from the object towards the link, and ``depth_m``
         how far the link must move along ``normal`` to reach its required distance.
 
+        ``per_link``: at most this many pairs per link shape, the first ones found closer than
+        required, pieces taken by increasing lower bound of their distance (None: all). The
+        IK's repair asks for a few: a link deep in a finely cut object overlaps hundreds of
+        pieces, and a row per pair costs a GJK call and a Jacobian each, for normals that
+        mostly agree (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
+
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
@@ -211,7 +224,7 @@ class HandObjectClearance:
         thresholds = self._thresholds(contacts, margin_m, allowance_m)
         T = self._place(q, T_world_object)
         near = self._screen(T, thresholds, range(len(self._links)))
-        pairs = self._pairs(T, thresholds, nearest_only=False, geometries=near)
+        pairs = self._pairs(T, thresholds, False, near, per_link=per_link)
         return [
             Penetration(
                 0,
@@ -422,6 +435,8 @@ class HandObjectClearance:
         pin.updateGeometryPlacements(
             self._model, self._data, self._geometry_model, self._geometry_data, self.hand.check_q(q)
         )
+        H = np.array([M.homogeneous for M in self._geometry_data.oMg])  # once per query
+        self._link_R, self._link_t = H[:, :3, :3], H[:, :3, 3]
         if T_world_object is None:
             return self.object.T_world_object
         return as_placement(T_world_object)
@@ -451,35 +466,64 @@ class HandObjectClearance:
         tree, links = self._tree, self._link_objects
         return [g for g in chosen if not tree.clear_of(links[g], float(thresholds[g]))]
 
+    def _coarse_bounds(self, T: FloatArray) -> FloatArray:
+        """Lower bounds [m] of each hand geometry's signed distance to each coarse hull: (G, K).
+
+        The larger of two bounds: the link's own shape against the hull's ball, and their boxes'
+        gap (object at ``T``). Numpy only.
+        """
+        tree = self._tree
+        coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
+        balls = self._shape_gaps(np.arange(len(self._links)), coarse) - tree.coarse_radii_m
+        return np.maximum(balls, self._link_box_gaps(T, tree.coarse_boxes_m))
+
     def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
-        Geometries are taken by increasing lower bound (their own shapes against the coarse
-        hulls' balls) until the bound exceeds the smallest distance found. A contact tip the
+        Geometries are taken by increasing lower bound (:meth:`_coarse_bounds`) until the bound
+        exceeds the smallest distance found. A contact tip the
         piece tree finds within its allowance is excepted; the others are measured against the
-        pieces whose bounds are below that distance, so a far link costs no GJK call.
+        pieces whose bounds are below that distance, so a far link costs no GJK call. Only the
+        geometries taken are posed in the object frame.
         """
         if not self._shapes:
             return {}
-        every = range(len(self._links))
-        self._pose_links(T, every)
         tree = self._tree
-        coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
-        gaps = self._shape_gaps(np.arange(len(every)), list(self._geometry_data.oMg), coarse)
-        bounds = (gaps - tree.coarse_radii_m).min(axis=1)
+        every = np.arange(len(self._links))
+        cell_bounds = self._coarse_bounds(T)
+        bounds = cell_bounds.min(axis=1)
         measured: dict[int, float] = {}
         smallest = math.inf
         for g in (int(i) for i in np.argsort(bounds, kind="stable")):
             if bounds[g] > smallest:
                 break
+            self._pose_links(T, (g,))
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
             limit = float(thresholds[g]) if tip else smallest
             if limit < math.inf and tree.clear_of(self._link_objects[g], limit):
                 continue  # one C++ query instead of bounding every piece in numpy
-            for pair in self._pairs(T, np.full(len(every), smallest), True, [g]):
+            pieces = self._candidates(T, g, cell_bounds[g], smallest)
+            for pair in self._pairs(T, np.full(len(every), smallest), True, [g], pieces=pieces):
                 if pair.distance_m < smallest:  # exact below the limit
                     measured[g] = smallest = pair.distance_m
         return measured
+
+    def _candidates(
+        self, T: FloatArray, g: int, cell_bounds: FloatArray, limit_m: float
+    ) -> NDArray[np.intp]:
+        """The pieces that may be the nearest to geometry ``g``, by the coarse hulls' bounds.
+
+        The pieces of the hull with the smallest bound give an upper bound of the distance
+        (a piece's centre lies inside it); only hulls bounded below that, and ``limit_m``, can
+        hold the nearest piece.
+        """
+        members = self._tree.members
+        if not self._other[g]:
+            first = members[int(np.argmin(cell_bounds))]
+            centres, _ = self._placed_pieces(T)
+            limit_m = min(limit_m, float(self._shape_gaps(np.array([g]), centres[first]).min()))
+        cells = np.flatnonzero(cell_bounds <= limit_m)
+        return np.concatenate([members[c] for c in cells]) if len(cells) else cells
 
     def _pairs(
         self,
@@ -488,47 +532,60 @@ class HandObjectClearance:
         nearest_only: bool,
         geometries: Sequence[int],
         stop_below_m: float = -math.inf,
+        pieces: NDArray[np.intp] | None = None,
+        per_link: int | None = None,
     ) -> list[_Pair]:
         """Signed distances of hand geometries to the object pieces that may matter.
 
         The hand is placed (:meth:`_place`), its ``geometries`` posed (:meth:`_pose_links`) and
         the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
         than the geometry's threshold (else some pair at least that far, or none). Otherwise
-        every pair whose bounds come closer than the threshold. The search ends at the first
-        pair closer than ``stop_below_m``.
+        every pair whose bounds come closer than the threshold, or the first ``per_link`` of
+        them found closer than it. The search ends at the first pair closer than
+        ``stop_below_m``. ``pieces``: only these pieces (default: all).
         """
         placements = self._geometry_data.oMg
-        piece_centres = self._piece_centres @ T[:3, :3].T + T[:3, 3]
-        transforms = self._piece_transforms(T)
+        piece_centres, transforms = self._placed_pieces(T)
         out: list[_Pair] = []
         for g in geometries:
             M = placements[g]
             geometry = self._geometry_model.geometryObjects[g].geometry
-            bounds = self._shape_gaps(np.array([g]), [M], piece_centres)[0] - self._piece_radii
-            near = np.flatnonzero(bounds < thresholds[g])  # no other piece can be kept
-            bounds[near] = np.maximum(bounds[near], self._box_gaps(g, near))
+            chosen = self._all_pieces if pieces is None else pieces
+            to_centres = self._shape_gaps(np.array([g]), piece_centres[chosen])[0]
+            bounds = to_centres - self._piece_radii[chosen]
+            limit = thresholds[g]
+            if nearest_only and not self._other[g] and len(chosen):
+                # A piece's centre lies inside it, so the link is no farther from the object
+                # than from the nearest centre: no piece bounded above that can be the nearest.
+                limit = min(limit, float(to_centres.min()))
+            kept = bounds <= limit  # no other piece can be kept
+            near, bounds = chosen[kept], bounds[kept]
+            bounds = np.maximum(bounds, self._box_gaps(g, near))
             at_link = coal.Transform3s(M.rotation, M.translation)
             best: _Pair | None = None
-            for i in near[np.argsort(bounds[near])]:
+            found = 0
+            order = np.argsort(bounds)
+            for i, bound in zip(near[order].tolist(), bounds[order].tolist(), strict=True):
                 limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
-                if bounds[i] >= limit:
+                if bound >= limit:
                     break
                 if transforms[i] is None:
                     transforms[i] = self._shapes[i].transform(T)
-                pair = self._distance(g, geometry, at_link, int(i), transforms[i])
+                pair = self._distance(g, geometry, at_link, i, transforms[i])
                 if pair.distance_m < stop_below_m:
                     return [*out, pair]
                 if nearest_only:
                     best = pair if best is None or pair.distance_m < best.distance_m else best
                 else:
                     out.append(pair)
+                    found += pair.distance_m < thresholds[g]
+                    if per_link is not None and found >= per_link:
+                        break
             if best is not None:
                 out.append(best)
         return out
 
-    def _shape_gaps(
-        self, geometries: NDArray[np.intp], placements: Sequence[pin.SE3], points_m: FloatArray
-    ) -> FloatArray:
+    def _shape_gaps(self, geometries: NDArray[np.intp], points_m: FloatArray) -> FloatArray:
         """Signed distances [m] from hand geometries, placed, to world points: (G, N).
 
         Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
@@ -536,18 +593,17 @@ class HandObjectClearance:
         this minus r from the link, inside as well (its penetration is at most the ball's): a
         much tighter bound than the link's own ball when the pieces are small.
         """
-        R = np.array([M.rotation for M in placements]).reshape(-1, 3, 3)
-        t = np.array([M.translation for M in placements]).reshape(-1, 3)
+        R, t = self._link_R[geometries], self._link_t[geometries]
         local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
-        half = self._half_m[geometries][:, None]
-        excess = np.abs(local) - half  # box (a sphere is a box of no size, rounded)
+        coords = np.abs(local)  # box (a sphere is a box of no size, rounded)
         cylinder = self._cylinder[geometries]
-        if cylinder.any():  # axis z: (radial, axial) excess
-            excess[cylinder, :, 0] = np.hypot(local[cylinder, :, 0], local[cylinder, :, 1])
-            excess[cylinder, :, 0] -= half[cylinder, :, 0]
-            excess[cylinder, :, 1] = np.abs(local[cylinder, :, 2]) - half[cylinder, :, 1]
-            excess[cylinder, :, 2] = -np.inf
-        gaps = np.sqrt(np.square(np.maximum(excess, 0.0)).sum(axis=2))
+        if cylinder.any():  # axis z: (radial, axial); the third half extent is infinite
+            axial = local[cylinder]
+            coords[cylinder, :, 0] = np.hypot(axial[..., 0], axial[..., 1])
+            coords[cylinder, :, 1] = coords[cylinder, :, 2]
+        excess = coords - self._half_m[geometries][:, None]
+        outside = np.maximum(excess, 0.0)
+        gaps = np.sqrt(np.einsum("gni,gni->gn", outside, outside))
         gaps += np.minimum(excess.max(axis=2), 0.0) - self._rounding_m[geometries][:, None]
         other = self._other[geometries]
         if other.any():
@@ -556,6 +612,23 @@ class HandObjectClearance:
                 np.linalg.norm(ball, axis=2) - self._link_radii[geometries[other]][:, None]
             )
         return gaps
+
+    def _link_box_gaps(self, T: FloatArray, boxes_m: FloatArray) -> FloatArray:
+        """Gaps [m] between every hand geometry's box and ``boxes_m`` (K, 2, 3): (G, K).
+
+        Boxes in the object frame at placement ``T``, the links' from their local boxes and
+        their placements at the last :meth:`_place` (no coal call). Disjoint boxes bound the
+        distance from below; overlapping ones bound nothing (-inf).
+        """
+        R_object = T[:3, :3]
+        R = np.matmul(R_object.T, self._link_R)  # link frame -> object frame
+        centres = np.einsum("gij,gj->gi", R, self._link_centres)
+        centres += (self._link_t - T[:3, 3]) @ R_object
+        halves = np.einsum("gij,gj->gi", np.abs(R), self._link_halves)
+        low, high = (centres - halves)[:, None], (centres + halves)[:, None]
+        gaps = np.maximum(low - boxes_m[None, :, 1], boxes_m[None, :, 0] - high)
+        gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=2)
+        return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
         """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
@@ -569,13 +642,17 @@ class HandObjectClearance:
         gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=1)
         return np.where(gaps > 0.0, gaps, -np.inf)
 
-    def _piece_transforms(self, T: FloatArray) -> list[coal.Transform3s | None]:
-        """The pieces' coal transforms at object placement ``T``, built on first use."""
+    def _placed_pieces(self, T: FloatArray) -> tuple[FloatArray, list[coal.Transform3s | None]]:
+        """The pieces' centres (N, 3) in the world and coal transforms (built on first use).
+
+        Kept while the object stays at placement ``T``: every query of a solve reuses them.
+        """
         key = T.tobytes()
         if self._transforms_key != key:
             self._transforms_key = key
+            self._centres_world = self._piece_centres @ T[:3, :3].T + T[:3, 3]
             self._transforms: list[coal.Transform3s | None] = [None] * len(self._shapes)
-        return self._transforms
+        return self._centres_world, self._transforms
 
     def _distance(
         self,

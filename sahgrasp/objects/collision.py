@@ -15,14 +15,23 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
+from typing import Any
 
 import coal
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.objects.frames import FloatArray, transform_points
 
-__all__ = ["COARSE_CELL_M", "CollisionShape", "PieceTree", "convex_hull", "signed_distances"]
+__all__ = [
+    "COARSE_CELL_M",
+    "BuiltOnce",
+    "CollisionShape",
+    "PieceTree",
+    "convex_hull",
+    "signed_distances",
+]
 
 COARSE_CELL_M = 0.02
 """Grid cell [m] of :class:`PieceTree`'s coarse level: the pieces whose centres share a cell are
@@ -47,6 +56,23 @@ class CollisionShape:
         """Return the shape's coal transform in the world, given the object's placement."""
         T = T_world_object @ self.placement
         return coal.Transform3s(T[:3, :3], T[:3, 3])
+
+
+class BuiltOnce:
+    """Mixin of solids whose collision pieces are built once (``functools.cached_property``).
+
+    Coal shapes cannot be pickled, and a solid goes to worker processes as plain data: pickling
+    leaves out every cached property, and the worker builds it again on first use.
+    """
+
+    def __getstate__(self) -> dict[str, Any]:
+        cached = {
+            name
+            for cls in type(self).__mro__
+            for name, value in vars(cls).items()
+            if isinstance(value, cached_property)
+        }
+        return {k: v for k, v in self.__dict__.items() if k not in cached}
 
 
 def convex_hull(points_m: ArrayLike) -> CollisionShape:
@@ -96,10 +122,17 @@ class PieceTree:
         coarse_centres_m: Centre of a ball about each coarse hull, object frame (K, 3) [m].
         coarse_radii_m: Radius of each such ball (K,) [m].
         boxes_m: Each piece's axis-aligned box in the object frame, (N, 2, 3): low, high [m].
+        coarse_boxes_m: Each coarse hull's box in the object frame, (K, 2, 3) [m].
+        cells: The coarse hull holding each piece, (N,).
+        members: The pieces of each coarse hull, in hull order (K arrays of indices).
     """
 
     def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
-        coarse = _coarse_pieces(shapes, cell_m)
+        self.cells = _cells(shapes, cell_m)
+        order = np.argsort(self.cells, kind="stable")
+        splits = np.flatnonzero(np.diff(self.cells[order])) + 1
+        self.members = tuple(np.split(order, splits)) if len(order) else ()
+        coarse = _coarse_pieces(shapes, self.cells)
         # The trees hold raw pointers to the collision objects: keep them (and their shapes).
         self._shapes = (tuple(shapes), tuple(coarse))
         self._objects = tuple([_collision_object(s) for s in level] for level in self._shapes)
@@ -107,6 +140,7 @@ class PieceTree:
         self.coarse_centres_m = np.array([s.placement[:3, 3] for s in coarse]).reshape(-1, 3)
         self.coarse_radii_m = np.array([s.bounding_radius_m for s in coarse])
         self.boxes_m = _boxes(self._objects[0])
+        self.coarse_boxes_m = _boxes(self._objects[1])
         self._callback = coal.CollisionCallBackDefault()
 
     def clear_of(self, link: coal.CollisionObject, threshold_m: float) -> bool:
@@ -154,15 +188,24 @@ def _manager(objects: list[coal.CollisionObject]) -> coal.BroadPhaseCollisionMan
     return manager
 
 
-def _coarse_pieces(shapes: Sequence[CollisionShape], cell_m: float) -> list[CollisionShape]:
+def _cells(shapes: Sequence[CollisionShape], cell_m: float) -> NDArray[np.intp]:
+    """The grid cell of each piece's centre, numbered from 0, (N,)."""
+    if not shapes:
+        return np.zeros(0, dtype=np.intp)
+    centres = np.array([s.placement[:3, 3] for s in shapes])
+    _, cells = np.unique(np.floor(centres / cell_m), axis=0, return_inverse=True)
+    return np.asarray(cells, dtype=np.intp).ravel()
+
+
+def _coarse_pieces(
+    shapes: Sequence[CollisionShape], cells: NDArray[np.intp]
+) -> list[CollisionShape]:
     """One convex hull per grid cell of the pieces' centres, holding that cell's pieces."""
     if not shapes:
         return []
-    centres = np.array([s.placement[:3, 3] for s in shapes])
-    _, cells = np.unique(np.floor(centres / cell_m), axis=0, return_inverse=True)
     out = []
     for cell in range(int(cells.max()) + 1):
-        members = [shapes[int(i)] for i in np.flatnonzero(cells.ravel() == cell)]
+        members = [shapes[int(i)] for i in np.flatnonzero(cells == cell)]
         if len(members) == 1:
             out.append(members[0])
         else:

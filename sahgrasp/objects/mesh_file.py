@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.errors import SahGraspError
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.collision import CollisionShape, convex_hull
+from sahgrasp.objects.collision import BuiltOnce, CollisionShape, convex_hull
 from sahgrasp.objects.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh
 from sahgrasp.objects.patches import Patch
@@ -78,7 +78,7 @@ class MeshFileError(SahGraspError):
 
 
 @dataclass(frozen=True, eq=False)
-class MeshSolid:
+class MeshSolid(BuiltOnce):
     """A closed triangle mesh in the object frame (outward winding), with convex collision pieces.
 
     Attributes:

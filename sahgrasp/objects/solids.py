@@ -14,12 +14,13 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Protocol
 
 import coal
 import numpy as np
 
-from sahgrasp.objects.collision import CollisionShape, convex_hull
+from sahgrasp.objects.collision import BuiltOnce, CollisionShape, convex_hull
 from sahgrasp.objects.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh, tessellate
 from sahgrasp.objects.patches import Patch
@@ -72,7 +73,7 @@ def _identity() -> FloatArray:
 
 
 @dataclass(frozen=True, eq=False)
-class RevolvedSolid:
+class RevolvedSolid(BuiltOnce):
     """A profile revolved about ``z`` over ``angle_range_rad``.
 
     Attributes:
@@ -127,8 +128,13 @@ class RevolvedSolid:
 
         A band touching the axis over a full turn is one convex frustum; any other band is cut
         into angular sectors, each the convex hull of its corners. The cross-section must meet
-        every horizontal line in a single interval.
+        every horizontal line in a single interval. Built once per solid (Qhull per sector:
+        about a second for the coffee cup).
         """
+        return self._shapes
+
+    @cached_property
+    def _shapes(self) -> tuple[CollisionShape, ...]:
         n_sectors = chord_count(self._turn_rad, self._max_radius_m, COLLISION_SAGITTA_M)
         angles = np.linspace(*self.angle_range_rad, n_sectors + 1)
         full_turn = math.isclose(self._turn_rad, _FULL_TURN)
