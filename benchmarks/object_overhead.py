@@ -5,7 +5,7 @@ ring finger free), the CPU time of one solve without and with the object (best o
 rounds of ``--calls`` solves each, both runs interleaved per round so that a change of machine
 load affects both alike), their ratio, and the clearance and closest link the IK reports.
 
-    python tools/object_overhead.py [--repeats 3] [--calls 5]
+    python benchmarks/object_overhead.py [--repeats 3] [--calls 5]
 """
 
 from __future__ import annotations
