@@ -626,6 +626,14 @@ class Hand:
         """Upper limits of ``q[7:]`` [rad]."""
         return np.array(self.model.upperPositionLimit[_WRIST_NQ:], dtype=np.float64)
 
+    @cached_property
+    def bound_tests(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``(lower + 1e-12, upper - 1e-12)`` [rad]: a coordinate beyond one sits at its bound.
+
+        The active-set tests of the IK compare with these every iteration.
+        """
+        return self.lower + 1e-12, self.upper - 1e-12
+
     def check_q(self, q: ArrayLike) -> NDArray[np.float64]:
         """Return ``q`` as a float array, or raise if its size is wrong or it holds NaN/inf."""
         arr = np.asarray(q, dtype=np.float64)
