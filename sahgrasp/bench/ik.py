@@ -91,12 +91,12 @@ def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
         settings = IKSettings(method=method, init=init, seed=seed)
         solvers[f"{method}/{init}"] = lambda t, s=settings: solve_ik(hand, t, s)
     searched = default_sequence(hand)
+    # The sequences alone: Table 1 and the peers are compared from the sequence's starts.
+    auto = IKSettings(init="sequence", seed=seed)
     if searched.source == "search":  # the paper's Table 1 on the same PCA basis, for comparison
         table1 = replace(searched, lambdas=PAPER_TABLE1_LAMBDAS, source="paper-table1")
-        auto = IKSettings(seed=seed)
         solvers["auto/paper-table1"] = lambda t: solve_ik(hand, t, auto, table1)
     if peers:
-        auto = IKSettings(seed=seed)
         for name in peers:
             solvers[f"peer:{name}/sequence"] = lambda t, fn=PEERS[name]: run_algorithm1(
                 hand, t, fn, auto

@@ -77,9 +77,10 @@ class IKSettings:
 
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
-        init: ``"sequence"`` (the offline sequence), ``"random"`` (random lambdas, Fig. 9) or
-            ``"learned"`` (the nearest grasps of a database first, then the sequence; see
-            :mod:`sahgrasp.ik.learned`).
+        init: ``"learned"`` (default: the nearest grasps of a database first, then the
+            sequence; see :mod:`sahgrasp.ik.learned`; the sequence alone for a hand without a
+            database), ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas,
+            Fig. 9).
         learned_starts: With ``init="learned"``, how many database neighbours come first.
         max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
@@ -97,7 +98,7 @@ class IKSettings:
     """
 
     method: Method = "auto"
-    init: Init = "sequence"
+    init: Init = "learned"
     max_inits: int = 12
     learned_starts: int = 2
     max_iterations: int = 100
