@@ -36,7 +36,7 @@ from sahgrasp.ik import (
     default_sequence,
     random_problems,
 )
-from sahgrasp.ik.learned import default_database
+from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, target_key
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
 from sahgrasp.progress import ProgressCallback
 
@@ -81,6 +81,34 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
         "solved_times_ms": sorted(
             float(t) for r, t in zip(results, times_ms, strict=True) if r.success
         ),
+    }
+
+
+def lookup_stats(
+    database: GraspDatabase, hand: Hand, targets: Sequence[Any], k: int
+) -> dict[str, Any]:
+    """The learned start's neighbour search on these targets: approximate against exact.
+
+    Returns the share of the exact ``k`` nearest entries that the approximate query
+    (:data:`~sahgrasp.ik.learned.QUERY_EPS`) finds, and the CPU time per query of each [us].
+    """
+    keys = [target_key(hand, t) for t in targets]
+    keys = [key for key in keys if key is not None]
+    found: dict[float, list[set[int]]] = {}
+    cpu_us: dict[float, float] = {}
+    for eps in (0.0, QUERY_EPS):
+        start = time.process_time()
+        found[eps] = [set(np.atleast_1d(database.tree.query(key, k=k, eps=eps)[1]).tolist())
+                      for key in keys]  # fmt: skip
+        cpu_us[eps] = (time.process_time() - start) / max(len(keys), 1) * 1e6
+    recall = [len(a & b) / k for a, b in zip(found[QUERY_EPS], found[0.0], strict=True)]
+    return {
+        "entries": len(database.features),
+        "k": k,
+        "eps": QUERY_EPS,
+        "recall": float(np.mean(recall)) if recall else None,
+        "exact_query_cpu_us": cpu_us[0.0],
+        "approximate_query_cpu_us": cpu_us[QUERY_EPS],
     }
 
 
@@ -184,6 +212,10 @@ def run(
         "cores": os.cpu_count(),
         "created_unix_s": time.time(),
     }
+    if learned is not None:
+        out["learned_lookup"] = lookup_stats(
+            learned, model, problem_set, IKSettings().learned_starts
+        )
     if plot:
         plot_fig9(out, plot)
         out["plot"] = plot

@@ -45,6 +45,7 @@ __all__ = [
     "build_database",
     "default_database",
     "rigid_features",
+    "target_key",
 ]
 
 FORMAT = "sahgrasp-grasp-db-1"
@@ -125,6 +126,17 @@ def _det3(M: NDArray[np.float64]) -> float:
     return float(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g))
 
 
+def target_key(hand: Hand, target: GraspTarget) -> NDArray[np.float64] | None:
+    """The database key (:func:`rigid_features`) of ``target``; None without every finger."""
+    if set(target.fingers) != set(hand.fingers):
+        return None
+    contacts = [target.contact(f) for f in hand.fingers]
+    points = np.array([c.point for c in contacts])
+    # Target normals point into the fingertips; the features use the fingertips' outward ones.
+    normals = -np.array([c.normal for c in contacts])
+    return np.asarray(rigid_features(points, normals))
+
+
 @dataclass(frozen=True)
 class GraspDatabase:
     """Solved grasps of one hand, looked up by :func:`rigid_features` of their contacts.
@@ -161,16 +173,14 @@ class GraspDatabase:
         Lazy: a start is aligned only when the solver asks for it. Requires a target with a
         contact for every finger of the hand (else: no starts).
         """
-        if count <= 0 or set(target.fingers) != set(hand.fingers):
+        key = target_key(hand, target)
+        if count <= 0 or key is None:
             return
-        contacts = [target.contact(f) for f in hand.fingers]
-        points = np.array([c.point for c in contacts])
-        # Target normals point into the fingertips; the features use the fingertips' outward ones.
-        normals = -np.array([c.normal for c in contacts])
-        key = rigid_features(points, normals)
         _, index = self.tree.query(key, k=min(count, len(self.features)), eps=QUERY_EPS)
+        points = np.array([target.contact(f).point for f in hand.fingers])
+        centres = np.array([target.contact(f).centre(hand.radius_m) for f in hand.fingers])
         # Rows (p_i, r_i) per finger, the order of Hand.contact_stack.
-        goal = np.stack([points, points - hand.radius_m * normals], axis=1).reshape(-1, 3)
+        goal = np.concatenate([points, centres], axis=1).reshape(-1, 3)
         for i in np.atleast_1d(index).tolist():
             yield self._moved(hand, i, goal)
 
