@@ -450,8 +450,7 @@ class HandState:
                 "this hand state has no Jacobians; take it with hand.state(q, jacobians=True)"
             )
         J = self.world_jacobian
-        # v_p = v_o + omega x p = J_lin - [p]x J_ang, on the joints that move the body.
-        return np.asarray(((J[:3] - _skew(point) @ J[3:]) * self._supports[joint]) @ self._reduce)
+        return _point_jacobians(J, self._supports, self._reduce, [joint], point[None])[0]
 
 
 class Hand:
@@ -877,6 +876,26 @@ class Hand:
         """
         return self.collision.in_collision(self._finite(q))
 
+    def separation_rows(
+        self, q: NDArray[np.float64], penetrations: list[Penetration]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Rows ``n^T (J_b(p_b) - J_a(p_a))`` (m, nv) and targets ``depth`` (m,) [m] of the pairs.
+
+        The IK's collision repair asks each penetrating pair's second witness to move away from
+        the first along the separating normal by the pair's depth.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        joints = [p.joint_a for p in penetrations] + [p.joint_b for p in penetrations]
+        points = np.array([p.point_a for p in penetrations] + [p.point_b for p in penetrations])
+        J = _point_jacobians(self.data.J, self._supports, self._reduce, joints, points)
+        m = len(penetrations)
+        normals = np.array([p.normal for p in penetrations])
+        rows = (normals[:, None, :] @ (J[m:] - J[:m]))[:, 0]
+        return rows, np.array([p.depth_m for p in penetrations])
+
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies closer than ``margin_m`` [m] at ``q``, with their witnesses.
 
@@ -924,8 +943,22 @@ _SKEW_BASIS = np.array(
 """``p @ _SKEW_BASIS`` is the flattened cross-product matrix ``[p]x`` of the row vector ``p``."""
 
 
-def _skew(p: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.asarray((p @ _SKEW_BASIS).reshape(3, 3))
+def _point_jacobians(
+    world_jacobian: NDArray[np.float64],
+    supports: NDArray[np.float64],
+    reduce: NDArray[np.float64],
+    joints: list[int],
+    points: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Jacobians (m, 3, nv) [m/rad] of world points ``points`` (m, 3) fixed to ``joints``' bodies.
+
+    ``v_p = v_o + omega x p = J_lin - [p]x J_ang`` on the columns of the joints that move the
+    body (``supports``), mimic columns folded into their leaders (``reduce``): all points in a
+    few batched products (joint 0, the world, has no supporting column: a zero Jacobian).
+    """
+    skews = (points @ _SKEW_BASIS).reshape(-1, 3, 3)
+    moving = (world_jacobian[:3] - skews @ world_jacobian[3:]) * supports[joints][:, None, :]
+    return np.asarray(moving @ reduce)
 
 
 def _placement_selectors(

@@ -32,7 +32,7 @@ from scipy.linalg.lapack import dposv
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import ContactState, Hand, HandState
+from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, default_database
 from sahgrasp.ik.obstacle import Obstacle
@@ -569,9 +569,8 @@ def _separate(
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
-        state = hand.state(q, jacobians=True)
+        rows, depths = hand.separation_rows(q, penetrations)
         stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
-        rows, depths = _separation_rows(state, penetrations)
         J = np.vstack([J_contacts, rows])
         e = np.concatenate([problem.target_stack - stack, depths])
         free = _free_coordinates(hand, q, J.T.dot(e))
@@ -583,23 +582,6 @@ def _separate(
         if history is not None:
             history.append(q.copy())
     return q, s.repair_iterations
-
-
-def _separation_rows(
-    state: HandState, penetrations: list[Penetration]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
-    rows = np.array(
-        [
-            pen.normal
-            @ (
-                state.point_jacobian(pen.joint_b, pen.point_b)
-                - state.point_jacobian(pen.joint_a, pen.point_a)
-            )
-            for pen in penetrations
-        ]
-    )
-    return rows, np.array([pen.depth_m for pen in penetrations])
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
