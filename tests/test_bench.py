@@ -86,6 +86,9 @@ def test_bench_ik_without_pink_runs_the_others(
     assert len(err) == 1 and "pink" in err[0] and '".[bench]"' in err[0]
     table = summary_table(doc)
     assert "auto/sequence" in table and "peer pink skipped" in table
+    learned = doc["runs"]["auto/learned"]
+    assert 0.0 < learned["cpu_median_ms"] <= learned["cpu_p95_ms"]
+    assert learned["cpu_us_per_iteration"] > 0.0
     lookup = doc["learned_lookup"]
     assert (lookup["entries"], lookup["k"]) == (20_000, 2) and 0.0 <= lookup["recall"] <= 1.0
     with pytest.raises(InvalidSettingsError, match="problems"):

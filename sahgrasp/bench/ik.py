@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sahgrasp.bench.peers import PEERS, available_peers
 from sahgrasp.bench.report import progress_reporter
@@ -51,9 +52,19 @@ RUNS: tuple[tuple[Method, Init], ...] = (
 )
 
 
-def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
-    """Fig. 9 statistics of one configuration's results."""
+def summarize(
+    results: Sequence[IKResult], max_inits: int, cpu_s: Sequence[float] | None = None
+) -> dict[str, Any]:
+    """Fig. 9 statistics of one configuration's results.
+
+    Args:
+        results: The configuration's results, one per problem.
+        max_inits: ``i_max`` of the runs (Fig. 9a's x axis).
+        cpu_s: Per problem, the CPU time [s] of the whole ``solve_ik`` call (this process), if
+            measured: unlike the wall time it does not grow with other processes' load.
+    """
     times_ms = np.array([r.time_s for r in results]) * 1e3
+    iterations = max(sum(r.iterations for r in results), 1)
     by_inits = []
     for i in range(1, max_inits + 1):
         solved = [r.success and r.inits_used <= i for r in results]
@@ -74,13 +85,22 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
         "p95_time_ms": float(np.percentile(times_ms, 95)),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
         # All in: the whole solve's time (starts, collision checks) per Jacobian iteration.
-        "us_per_iteration": float(
-            times_ms.sum() * 1e3 / max(sum(r.iterations for r in results), 1)
-        ),
+        "us_per_iteration": float(times_ms.sum() * 1e3 / iterations),
         "by_inits": by_inits,
         "solved_times_ms": sorted(
             float(t) for r, t in zip(results, times_ms, strict=True) if r.success
         ),
+        **({} if cpu_s is None else _cpu_stats(np.asarray(cpu_s) * 1e3, iterations)),
+    }
+
+
+def _cpu_stats(cpu_ms: NDArray[np.float64], iterations: int) -> dict[str, float]:
+    """Median, mean, p95 of the CPU time per problem [ms] and per Jacobian iteration [us]."""
+    return {
+        "cpu_median_ms": float(np.median(cpu_ms)),
+        "cpu_mean_ms": float(cpu_ms.mean()),
+        "cpu_p95_ms": float(np.percentile(cpu_ms, 95)),
+        "cpu_us_per_iteration": float(cpu_ms.sum() * 1e3 / iterations),
     }
 
 
@@ -185,19 +205,22 @@ def run(
     solvers = _solvers(model, seed, peers)
     subset = len(problem_set) if peer_problems is None else peer_problems
     results: dict[str, list[IKResult]] = {label: [] for label in solvers}
+    cpu_s: dict[str, list[float]] = {label: [] for label in solvers}
     load_before = os.getloadavg()
     with progress_reporter(progress, quiet) as report:
         for i, target in enumerate(problem_set):
             for label, solve in solvers.items():
                 if i < subset or not label.startswith("peer:"):
+                    start = time.process_time()
                     results[label].append(solve(target))
+                    cpu_s[label].append(time.process_time() - start)
             if report is not None:
                 report("bench ik: problems", i + 1, len(problem_set))
     max_inits = IKSettings().max_inits
-    runs = {label: summarize(rs, max_inits) for label, rs in results.items()}
+    runs = {label: summarize(rs, max_inits, cpu_s[label]) for label, rs in results.items()}
     if peers:
         runs["auto/sequence (peer subset)"] = summarize(
-            results["auto/sequence"][:subset], max_inits
+            results["auto/sequence"][:subset], max_inits, cpu_s["auto/sequence"][:subset]
         )
     out: dict[str, Any] = {
         "benchmark": "ik",
