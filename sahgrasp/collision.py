@@ -15,6 +15,7 @@ spheres) nothing else is carried between queries.
 
 from __future__ import annotations
 
+import math
 import warnings
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -103,6 +104,9 @@ class SelfCollision:
         # A second set of requests computes contact witnesses, needed only to resolve collisions.
         self._witness_data = stateless_requests(pin.GeometryData(geometry_model))
         self._witness_margin_m: float | None = None
+        # The result objects, listed once: each reads its pair's entry of the (fixed-size)
+        # results vector, and indexing that vector anew costs more than the query (~1 us a pair).
+        self._witness_results = list(self._witness_data.collisionResults)
         self._pair_joints = [
             (int(objects[p.first].parentJoint), int(objects[p.second].parentJoint))
             for p in geometry_model.collisionPairs
@@ -171,7 +175,7 @@ class SelfCollision:
         pin.computeCollisions(model, self.data, geometry, gd, q, False)
         return [
             _penetration(joints, result.getContact(0), margin_m)
-            for joints, result in zip(self._pair_joints, gd.collisionResults, strict=True)
+            for joints, result in zip(self._pair_joints, self._witness_results, strict=True)
             if result.isCollision()
         ]
 
@@ -185,6 +189,6 @@ def _penetration(joints: tuple[int, int], contact: coal.Contact, margin_m: float
         joints[1],
         np.asarray(contact.getNearestPoint1(), dtype=np.float64),
         np.asarray(contact.getNearestPoint2(), dtype=np.float64),
-        normal / max(float(np.linalg.norm(normal)), 1e-12),
+        normal / max(math.sqrt(float(normal.dot(normal))), 1e-12),
         max(-signed, 0.0) + margin_m if signed < 0 else margin_m - signed,
     )

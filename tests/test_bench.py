@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 from sahgrasp.bench import atlas as bench_atlas
@@ -16,7 +17,10 @@ from sahgrasp.bench import ik as bench_ik
 from sahgrasp.bench import kinematics as bench_kinematics
 from sahgrasp.bench.peers import available_peers
 from sahgrasp.bench.report import summary_table
+from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.hand import Hand
+from sahgrasp.ik.learned import default_database
 from sahgrasp.progress import StderrProgress
 from sahgrasp.tables import format_table
 
@@ -82,8 +86,31 @@ def test_bench_ik_without_pink_runs_the_others(
     assert len(err) == 1 and "pink" in err[0] and '".[bench]"' in err[0]
     table = summary_table(doc)
     assert "auto/sequence" in table and "peer pink skipped" in table
+    learned = doc["runs"]["auto/learned"]
+    assert 0.0 < learned["cpu_median_ms"] <= learned["cpu_p95_ms"]
+    assert learned["cpu_us_per_iteration"] > 0.0
+    lookup = doc["learned_lookup"]
+    assert (lookup["entries"], lookup["k"]) == (20_000, 2) and 0.0 <= lookup["recall"] <= 1.0
     with pytest.raises(InvalidSettingsError, match="problems"):
         bench_ik.run(problems=0)
+
+
+def test_lookup_recall_counts_the_exact_neighbours_found(sah: Hand) -> None:
+    database = default_database(sah)
+    assert database is not None
+    # Keys of entries themselves: the exact nearest is the entry, and eps=1 finds it too.
+    targets = [_target_of(sah, database.configurations[i].astype(np.float64)) for i in (0, 7)]
+    assert bench_ik.lookup_stats(database, sah, targets, 1)["recall"] == 1.0
+    free = GraspTarget("three", targets[0].contacts[:3])
+    assert bench_ik.lookup_stats(database, sah, [free], 1)["recall"] is None
+
+
+def _target_of(hand: Hand, q: np.ndarray) -> GraspTarget:
+    state = hand.contact_state(q)
+    return GraspTarget(
+        "entry",
+        [ContactTarget(f, state.points[i], -state.normals[i]) for i, f in enumerate(hand.fingers)],
+    )
 
 
 def test_bench_ik_command_without_pink_exits_cleanly(tmp_path: Path) -> None:

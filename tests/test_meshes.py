@@ -155,7 +155,7 @@ def test_mesh_example_grasp_checked_with_coal(sah: Hand) -> None:
     """The example's grasp, re-checked link by link with coal against the mug's prisms."""
     obj = load_mesh(MESHES / "mug.stl")
     target = _example().side_grasp(obj.solids[0], "mug")
-    result = solve_ik(sah, target)
+    result = solve_ik(sah, target, obstacle=obj)  # as the example solves it
     assert result.success
     gm = sah.collision.geometry_model
     gd = pin.GeometryData(gm)

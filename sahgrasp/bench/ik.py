@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from sahgrasp.bench.peers import PEERS, available_peers
 from sahgrasp.bench.report import progress_reporter
@@ -36,7 +37,7 @@ from sahgrasp.ik import (
     default_sequence,
     random_problems,
 )
-from sahgrasp.ik.learned import default_database
+from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, target_key
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
 from sahgrasp.progress import ProgressCallback
 
@@ -51,9 +52,19 @@ RUNS: tuple[tuple[Method, Init], ...] = (
 )
 
 
-def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
-    """Fig. 9 statistics of one configuration's results."""
+def summarize(
+    results: Sequence[IKResult], max_inits: int, cpu_s: Sequence[float] | None = None
+) -> dict[str, Any]:
+    """Fig. 9 statistics of one configuration's results.
+
+    Args:
+        results: The configuration's results, one per problem.
+        max_inits: ``i_max`` of the runs (Fig. 9a's x axis).
+        cpu_s: Per problem, the CPU time [s] of the whole ``solve_ik`` call (this process), if
+            measured: unlike the wall time it does not grow with other processes' load.
+    """
     times_ms = np.array([r.time_s for r in results]) * 1e3
+    iterations = max(sum(r.iterations for r in results), 1)
     by_inits = []
     for i in range(1, max_inits + 1):
         solved = [r.success and r.inits_used <= i for r in results]
@@ -74,13 +85,50 @@ def summarize(results: Sequence[IKResult], max_inits: int) -> dict[str, Any]:
         "p95_time_ms": float(np.percentile(times_ms, 95)),
         "mean_iterations": float(np.mean([r.iterations for r in results])),
         # All in: the whole solve's time (starts, collision checks) per Jacobian iteration.
-        "us_per_iteration": float(
-            times_ms.sum() * 1e3 / max(sum(r.iterations for r in results), 1)
-        ),
+        "us_per_iteration": float(times_ms.sum() * 1e3 / iterations),
         "by_inits": by_inits,
         "solved_times_ms": sorted(
             float(t) for r, t in zip(results, times_ms, strict=True) if r.success
         ),
+        **({} if cpu_s is None else _cpu_stats(np.asarray(cpu_s) * 1e3, iterations)),
+    }
+
+
+def _cpu_stats(cpu_ms: NDArray[np.float64], iterations: int) -> dict[str, float]:
+    """Median, mean, p95 of the CPU time per problem [ms] and per Jacobian iteration [us]."""
+    return {
+        "cpu_median_ms": float(np.median(cpu_ms)),
+        "cpu_mean_ms": float(cpu_ms.mean()),
+        "cpu_p95_ms": float(np.percentile(cpu_ms, 95)),
+        "cpu_us_per_iteration": float(cpu_ms.sum() * 1e3 / iterations),
+    }
+
+
+def lookup_stats(
+    database: GraspDatabase, hand: Hand, targets: Sequence[Any], k: int
+) -> dict[str, Any]:
+    """The learned start's neighbour search on these targets: approximate against exact.
+
+    Returns the share of the exact ``k`` nearest entries that the approximate query
+    (:data:`~sahgrasp.ik.learned.QUERY_EPS`) finds, and the CPU time per query of each [us].
+    """
+    keys = [target_key(hand, t) for t in targets]
+    keys = [key for key in keys if key is not None]
+    found: dict[float, list[set[int]]] = {}
+    cpu_us: dict[float, float] = {}
+    for eps in (0.0, QUERY_EPS):
+        start = time.process_time()
+        found[eps] = [set(np.atleast_1d(database.tree.query(key, k=k, eps=eps)[1]).tolist())
+                      for key in keys]  # fmt: skip
+        cpu_us[eps] = (time.process_time() - start) / max(len(keys), 1) * 1e6
+    recall = [len(a & b) / k for a, b in zip(found[QUERY_EPS], found[0.0], strict=True)]
+    return {
+        "entries": len(database.features),
+        "k": k,
+        "eps": QUERY_EPS,
+        "recall": float(np.mean(recall)) if recall else None,
+        "exact_query_cpu_us": cpu_us[0.0],
+        "approximate_query_cpu_us": cpu_us[QUERY_EPS],
     }
 
 
@@ -91,12 +139,12 @@ def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
         settings = IKSettings(method=method, init=init, seed=seed)
         solvers[f"{method}/{init}"] = lambda t, s=settings: solve_ik(hand, t, s)
     searched = default_sequence(hand)
+    # The sequences alone: Table 1 and the peers are compared from the sequence's starts.
+    auto = IKSettings(init="sequence", seed=seed)
     if searched.source == "search":  # the paper's Table 1 on the same PCA basis, for comparison
         table1 = replace(searched, lambdas=PAPER_TABLE1_LAMBDAS, source="paper-table1")
-        auto = IKSettings(seed=seed)
         solvers["auto/paper-table1"] = lambda t: solve_ik(hand, t, auto, table1)
     if peers:
-        auto = IKSettings(seed=seed)
         for name in peers:
             solvers[f"peer:{name}/sequence"] = lambda t, fn=PEERS[name]: run_algorithm1(
                 hand, t, fn, auto
@@ -157,19 +205,22 @@ def run(
     solvers = _solvers(model, seed, peers)
     subset = len(problem_set) if peer_problems is None else peer_problems
     results: dict[str, list[IKResult]] = {label: [] for label in solvers}
+    cpu_s: dict[str, list[float]] = {label: [] for label in solvers}
     load_before = os.getloadavg()
     with progress_reporter(progress, quiet) as report:
         for i, target in enumerate(problem_set):
             for label, solve in solvers.items():
                 if i < subset or not label.startswith("peer:"):
+                    start = time.process_time()
                     results[label].append(solve(target))
+                    cpu_s[label].append(time.process_time() - start)
             if report is not None:
                 report("bench ik: problems", i + 1, len(problem_set))
     max_inits = IKSettings().max_inits
-    runs = {label: summarize(rs, max_inits) for label, rs in results.items()}
+    runs = {label: summarize(rs, max_inits, cpu_s[label]) for label, rs in results.items()}
     if peers:
         runs["auto/sequence (peer subset)"] = summarize(
-            results["auto/sequence"][:subset], max_inits
+            results["auto/sequence"][:subset], max_inits, cpu_s["auto/sequence"][:subset]
         )
     out: dict[str, Any] = {
         "benchmark": "ik",
@@ -184,6 +235,10 @@ def run(
         "cores": os.cpu_count(),
         "created_unix_s": time.time(),
     }
+    if learned is not None:
+        out["learned_lookup"] = lookup_stats(
+            learned, model, problem_set, IKSettings().learned_starts
+        )
     if plot:
         plot_fig9(out, plot)
         out["plot"] = plot

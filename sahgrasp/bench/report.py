@@ -36,11 +36,12 @@ def progress_reporter(
 def _ik_table(doc: Document) -> str:
     rows = [
         (label, s["problems"], 100 * s["success_rate"], 100 * s["first_init_success_rate"],
-         s["median_time_ms"], s["p95_time_ms"], s["mean_iterations"])
+         s["median_time_ms"], s["p95_time_ms"], s.get("cpu_median_ms"), s.get("cpu_mean_ms"),
+         s["mean_iterations"])
         for label, s in doc["runs"].items()
     ]  # fmt: skip
     headers = ("run", "problems", "solved [%]", "1st init [%]", "median [ms]", "p95 [ms]",
-               "iterations")  # fmt: skip
+               "CPU median [ms]", "CPU mean [ms]", "iterations")  # fmt: skip
     lines = [f"bench ik: {doc['hand']}, {doc['problems']} problems, seed {doc['seed']}"]
     lines.append(format_table(headers, rows))
     for name, reason in doc.get("skipped_peers", {}).items():

@@ -77,7 +77,9 @@ def run(
 ) -> dict[str, Any]:
     """Time the same search with each worker count; extrapolate to the paper's scale."""
     model = load_hand(hand)
-    settings = SearchSettings(grid, problems, rounds, seed, IKSettings(method=method))
+    settings = SearchSettings(
+        grid, problems, rounds, seed, IKSettings(method=method, init="sequence")
+    )
     rows: dict[str, dict[str, float]] = {}
     for count in workers:
         cpu = _children_cpu_seconds()

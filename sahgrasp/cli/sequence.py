@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
 
     settings = SearchSettings(
         grid=args.grid, problems=args.problems, rounds=args.rounds, seed=args.seed,
-        ik=IKSettings(method=args.method),
+        ik=IKSettings(method=args.method, init="sequence"),
     )  # fmt: skip
     bar = _Bar()
     try:

@@ -57,10 +57,11 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
     p.add_argument(
         "--init",
-        choices=("sequence", "random", "learned"),
-        default="sequence",
-        help="initial configurations: the searched sequence of poses, random ones, or the nearest "
-        "solved grasps of the shipped database followed by the sequence",
+        choices=("learned", "sequence", "random"),
+        default="learned",
+        help="initial configurations: the nearest solved grasps of the shipped database followed "
+        "by the searched sequence of poses (the sequence alone for a hand without a database), "
+        "the sequence alone, or random ones",
     )
     p.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
     p.add_argument(

@@ -96,7 +96,10 @@ def ik_settings(args: argparse.Namespace) -> IKSettings:
     """The IK settings of :func:`add_ik_arguments`'s options."""
     from sahgrasp.ik import IKSettings
 
-    return IKSettings(method=args.method, max_inits=args.inits, max_iterations=args.iterations)
+    # The paper's Algorithm 1: its starts come from the sequence of initial poses.
+    return IKSettings(
+        method=args.method, init="sequence", max_inits=args.inits, max_iterations=args.iterations
+    )
 
 
 def add_html_argument(parser: argparse.ArgumentParser, default: str | None = None) -> None:

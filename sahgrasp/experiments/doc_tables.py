@@ -64,7 +64,7 @@ def _solved(method: Literal["auto", "paper"]) -> dict[str, tuple[bool, int, int]
 
     Each example gets a hand of its own, as each run of ``grasp_paper_object.py`` does.
     """
-    settings = IKSettings(method=method)
+    settings = IKSettings(method=method, init="sequence")  # as grasp_paper_object.py runs it
     out = {}
     for name in EXAMPLE_NAMES:
         result = solve_example(load_hand("sah"), name, settings).result

@@ -14,6 +14,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -33,6 +34,7 @@ __all__ = [
     "PAPER_TABLE1_LAMBDAS",
     "PoseBasis",
     "Sequence",
+    "cross3",
     "default_sequence",
     "expansion_matrix",
     "hang_from_thumb",
@@ -254,13 +256,27 @@ def _default_sequence(digest: str, hand: Hand) -> Sequence:
     return sequence
 
 
+_NEXT, _PREV = [1, 2, 0], [2, 0, 1]
+
+
+def cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a x b`` of 3-vectors (or of stacks of them along the last axis).
+
+    The products of ``np.cross`` without its Python wrapper, which costs about ten times the
+    arithmetic on 3-vectors (docs/ik.md, "Where the time goes").
+    """
+    return np.asarray(a[..., _NEXT] * b[..., _PREV] - a[..., _PREV] * b[..., _NEXT])
+
+
 def rotation_aligning_x(direction: NDArray[np.float64]) -> NDArray[np.float64]:
     """A rotation matrix whose x axis is the unit vector ``direction``."""
-    x = direction / np.linalg.norm(direction)
-    helper = np.array([1.0, 0.0, 0.0]) if abs(x[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    y = np.cross(x, helper)
-    y /= np.linalg.norm(y)
-    return np.column_stack([x, y, np.cross(x, y)])
+    x = direction / math.sqrt(float(direction.dot(direction)))
+    y = cross3(x, _X_AXIS if abs(x[0]) < 0.9 else _Y_AXIS)
+    y /= math.sqrt(float(y.dot(y)))
+    return np.array([x, y, cross3(x, y)]).T
+
+
+_X_AXIS, _Y_AXIS = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
 
 
 def hang_from_thumb(
@@ -311,7 +327,7 @@ def _best_psi(
     v1 = target.contact(last).point - target.contact(first).point
     axis = R_align[:, 0]
     v1p, v2p = v1 - (v1 @ axis) * axis, v2 - (v2 @ axis) * axis
-    return float(np.arctan2(axis @ np.cross(v2p, v1p), v2p @ v1p))
+    return math.atan2(float(axis @ cross3(v2p, v1p)), float(v2p @ v1p))
 
 
 def _rot_x(angle: float) -> NDArray[np.float64]:

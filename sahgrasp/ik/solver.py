@@ -22,6 +22,7 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
@@ -31,7 +32,7 @@ from scipy.linalg.lapack import dposv
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import ContactState, Hand, HandState
+from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, default_database
 from sahgrasp.ik.obstacle import Obstacle
@@ -76,9 +77,10 @@ class IKSettings:
 
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
-        init: ``"sequence"`` (the offline sequence), ``"random"`` (random lambdas, Fig. 9) or
-            ``"learned"`` (the nearest grasps of a database first, then the sequence; see
-            :mod:`sahgrasp.ik.learned`).
+        init: ``"learned"`` (default: the nearest grasps of a database first, then the
+            sequence; see :mod:`sahgrasp.ik.learned`; the sequence alone for a hand without a
+            database), ``"sequence"`` (the offline sequence) or ``"random"`` (random lambdas,
+            Fig. 9).
         learned_starts: With ``init="learned"``, how many database neighbours come first.
         max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
         max_iterations: ``k_max``, Jacobian iterations per initial configuration.
@@ -96,7 +98,7 @@ class IKSettings:
     """
 
     method: Method = "auto"
-    init: Init = "sequence"
+    init: Init = "learned"
     max_inits: int = 12
     learned_starts: int = 2
     max_iterations: int = 100
@@ -269,10 +271,13 @@ class ContactProblem:
         self.points = np.array([c.point for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
         # The targets in the order of Hand.contact_stack: (p_i*, r_i*) per constrained finger.
-        self.target_stack = np.stack([self.points, self.centres], axis=1).ravel()
+        self.target_stack = np.concatenate([self.points, self.centres], axis=1).ravel()
         self.obstacle = (
             None if obstacle is None else Obstacle(hand, obstacle, self.fingers, allowance_m)
         )
+        # The last configuration checked and its verdict: the inner solver checks a converged
+        # start and the outer loop checks it again (Step 8); the second check is free.
+        self._checked: tuple[bytes, Literal["collision", "object_collision"] | None] | None = None
 
     def collision(self, q: NDArray[np.float64]) -> Literal["collision", "object_collision"] | None:
         """Why ``q`` is rejected, None if it is not.
@@ -281,9 +286,16 @@ class ContactProblem:
         itself: the collision repair often trades one for the other, and the object is the reason
         the problem has no solution.
         """
+        key = q.tobytes()
+        if self._checked is not None and self._checked[0] == key:
+            return self._checked[1]
+        verdict: Literal["collision", "object_collision"] | None = None
         if self.obstacle is not None and self.obstacle.penetrated(q):
-            return "object_collision"
-        return "collision" if self.hand.in_collision(q) else None
+            verdict = "object_collision"
+        elif self.hand.in_collision(q):
+            verdict = "collision"
+        self._checked = (key, verdict)
+        return verdict
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies, and links and the obstacle, closer than ``margin_m`` [m]."""
@@ -458,14 +470,13 @@ def _free_coordinates(
     """Active set: coordinates at a bound that the descent direction pushes outwards are fixed.
 
     Returns the mask of the free coordinates, or None when every coordinate is free (the usual
-    case, which then needs no column selection).
+    case, which then needs no column selection). A coordinate is fixed when it sits at its lower
+    bound with ``g < 0`` or at its upper bound with ``g > 0``: one product of signs and flags
+    (numpy's fixed cost per call, not the arithmetic, is what an iteration pays for).
     """
-    x = hand.finger_part(q)
-    low, high = x <= hand.lower + 1e-12, x >= hand.upper - 1e-12
-    if not (low.any() or high.any()):  # the usual case: no coordinate at a bound
-        return None
-    g = gradient[6:]
-    fixed = (low & (g < 0)) | (high & (g > 0))
+    x, g = hand.finger_part(q), gradient[6:]
+    at_lower, at_upper = hand.bound_tests
+    fixed = ((x <= at_lower) & (g < 0.0)) | ((x >= at_upper) & (g > 0.0))
     if not fixed.any():
         return None
     free = np.ones(hand.nv, dtype=bool)
@@ -478,7 +489,8 @@ def _clamped_step(
 ) -> NDArray[np.float64]:
     candidate = hand.integrate(q, step)
     joints = hand.finger_part(candidate)
-    np.clip(joints, hand.lower, hand.upper, out=joints)
+    # np.clip's Python wrapper costs several times these two ufuncs.
+    np.minimum(np.maximum(joints, hand.lower, out=joints), hand.upper, out=joints)
     return candidate
 
 
@@ -486,10 +498,17 @@ def _damped_solve(
     A: NDArray[np.float64], g: NDArray[np.float64], mu: float
 ) -> NDArray[np.float64] | None:
     """``(A + mu I)^-1 g`` by Cholesky (LAPACK ``dposv``); None if not positive definite."""
-    damped = A.copy()
-    damped.flat[:: len(A) + 1] += mu
+    damped = A + mu * _identity(len(A))
     _, x, info = dposv(damped, g, overwrite_a=True)
     return None if info != 0 else np.asarray(x)
+
+
+@lru_cache(maxsize=8)
+def _identity(n: int) -> NDArray[np.float64]:
+    """The n x n identity, built once per size (the damping adds ``mu I`` every step)."""
+    identity = np.eye(n)
+    identity.flags.writeable = False
+    return identity
 
 
 def _full_step(
@@ -550,9 +569,8 @@ def _separate(
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
-        state = hand.state(q, jacobians=True)
+        rows, depths = hand.separation_rows(q, penetrations)
         stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
-        rows, depths = _separation_rows(state, penetrations)
         J = np.vstack([J_contacts, rows])
         e = np.concatenate([problem.target_stack - stack, depths])
         free = _free_coordinates(hand, q, J.T.dot(e))
@@ -564,23 +582,6 @@ def _separate(
         if history is not None:
             history.append(q.copy())
     return q, s.repair_iterations
-
-
-def _separation_rows(
-    state: HandState, penetrations: list[Penetration]
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Rows ``n^T (J_b(p_b) - J_a(p_a))`` and targets ``depth`` of the penetrating pairs."""
-    rows = np.array(
-        [
-            pen.normal
-            @ (
-                state.point_jacobian(pen.joint_b, pen.point_b)
-                - state.point_jacobian(pen.joint_a, pen.point_a)
-            )
-            for pen in penetrations
-        ]
-    )
-    return rows, np.array([pen.depth_m for pen in penetrations])
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]

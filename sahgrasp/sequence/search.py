@@ -25,7 +25,7 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, Future, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -67,21 +67,24 @@ class SearchSettings:
         rounds: ``i_max``, length of the sequence.
         seed: Seed of the random-problem stream.
         ik: Solver settings of Algorithm 1 (``method`` included); ``max_inits`` is set by the
-            search, ``init`` must be ``"sequence"``.
+            search and so is ``init``, to ``"sequence"``: the search evaluates the sequence
+            itself, so the learned start (the solver's default) must not stand in front of it.
+            ``init="random"`` is refused.
     """
 
     grid: int = 10
     problems: int = 300
     rounds: int = 12
     seed: int = 0
-    ik: IKSettings = field(default_factory=IKSettings)
+    ik: IKSettings = field(default_factory=lambda: IKSettings(init="sequence"))
 
     def __post_init__(self) -> None:
         for name, lower in (("grid", 2), ("problems", 1), ("rounds", 1)):
             if int(getattr(self, name)) < lower:
                 raise InvalidSettingsError(f"{name} must be >= {lower}, got {getattr(self, name)}")
-        if self.ik.init != "sequence":
+        if self.ik.init == "random":
             raise InvalidSettingsError("the search evaluates initial poses: ik.init = 'sequence'")
+        object.__setattr__(self, "ik", replace(self.ik, init="sequence"))
 
     @property
     def method(self) -> str:

@@ -94,7 +94,8 @@ def solve_chunk(chunk: Chunk) -> ChunkResult:
     start = time.perf_counter()
     hand = worker_hand(chunk.description, chunk.hand_digest)
     sequence = Sequence(chunk.description.name, chunk.hand_digest, chunk.basis, chunk.lambdas)
-    settings = replace(chunk.ik, max_inits=len(chunk.lambdas))
+    # The cells' lambdas alone: no learned start in front of the poses being evaluated.
+    settings = replace(chunk.ik, init="sequence", max_inits=len(chunk.lambdas))
     results = [
         solve_ik(hand, _problem(hand, chunk.hand_digest, chunk.seed, i), settings, sequence)
         for i in chunk.problems
