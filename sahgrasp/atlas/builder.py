@@ -165,7 +165,9 @@ class _Builder:
         found = self.index.query(self.X, j0, new, 2 * self.r)
         gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
         close = (gap * gap).sum(axis=2) < 4 * self.r**2
-        lists = [np.concatenate((f, j0 + np.flatnonzero(close[q, :q]))) for q, f in enumerate(found)]
+        lists = [
+            np.concatenate((f, j0 + np.flatnonzero(close[q, :q]))) for q, f in enumerate(found)
+        ]
         self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
         sizes = [len(nbrs) for nbrs in lists]
         owner = np.repeat(np.arange(len(points)), sizes)
@@ -197,7 +199,9 @@ class _Builder:
                 )
             )
             self.count = j0 + q + 1
-            planes = zip(chart_nbrs[give].tolist(), Uc[rows][give].tolist(), Bc[rows][give].tolist())
+            planes = zip(
+                chart_nbrs[give].tolist(), Uc[rows][give].tolist(), Bc[rows][give].tolist()
+            )
             for c, a, b in planes:
                 self._give_plane(c, a, b)
             self._enqueue(self.count - 1)
@@ -363,7 +367,9 @@ class _Builder:
         One whose picked vertex the plane of an earlier accepted one would cut off (as
         :meth:`add_charts` would cut its chart's polytope) is left out: its chart stays queued.
         """
-        parents = np.array([wave.picks[p][0] for p in ok.tolist()])
+        if ok.size == 0:
+            return []
+        parents = np.array([wave.picks[p][0] for p in ok.tolist()], dtype=np.int64)
         phi = self.PHI[parents]
         diff = wave.x[ok][:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
         Uc = np.einsum("pqn,qnk->pqk", diff, phi)

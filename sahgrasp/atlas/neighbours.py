@@ -30,7 +30,9 @@ class NeighbourIndex:
         if self._tree is None:
             return tails
         found = self._tree.query_ball_point(xs, radius, return_sorted=False)
-        return [np.concatenate((np.asarray(f, np.int64), t)) for f, t in zip(found, tails, strict=True)]
+        return [
+            np.concatenate((np.asarray(f, np.int64), t)) for f, t in zip(found, tails, strict=True)
+        ]
 
     def added(self, points: FloatArray, count: int) -> None:
         """Note that ``count`` points exist; rebuild the tree when the unindexed tail is long."""
