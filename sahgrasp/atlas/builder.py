@@ -199,10 +199,8 @@ class _Builder:
                 )
             )
             self.count = j0 + q + 1
-            planes = zip(
-                chart_nbrs[give].tolist(), Uc[rows][give].tolist(), Bc[rows][give].tolist()
-            )
-            for c, a, b in planes:
+            targets, normals = chart_nbrs[give].tolist(), Uc[rows][give].tolist()
+            for c, a, b in zip(targets, normals, Bc[rows][give].tolist(), strict=True):
                 self._give_plane(c, a, b)
             self._enqueue(self.count - 1)
         self.index.added(self.X, self.count)

@@ -22,8 +22,10 @@ class NeighbourIndex:
     def query(
         self, points: FloatArray, count: int, xs: FloatArray, radius: float
     ) -> list[IndexArray]:
-        """For each row of ``xs`` (A, n), the indices ``< count`` of ``points`` closer than
-        ``radius`` to it (the k-d tree answers for all rows in one call)."""
+        """Per row of ``xs`` (A, n): indices ``< count`` of ``points`` closer than ``radius``.
+
+        The k-d tree answers for all rows in one call; the unindexed tail is scanned directly.
+        """
         pending = points[self._n_tree : count][None] - xs[:, None]
         close = (pending * pending).sum(axis=2) < radius**2
         tails = [self._n_tree + np.flatnonzero(row) for row in close]

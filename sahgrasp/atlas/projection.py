@@ -130,7 +130,8 @@ def regular_point(J: Function, x: FloatArray, k: int, scale: float = 0.0) -> Poi
 def _solve_stack(A: FloatArray, b: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """``A x = b`` for a stack (B, n, n); rows whose matrix is singular get ``ok = False``."""
     try:
-        return np.linalg.solve(A, b[..., None])[..., 0], np.ones(len(A), dtype=bool)
+        x = np.asarray(np.linalg.solve(A, b[..., None])[..., 0], dtype=np.float64)
+        return x, np.ones(len(A), dtype=bool)
     except np.linalg.LinAlgError:  # one singular matrix fails the stack: solve row by row
         out, ok = np.zeros_like(b), np.ones(len(A), dtype=bool)
         for row, (a, rhs) in enumerate(zip(A, b, strict=True)):
