@@ -47,7 +47,6 @@ class _Wave:
     Attributes:
         picks: ``(chart, vertex index)`` pairs, oldest chart first.
         vertices: The picked vertices (a later cut may renumber them).
-        snapshots: Each polytope's vertex list when picked (a cut replaces the list).
         directions: Unit vectors towards the vertices, shape (B, k).
         x: Projected candidates, shape (B, n).
         outcome: Per pick one of the ``_OK``, ``_NEWTON``, ... codes below.
@@ -58,7 +57,6 @@ class _Wave:
 
     picks: list[tuple[int, int]]
     vertices: list[tuple[float, ...]]
-    snapshots: list[list[tuple[float, ...]]]
     directions: FloatArray
     x: FloatArray
     outcome: IndexArray
@@ -356,8 +354,7 @@ class _Builder:
             phi[good], sign[good] = phi_g, sign_g
             parent_sign = np.array([self.charts[i].sign for i in rows[good].tolist()])
             crossed[good] = crossing_signs(phi_i[good], phi_g, sign_g) != parent_sign
-        snapshots = [p.verts for p in polys]
-        return _Wave(picks, vertices, snapshots, directions, x, outcome, phi, sign, crossed)
+        return _Wave(picks, vertices, directions, x, outcome, phi, sign, crossed)
 
     def _compatible(self, wave: _Wave, ok: IndexArray) -> list[int]:
         """The successful first tries ``ok`` that can all be added, in order.
@@ -386,6 +383,15 @@ class _Builder:
                 accepted.append(q)
         return ok[accepted].tolist()
 
+    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
+        """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
+
+        A new chart's plane may have cut it off or created a nearer exterior vertex.
+        """
+        poly = self._polytope(i)
+        v = poly.expandable(self.r**2)
+        return v if v >= 0 and poly.verts[v] == vertex else -1
+
     def _run_wave(self, progress: ProgressCallback | None) -> None:
         """Expand a wave of up to ``batch`` charts: first tries and new charts stacked.
 
@@ -408,14 +414,14 @@ class _Builder:
             self.add_charts(points, [picks[p][0] for p in added])
             if progress is not None:
                 progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
-        r2, c = self.r**2, self.counters
+        c = self.counters
         for p in np.flatnonzero(wave.outcome != _OK).tolist():
-            i, v = picks[p]
-            poly, vertex = self._polytope(i), wave.vertices[p]
-            if poly.verts is not wave.snapshots[p]:  # cut since it was picked
-                v = poly.expandable(r2)
-                if v < 0 or poly.verts[v] != vertex:
-                    continue
+            i = picks[p][0]
+            v = self._still_picked(i, wave.vertices[p])
+            if v < 0:
+                continue
+            poly = self._polytope(i)
+            vertex = poly.verts[v]
             outcome = int(wave.outcome[p])
             if outcome == _NEWTON:
                 c.newton_failures += 1
