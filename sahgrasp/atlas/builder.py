@@ -14,7 +14,17 @@ from sahgrasp.atlas.checks import check_bounds, start_point
 from sahgrasp.atlas.model import Atlas, AtlasSettings, FloatArray, Function, IndexArray
 from sahgrasp.atlas.neighbours import NeighbourIndex
 from sahgrasp.atlas.polytope import CUT_TOL, Polytope
-from sahgrasp.atlas.projection import Point, crossing_sign, min_cosine, project, regular_point
+from sahgrasp.atlas.projection import (
+    Point,
+    crossing_sign,
+    crossing_signs,
+    min_cosine,
+    min_cosines,
+    project,
+    project_many,
+    regular_point,
+    tangent_many,
+)
 from sahgrasp.errors import AtlasError
 from sahgrasp.progress import ProgressCallback, StderrProgress
 
@@ -23,6 +33,39 @@ __all__ = ["build_atlas"]
 _SHRINK = 0.9  # Algorithm 1, line 11: alpha <- 0.9 alpha
 _BISECTIONS = 40  # steps to locate a branch crossing along a chart's parameter ray
 _PROGRESS_STAGE = "atlas charts"
+
+
+def _rowwise(f: Function) -> Function:
+    """``f`` of one point applied to each row of a stack of points."""
+    return lambda X: np.array([f(x) for x in X])
+
+
+@dataclass(frozen=True)
+class _Wave:
+    """The first try (step ``alpha = r``) of every chart of a wave, computed in stacked calls.
+
+    Attributes:
+        picks: ``(chart, vertex index)`` pairs, oldest chart first.
+        vertices: The picked vertices (a later cut may renumber them).
+        directions: Unit vectors towards the vertices, shape (B, k).
+        x: Projected candidates, shape (B, n).
+        outcome: Per pick one of the ``_OK``, ``_NEWTON``, ... codes below.
+        phi: Tangent bases at the candidates (rows of accepted ones only), shape (B, n, k).
+        sign: ``sign(det([J; phi^T]))`` there, shape (B,).
+        crossed: The sign changed from the parent's (a branch crossing), shape (B,).
+    """
+
+    picks: list[tuple[int, int]]
+    vertices: list[tuple[float, ...]]
+    directions: FloatArray
+    x: FloatArray
+    outcome: IndexArray
+    phi: FloatArray
+    sign: FloatArray
+    crossed: NDArray[np.bool_]
+
+
+_OK, _NEWTON, _FAR, _OUTSIDE, _SINGULAR, _TURNED = range(6)  # outcomes of a wave's first try
 
 
 @dataclass
@@ -73,8 +116,11 @@ class _Builder:
         bounds: tuple[FloatArray, FloatArray],
         scale: float,
         settings: AtlasSettings,
+        stacked: bool = False,
     ) -> None:
         self.F, self.J, self.k, self.settings = F, J, k, settings
+        self.F_many = F if stacked else _rowwise(F)
+        self.J_many = J if stacked else _rowwise(J)
         self.lower, self.upper = bounds
         self.scale = scale  # size of J at the start, for the rank test of single equations
         self.bounded = bool((np.isfinite(self.lower) | np.isfinite(self.upper)).any())
@@ -100,43 +146,72 @@ class _Builder:
             setattr(self, name, new)
 
     def add_chart(self, point: Point, parent: int) -> None:
-        """Add a chart at ``point``; give it and each neighbour the other's plane (Fig. 6b)."""
-        x, phi = point.x, point.phi
-        if self.count == self.X.shape[0]:
+        """Add one chart (see :meth:`add_charts`)."""
+        self.add_charts([point], [parent])
+
+    def add_charts(self, points: list[Point], parents: list[int]) -> None:
+        """Add charts at ``points``, in order; give each and each neighbour the other's plane.
+
+        Neighbour search, the branch test and the planes (Fig. 6b) are computed for all new charts
+        at once; the planes then cut the neighbours' polytopes one by one, chart after chart.
+        """
+        while self.count + len(points) > self.X.shape[0]:
             self._grow()
-        j = self.count
-        nbrs = self.index.query(self.X, j, x, 2 * self.r)
-        bases = self.PHI[nbrs]
-        similar = self._similar(bases, phi)
-        if not similar.all():
-            nbrs, bases = nbrs[similar], bases[similar]
-        diff = x - self.X[nbrs]
+        j0 = self.count
+        new = np.array([p.x for p in points])
+        phis = np.array([p.phi for p in points])
+        found = self.index.query(self.X, j0, new, 2 * self.r)
+        gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
+        close = (gap * gap).sum(axis=2) < 4 * self.r**2
+        lists = [
+            np.concatenate((f, j0 + np.flatnonzero(close[q, :q]))) for q, f in enumerate(found)
+        ]
+        self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
+        sizes = [len(nbrs) for nbrs in lists]
+        owner = np.repeat(np.arange(len(points)), sizes)
+        nbrs = np.concatenate(lists).astype(np.int64)
+        bases, own = self.PHI[nbrs], phis[owner]
+        similar = self._similar(bases, own)
+        diff = new[owner] - self.X[nbrs]
         # Neighbour centres in each chart's parameters; the sphere |w| = r and the sphere of
         # radius r around u meet on the plane u . w = |u|^2 / 2. (matmul: einsum costs twice as
         # much per call on these small stacks.)
-        U = -diff @ phi
+        U = -np.matmul(diff[:, None, :], own)[:, 0]
         Uc = np.matmul(diff[:, None, :], bases)[:, 0]
         B = 0.5 * (U * U).sum(axis=1)
         Bc = 0.5 * (Uc * Uc).sum(axis=1)
-        far = self.tol * self.r < B  # a neighbour straight along the normal gives no plane
-        self.X[j], self.PHI[j] = x, phi
-        self.charts.append(_Chart(point.sign, parent, nbrs, U[far].tolist(), B[far].tolist()))
-        self.count = j + 1
-        self.index.added(self.X, self.count)
-        for c, a, b in zip(nbrs.tolist(), Uc.tolist(), Bc.tolist(), strict=True):
-            if b > self.tol * self.r:
+        small = self.tol * self.r  # a neighbour straight along the normal gives no plane
+        mine, theirs = similar & (small < B), similar & (small < Bc)
+        ends = np.cumsum(sizes).tolist()
+        for q, (point, parent) in enumerate(zip(points, parents, strict=True)):
+            rows = slice(ends[q] - sizes[q], ends[q])
+            own_rows, give = mine[rows], theirs[rows]
+            chart_nbrs = nbrs[rows]
+            self.charts.append(
+                _Chart(
+                    point.sign,
+                    parent,
+                    chart_nbrs[similar[rows]],
+                    U[rows][own_rows].tolist(),
+                    B[rows][own_rows].tolist(),
+                )
+            )
+            self.count = j0 + q + 1
+            targets, normals = chart_nbrs[give].tolist(), Uc[rows][give].tolist()
+            for c, a, b in zip(targets, normals, Bc[rows][give].tolist(), strict=True):
                 self._give_plane(c, a, b)
-        self._enqueue(j)
+            self._enqueue(self.count - 1)
+        self.index.added(self.X, self.count)
 
-    def _similar(self, bases: FloatArray, phi: FloatArray) -> NDArray[np.bool_]:
-        """Which of the tangent bases ``bases`` (q, n, k) are close enough to ``phi``.
+    def _similar(self, bases: FloatArray, phis: FloatArray) -> NDArray[np.bool_]:
+        """Which of the tangent bases ``bases`` (q, n, k) are close enough to ``phis`` (q, n, k).
 
         Eq. (18) lets a chart turn by ``theta = acos(1 - epsilon)`` from its parent at distance
         ``r``; neighbours (distance < 2r) turned by more than ``2 theta`` lie on another branch (a
         crossing, a cone's apex) and must not bound each other, so that the continuation passes
         through. ``|M|_F^2 - (k - 1)`` bounds the squared smallest singular value of M from below.
         """
-        M = np.matmul(phi.T, bases)  # (q, k, k): phi^T Phi_c, the transpose has the same norms
+        M = np.matmul(phis.transpose(0, 2, 1), bases)  # (q, k, k): phi^T Phi_c
         threshold = max(2.0 * (1.0 - self.settings.epsilon) ** 2 - 1.0, 0.0) ** 2  # cos(2 theta)^2
         unsure = (M * M).sum(axis=(1, 2)) - (self.k - 1) < threshold
         if unsure.any():
@@ -186,6 +261,9 @@ class _Builder:
         if progress is not None:
             progress(_PROGRESS_STAGE, self.count, cap)
         while self.queue and self.count < cap:
+            if self.settings.batch > 1:
+                self._run_wave(progress)
+                continue
             i = self.queue[0]
             v = self._polytope(i).expandable(r2)
             if v < 0:
@@ -195,16 +273,18 @@ class _Builder:
             if self.expand(i, v) and progress is not None:
                 progress(_PROGRESS_STAGE, self.count, cap)
 
-    def expand(self, i: int, v: int) -> bool:
+    def expand(self, i: int, v: int, alpha: float | None = None) -> bool:
         """Try to create a chart from vertex ``v`` of chart ``i`` (Algorithm 1, lines 7-13).
 
-        Returns True when a chart was added. Otherwise either a box bound the candidates crossed
-        cut ``v`` off, or ``v`` is blocked after every step down to ``min_step * r`` failed.
+        ``alpha`` is the first step (``r`` when None; a wave passes ``0.9 r`` after its own
+        try at ``r`` failed). Returns True when a chart was added. Otherwise either a box bound
+        the candidates crossed cut ``v`` off, or ``v`` is blocked after every step down to
+        ``min_step * r`` failed.
         """
         poly = self._polytope(i)
         vertex = poly.verts[v]
         direction = np.array(vertex) / np.sqrt(poly.norm2[v])
-        alpha = self.r
+        alpha = self.r if alpha is None else alpha
         while alpha >= self.settings.min_step * self.r:
             x_tilde = self.X[i] + self.PHI[i] @ (alpha * direction)  # Eqs. (14), (16)
             x_j = self._project(i, x_tilde)
@@ -222,6 +302,139 @@ class _Builder:
         poly.blocked[v] = True
         self.charts[i].boundary = True
         return False
+
+    # -- expanding a wave of charts ------------------------------------------------------------
+
+    def _pick(self) -> list[tuple[int, int]]:
+        """Up to ``batch`` queued charts with an expandable vertex, oldest first, and the vertex.
+
+        Charts without one leave the queue, as they do at its head in one-chart expansion.
+        """
+        r2, queue = self.r**2, self.queue
+        room = min(self.settings.batch, self.settings.max_charts - self.count)
+        picks: list[tuple[int, int]] = []
+        while queue and len(picks) < room:
+            i = queue.popleft()
+            v = self._polytope(i).expandable(r2)
+            if v < 0:
+                self.charts[i].queued = False
+            else:
+                picks.append((i, v))
+        queue.extendleft(reversed([i for i, _ in picks]))
+        return picks
+
+    def _first_try(self, picks: list[tuple[int, int]]) -> _Wave:
+        """Eqs. (14)-(18) at step ``r`` for every pick at once: stacked Newton, QR and SVD."""
+        s = self.settings
+        rows = np.array([i for i, _ in picks])
+        polys = [self._polytope(i) for i in rows.tolist()]
+        vertices = [p.verts[v] for p, (_, v) in zip(polys, picks, strict=True)]
+        norms = np.sqrt([p.norm2[v] for p, (_, v) in zip(polys, picks, strict=True)])
+        directions = np.array(vertices) / norms[:, None]
+        phi_i = self.PHI[rows]
+        x_tilde = self.X[rows] + np.matmul(phi_i, self.r * directions[:, :, None])[:, :, 0]
+        x, converged = project_many(
+            self.F_many, self.J_many, x_tilde, phi_i, s.newton_tol, s.newton_max_iter
+        )
+        outcome = np.where(converged, _OK, _NEWTON)
+        dx = x - x_tilde
+        outcome[(outcome == _OK) & ((dx * dx).sum(axis=1) > s.epsilon**2)] = _FAR  # Eq. (17)
+        if self.bounded:
+            outside = ((x < self.lower) | (x > self.upper)).any(axis=1)
+            outcome[(outcome == _OK) & outside] = _OUTSIDE
+        phi = np.zeros_like(phi_i)
+        sign = np.ones(len(picks))
+        crossed = np.zeros(len(picks), dtype=bool)
+        good = np.flatnonzero(outcome == _OK)
+        if good.size:
+            phi_g, sign_g, regular = tangent_many(self.J_many(x[good]), self.k, self.scale)
+            turned = min_cosines(phi_i[good], phi_g) < 1.0 - s.epsilon  # Eq. (18)
+            outcome[good[turned]] = _TURNED
+            outcome[good[~regular]] = _SINGULAR
+            phi[good], sign[good] = phi_g, sign_g
+            parent_sign = np.array([self.charts[i].sign for i in rows[good].tolist()])
+            crossed[good] = crossing_signs(phi_i[good], phi_g, sign_g) != parent_sign
+        return _Wave(picks, vertices, directions, x, outcome, phi, sign, crossed)
+
+    def _compatible(self, wave: _Wave, ok: IndexArray) -> list[int]:
+        """The successful first tries ``ok`` that can all be added, in order.
+
+        One whose picked vertex the plane of an earlier accepted one would cut off (as
+        :meth:`add_charts` would cut its chart's polytope) is left out: its chart stays queued.
+        """
+        if ok.size == 0:
+            return []
+        parents = np.array([wave.picks[p][0] for p in ok.tolist()], dtype=np.int64)
+        phi = self.PHI[parents]
+        diff = wave.x[ok][:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
+        Uc = np.einsum("pqn,qnk->pqk", diff, phi)
+        Bc = 0.5 * (Uc * Uc).sum(axis=2)
+        vertices = np.array([wave.vertices[p] for p in ok.tolist()])
+        cut = (diff * diff).sum(axis=2) < 4 * self.r**2
+        cut &= (self.tol * self.r < Bc) & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
+        np.fill_diagonal(cut, False)
+        p_idx, q_idx = np.nonzero(cut)
+        if p_idx.size:  # the branch test of add_charts, only where a cut would happen
+            alike = self._similar(phi[q_idx], wave.phi[ok][p_idx])
+            cut[p_idx[~alike], q_idx[~alike]] = False
+        accepted: list[int] = []
+        for q, column in enumerate(cut.T.tolist()):
+            if not any(column[p] for p in accepted):
+                accepted.append(q)
+        return ok[accepted].tolist()
+
+    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
+        """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
+
+        A new chart's plane may have cut it off or created a nearer exterior vertex.
+        """
+        poly = self._polytope(i)
+        v = poly.expandable(self.r**2)
+        return v if v >= 0 and poly.verts[v] == vertex else -1
+
+    def _run_wave(self, progress: ProgressCallback | None) -> None:
+        """Expand a wave of up to ``batch`` charts: first tries and new charts stacked.
+
+        The successful first tries that do not cut off each other's vertex are added at once,
+        so the atlas is the one-chart atlas of another expansion order: covering and
+        deterministic. Then each chart whose first try failed goes on with smaller steps, one at
+        a time, unless a new chart cut off (or renumbered into a different nearest vertex) its
+        picked vertex; then, as a chart whose try was left out, it stays queued.
+        """
+        picks = self._pick()
+        if not picks:
+            return
+        wave = self._first_try(picks)
+        added = self._compatible(wave, np.flatnonzero(wave.outcome == _OK))
+        for p in added:
+            if wave.crossed[p]:
+                self._locate_crossing(picks[p][0], wave.directions[p], self.r)
+        if added:
+            points = [Point(wave.x[p], wave.phi[p], float(wave.sign[p])) for p in added]
+            self.add_charts(points, [picks[p][0] for p in added])
+            if progress is not None:
+                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
+        c = self.counters
+        for p in np.flatnonzero(wave.outcome != _OK).tolist():
+            i = picks[p][0]
+            v = self._still_picked(i, wave.vertices[p])
+            if v < 0:
+                continue
+            poly = self._polytope(i)
+            vertex = poly.verts[v]
+            outcome = int(wave.outcome[p])
+            if outcome == _NEWTON:
+                c.newton_failures += 1
+            elif outcome == _OUTSIDE:
+                if self._cut_by_bounds(i, wave.x[p], vertex):
+                    continue
+                v = poly.verts.index(vertex)  # the cut may have renumbered the vertices
+            else:
+                if outcome == _SINGULAR:
+                    self._add_singular(wave.x[p])
+                c.rejections += 1
+            if self.expand(i, v, self.r * _SHRINK) and progress is not None:
+                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
 
     def _project(self, i: int, x_tilde: FloatArray) -> FloatArray | None:
         """Eq. (15) from ``x_tilde`` along chart ``i``; None if it fails or breaks Eq. (17)."""
@@ -332,6 +545,7 @@ def build_atlas(
     lower: ArrayLike | None = None,
     upper: ArrayLike | None = None,
     progress: ProgressCallback | None = None,
+    stacked: bool = False,
 ) -> Atlas:
     """Cover the connected component of ``F(x) = 0`` through ``x0`` with charts (Section IV).
 
@@ -345,6 +559,9 @@ def build_atlas(
         upper: Upper box bound on ``x`` (``+inf`` for none), shape (n,).
         progress: Called after every new chart as ``progress("atlas charts", charts,
             max_charts)``; with None, ``settings.progress`` draws a bar on stderr.
+        stacked: ``F`` and ``J`` also take a stack of points, ``(B, n) -> (B, n - k)`` and
+            ``(B, n - k, n)``; a wave (``settings.batch > 1``) then evaluates them once per
+            Newton iteration for all its charts instead of point by point.
 
     Returns:
         The atlas; when ``max_charts`` stopped the build, ``atlas.stop_reason`` is
@@ -362,7 +579,7 @@ def build_atlas(
     if (point.x < lo).any() or (point.x > hi).any():
         raise AtlasError("x0 lies outside the box [lower, upper]; the start must lie within it")
     scale = float(np.sqrt(np.einsum("ij,ij->i", J(point.x), J(point.x))).max())
-    builder = _Builder(F, J, k, (lo, hi), scale, settings)
+    builder = _Builder(F, J, k, (lo, hi), scale, settings, stacked)
     builder.add_chart(point, -1)
     if progress is None and settings.progress:
         with StderrProgress() as bar:

@@ -33,6 +33,9 @@ class AtlasSettings:
         min_step: Smallest step ``alpha`` as a fraction of ``r``; a vertex whose expansion fails at
             every step down to it is blocked (Algorithm 1, lines 9-12, with a floor).
         start_tol: Largest ``|F(x0)|`` accepted for the start point (it is projected first).
+        batch: Charts expanded together in one wave (their first Newton projections, tangent
+            spaces and Eq. (18) tests as stacked numpy calls); 1 expands one chart at a time.
+            Waves change the order of expansion, hence the atlas slightly, not its coverage.
         progress: Draw a progress bar on stderr when :func:`build_atlas` gets no ``progress``
             callback (a front-end switch; the builder itself only calls the callback).
     """
@@ -44,6 +47,7 @@ class AtlasSettings:
     newton_max_iter: int = 20
     min_step: float = 0.1
     start_tol: float = 1e-6
+    batch: int = 1
     progress: bool = False
 
     def __post_init__(self) -> None:
@@ -55,6 +59,7 @@ class AtlasSettings:
             (self.newton_max_iter >= 1, "newton_max_iter must be >= 1"),
             (0 < self.min_step < 1, "min_step must lie in (0, 1)"),
             (self.start_tol >= self.newton_tol, "start_tol must be >= newton_tol"),
+            (self.batch >= 1, "batch must be >= 1"),
         )
         for ok, message in checks:
             if not ok:

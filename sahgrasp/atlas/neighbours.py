@@ -19,14 +19,22 @@ class NeighbourIndex:
         self._tree: cKDTree | None = None
         self._n_tree = 0
 
-    def query(self, points: FloatArray, count: int, x: FloatArray, radius: float) -> IndexArray:
-        """Indices ``< count`` of ``points`` closer than ``radius`` to ``x``."""
-        pending = points[self._n_tree : count] - x
-        near = self._n_tree + np.flatnonzero((pending * pending).sum(axis=1) < radius**2)
+    def query(
+        self, points: FloatArray, count: int, xs: FloatArray, radius: float
+    ) -> list[IndexArray]:
+        """Per row of ``xs`` (A, n): indices ``< count`` of ``points`` closer than ``radius``.
+
+        The k-d tree answers for all rows in one call; the unindexed tail is scanned directly.
+        """
+        pending = points[self._n_tree : count][None] - xs[:, None]
+        close = (pending * pending).sum(axis=2) < radius**2
+        tails = [self._n_tree + np.flatnonzero(row) for row in close]
         if self._tree is None:
-            return near
-        found = np.asarray(self._tree.query_ball_point(x, radius, return_sorted=False), np.int64)
-        return np.concatenate((found, near))
+            return tails
+        found = self._tree.query_ball_point(xs, radius, return_sorted=False)
+        return [
+            np.concatenate((np.asarray(f, np.int64), t)) for f, t in zip(found, tails, strict=True)
+        ]
 
     def added(self, points: FloatArray, count: int) -> None:
         """Note that ``count`` points exist; rebuild the tree when the unindexed tail is long."""

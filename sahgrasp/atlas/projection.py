@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+from numpy.typing import NDArray
 from scipy.linalg.lapack import dgeqrf as _dgeqrf
 from scipy.linalg.lapack import dgesdd as _dgesdd
 from scipy.linalg.lapack import dgesv as _dgesv
@@ -13,7 +14,17 @@ from scipy.linalg.lapack import dorgqr as _dorgqr
 
 from sahgrasp.atlas.model import FloatArray, Function
 
-__all__ = ["Point", "crossing_sign", "min_cosine", "project", "regular_point"]
+__all__ = [
+    "Point",
+    "crossing_sign",
+    "crossing_signs",
+    "min_cosine",
+    "min_cosines",
+    "project",
+    "project_many",
+    "regular_point",
+    "tangent_many",
+]
 
 RANK_TOL = 1e-8  # relative size of the smallest R diagonal of qr(J^T) below which J drops rank
 
@@ -114,3 +125,98 @@ def regular_point(J: Function, x: FloatArray, k: int, scale: float = 0.0) -> Poi
     """``x`` with its tangent space, or None when ``J(x)`` drops rank (see :func:`tangent`)."""
     basis = tangent(J(x), k, scale)
     return None if basis is None else Point(x, *basis)
+
+
+def _solve_stack(A: FloatArray, b: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """``A x = b`` for a stack (B, n, n); rows whose matrix is singular get ``ok = False``."""
+    try:
+        x = np.asarray(np.linalg.solve(A, b[..., None])[..., 0], dtype=np.float64)
+        return x, np.ones(len(A), dtype=bool)
+    except np.linalg.LinAlgError:  # one singular matrix fails the stack: solve row by row
+        out, ok = np.zeros_like(b), np.ones(len(A), dtype=bool)
+        for row, (a, rhs) in enumerate(zip(A, b, strict=True)):
+            dx, info = _dgesv(a, rhs)[2:]
+            out[row], ok[row] = dx, info == 0
+        return out, ok
+
+
+def project_many(
+    F: Function,
+    J: Function,
+    x_tilde: FloatArray,
+    phi: FloatArray,
+    tol: float = 1e-10,
+    max_iter: int = 20,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`project` for a stack of points, one stacked linear solve per Newton iteration.
+
+    Args:
+        F: Residual on a stack of points, ``(B, n) -> (B, n - k)``.
+        J: Its Jacobian on a stack, ``(B, n) -> (B, n - k, n)``.
+        x_tilde: Points to project, shape (B, n).
+        phi: Orthonormal tangent bases of their charts, shape (B, n, k).
+        tol: Convergence tolerance on ``|F(x)|``.
+        max_iter: Largest number of Newton iterations per point.
+
+    Returns:
+        The projected points (B, n) and which of them converged (B,); each row takes exactly the
+        iterations :func:`project` would.
+    """
+    B, n, k = phi.shape
+    m = n - k
+    x = x_tilde.copy()
+    done = np.zeros(B, dtype=bool)
+    active = np.flatnonzero(np.isfinite(x).all(axis=1))
+    tol2 = tol * tol
+    A = np.empty((B, n, n))
+    A[:, m:] = phi.transpose(0, 2, 1)
+    rhs = np.zeros((B, n))
+    for _ in range(max_iter):
+        if active.size == 0:
+            break
+        xa = x[active]
+        f = F(xa)
+        converged = (f * f).sum(axis=1) <= tol2
+        done[active[converged]] = True
+        step = ~converged
+        active, xa, f = active[step], xa[step], f[step]
+        if active.size == 0:
+            break
+        Aa = A[active]
+        Aa[:, :m] = J(xa)
+        rhs_a = rhs[active]
+        rhs_a[:, :m] = -f
+        dx, solved = _solve_stack(Aa, rhs_a)  # Eq. (15), linearised
+        x[active] = xa + dx
+        active = active[solved & np.isfinite(x[active]).all(axis=1)]
+    return x, done
+
+
+def tangent_many(
+    jac: FloatArray, k: int, scale: float = 0.0
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+    """:func:`tangent` for a stack of Jacobians (B, n - k, n), by one stacked QR.
+
+    Returns:
+        Tangent bases (B, n, k), the signs of ``det([J; phi^T])`` (B,) and which rows are regular
+        (the rank test of :func:`tangent`; bases of the other rows are meaningless).
+    """
+    m = jac.shape[1]
+    q, r = np.linalg.qr(jac.transpose(0, 2, 1), mode="complete")
+    phi = q[:, :, m:]
+    size = np.abs(np.diagonal(r[:, :m, :m], axis1=1, axis2=2))
+    regular = size.min(axis=1) > RANK_TOL * np.maximum(size.max(axis=1), scale)
+    sign = np.linalg.slogdet(np.concatenate((jac, phi.transpose(0, 2, 1)), axis=1))[0]
+    return phi, np.where(sign < 0, -1.0, 1.0), regular
+
+
+def crossing_signs(phi_i: FloatArray, phi_j: FloatArray, sign_j: FloatArray) -> FloatArray:
+    """:func:`crossing_sign` for stacks of bases (B, n, k) and signs (B,)."""
+    det_sign = np.linalg.slogdet(np.matmul(phi_i.transpose(0, 2, 1), phi_j))[0]
+    return np.where(det_sign < 0, -sign_j, sign_j)
+
+
+def min_cosines(phi_i: FloatArray, phi_j: FloatArray) -> FloatArray:
+    """:func:`min_cosine` for stacks of bases (B, n, k)."""
+    M = np.matmul(phi_i.transpose(0, 2, 1), phi_j)
+    return np.linalg.svd(M, compute_uv=False)[:, -1]

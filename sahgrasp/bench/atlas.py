@@ -8,8 +8,10 @@ all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
 compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
 k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are the paper's
 sizes in scaled coordinates. Each case reports its best wall time over ``repeats`` builds and the
-CPU time of that build (steadier on a shared machine). :func:`stage_profile` tells where one
-build's time goes.
+CPU time of that build (steadier on a shared machine). The S2, S3 and planar cases time the
+wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside it in the same run, the
+one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile` tells where one
+one-chart build's time goes.
 """
 
 from __future__ import annotations
@@ -33,7 +35,15 @@ from sahgrasp.fileio import write_json_atomic
 from sahgrasp.planar import make_planar_problem
 from sahgrasp.progress import ProgressCallback
 
-__all__ = ["BASELINES", "SAH_CASES", "SAH_PAPER", "STAGES", "run", "stage_profile"]
+__all__ = [
+    "BASELINES",
+    "SAH_CASES",
+    "SAH_PAPER",
+    "STAGES",
+    "WAVE_BATCH",
+    "run",
+    "stage_profile",
+]
 
 BASELINES: dict[str, dict[str, float]] = {
     "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
@@ -68,12 +78,18 @@ _SAH_MAX_CHARTS = 20_000
 _COUNT_TOLERANCE = 0.10  # allowed relative deviation of the chart count from Vol / r^k
 
 
+WAVE_BATCH = 32
+"""Charts per wave of the wave-front engine (``AtlasSettings.batch``) in the S2, S3 and planar
+cases; each of them also times the one-chart engine (``batch = 1``) beside it."""
+
+
 def _sphere_residual(x: np.ndarray) -> np.ndarray:
-    return np.array([x @ x - 1.0])
+    """``|x|^2 - 1`` of one point (n,) or a stack of points (B, n)."""
+    return (x * x).sum(axis=-1, keepdims=True) - 1.0
 
 
 def _sphere_jacobian(x: np.ndarray) -> np.ndarray:
-    return 2.0 * x[None, :]
+    return 2.0 * x[..., None, :]
 
 
 def _timed(build: Callable[[], Atlas]) -> tuple[Atlas, float, float]:
@@ -88,20 +104,36 @@ def _best_build(build: Callable[[], Atlas], repeats: int) -> tuple[Atlas, float,
     return min((_timed(build) for _ in range(max(repeats, 1))), key=lambda row: row[1])
 
 
-def _sphere_build(n: int, radius: float) -> Callable[[], Atlas]:
-    """The build of the unit sphere S^(n-1) in R^n from ``e_1``."""
-    settings = AtlasSettings(radius=radius)
+def _sphere_build(n: int, radius: float, batch: int = 1) -> Callable[[], Atlas]:
+    """The build of the unit sphere S^(n-1) in R^n from ``e_1``, ``batch`` charts per wave."""
+    settings = AtlasSettings(radius=radius, batch=batch)
     x0 = np.eye(n)[0]
-    return lambda: build_atlas(_sphere_residual, _sphere_jacobian, x0, n - 1, settings)
+    F, J = _sphere_residual, _sphere_jacobian
+    return lambda: build_atlas(F, J, x0, n - 1, settings, stacked=True)
 
 
-def _planar_build() -> Callable[[], Atlas]:
+def _planar_build(batch: int = 1) -> Callable[[], Atlas]:
     """The build of the planar hand at the paper's settings (r = 0.125, epsilon = 0.4)."""
     problem = make_planar_problem()
-    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
+    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000, batch=batch)
     return lambda: build_atlas(
-        problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds()
-    )
+        problem.F, problem.J, problem.start, problem.dimension, settings, *problem.bounds(),
+        stacked=True,
+    )  # fmt: skip
+
+
+def _engines(
+    build: Callable[[int], Callable[[], Atlas]], repeats: int
+) -> tuple[tuple[Atlas, float, float], dict[str, Any]]:
+    """The wave engine's best build, and the one-chart engine's charts and times beside it."""
+    one, one_seconds, one_cpu = _best_build(build(1), repeats)
+    wave = _best_build(build(WAVE_BATCH), repeats)
+    return wave, {
+        "batch": WAVE_BATCH,
+        "one_chart": {"charts": one.n_charts, "seconds": one_seconds, "cpu_seconds": one_cpu},
+        "charts_vs_one_chart": wave[0].n_charts / one.n_charts,
+        "cpu_speedup": one_cpu / wave[2],
+    }
 
 
 STAGES: dict[str, tuple[str, str]] = {
@@ -152,7 +184,7 @@ def stage_profile(case: str) -> dict[str, float]:
 
 
 def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any]:
-    atlas, seconds, cpu = _best_build(_sphere_build(n, radius), repeats)
+    (atlas, seconds, cpu), engines = _engines(functools.partial(_sphere_build, n, radius), repeats)
     volume = 2.0 * pi ** (n / 2) / gamma(n / 2)  # of the unit sphere S^(n-1)
     expected = volume / radius ** (n - 1)
     baseline = BASELINES[name]
@@ -170,12 +202,13 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
         "target_seconds": baseline["seconds"],
         "count_ok": abs(atlas.n_charts / expected - 1.0) <= _COUNT_TOLERANCE,
         "time_ok": seconds <= baseline["seconds"],
+        **engines,
     }
 
 
 def _planar_row(repeats: int) -> dict[str, Any]:
     problem = make_planar_problem()
-    atlas, seconds, cpu = _best_build(_planar_build(), repeats)
+    (atlas, seconds, cpu), engines = _engines(_planar_build, repeats)
     quality_seconds = float("inf")
     for _ in range(repeats):
         start = time.perf_counter()
@@ -194,6 +227,7 @@ def _planar_row(repeats: int) -> dict[str, Any]:
         "baseline_charts": baseline["charts"],
         "time_ok": seconds <= baseline["seconds"],
         "quality_time_ok": quality_seconds <= baseline["quality_seconds"],
+        **engines,
     }
 
 
