@@ -22,6 +22,11 @@ Linux sends the parent-death signal when the *thread* that started the worker en
 starts workers lazily, from the thread that calls ``submit``: submit from the thread that holds
 the ``with`` block (as a plain ``with process_pool(...)`` does), not from short-lived threads.
 
+All workers are started before the pool is handed out, with the stop signals (SIGINT, SIGTERM,
+SIGHUP) held meanwhile: a stop that unwinds the parent while it writes a spawned worker's start-up
+data makes that worker print a traceback (``EOFError``, ``FileNotFoundError``); held, it is acted
+on once the workers are up, as a ``KeyboardInterrupt`` in the parent.
+
 SIGINT ends a worker at once and silently (the default action, not Python's
 ``KeyboardInterrupt``): Ctrl-C in a terminal reaches the whole process group, so the workers stop
 without printing a traceback each and without finishing their tasks, and the parent, which gets
@@ -36,8 +41,9 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, wait
 from contextlib import contextmanager
 
 from sahgrasp.errors import InvalidSettingsError
@@ -109,12 +115,35 @@ def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
         initargs=(os.getpid(),),
     )
     try:
+        with _stop_signals_held():
+            wait([pool.submit(time.monotonic) for _ in range(count)])  # one spawn per submit
         yield pool
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         for key, value in saved.items():
             if value is None:
                 os.environ.pop(key, None)
+
+
+_STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+@contextmanager
+def _stop_signals_held() -> Iterator[None]:
+    """Record the stop signals instead of acting on them; raise KeyboardInterrupt after, if any."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only be set in the main thread
+        return
+    caught: list[int] = []
+    numbers = [getattr(signal, name) for name in _STOP_SIGNALS if hasattr(signal, name)]
+    previous = {n: signal.signal(n, lambda number, _: caught.append(number)) for n in numbers}
+    try:
+        yield
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+    if caught:
+        raise KeyboardInterrupt
 
 
 def die_with_parent(parent_pid: int) -> None:

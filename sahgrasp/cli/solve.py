@@ -6,9 +6,7 @@ import argparse
 import contextlib
 import math
 import shlex
-import signal
 import sys
-import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -33,7 +31,6 @@ from sahgrasp.cli.common import (
 
 if TYPE_CHECKING:
     from collections.abc import Iterator
-    from concurrent.futures import Executor
 
     from sahgrasp.contacts import GraspTarget, InvalidProblem
     from sahgrasp.stream import ResultsWriter
@@ -186,46 +183,9 @@ def _executor(args: argparse.Namespace) -> Any:
         return open_executor(args.scheduler)
     if args.workers <= 1:
         return contextlib.nullcontext(None)
-    return _local_pool(args.workers)
-
-
-@contextlib.contextmanager
-def _local_pool(workers: int) -> Iterator[Executor]:
-    """Local worker processes, all started (signals held meanwhile) before the work is sent.
-
-    A stop signal that unwinds the parent while it writes a spawned worker's start-up data makes
-    that worker print an ``EOFError`` traceback; held until the workers are up, the signal stops
-    the run cleanly (one line, exit status 130).
-    """
-    from concurrent.futures import wait
-
     from sahgrasp.parallel import process_pool
 
-    with process_pool(workers) as pool:
-        with _signals_held():
-            wait([pool.submit(time.monotonic) for _ in range(workers)])  # one spawn per submit
-        yield pool
-
-
-_HELD_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
-
-
-@contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """Record the stop signals instead of acting on them; raise KeyboardInterrupt after, if any."""
-    if threading.current_thread() is not threading.main_thread():
-        yield  # signal handlers can only be set in the main thread
-        return
-    caught: list[int] = []
-    numbers = [getattr(signal, name) for name in _HELD_SIGNALS if hasattr(signal, name)]
-    previous = {n: signal.signal(n, lambda number, _: caught.append(number)) for n in numbers}
-    try:
-        yield
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-    if caught:
-        raise KeyboardInterrupt
+    return process_pool(args.workers)
 
 
 def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
