@@ -138,6 +138,8 @@ def test_bench_atlas_reports_each_case_and_tables_them() -> None:
     lines = summary_table(doc).splitlines()
     assert lines[0] == "bench atlas" and lines[1].split()[:3] == ["case", "charts", "complete"]
     assert [line.split()[0] for line in lines[2:]] == ["S2", "planar"]
+    assert "one-chart [s]" in lines[1]  # the wave engine beside the one-chart engine
+    assert lines[2].split()[5] == str(doc["cases"]["S2"]["one_chart"]["charts"])
     with pytest.raises(InvalidSettingsError, match="valid: S2, S3, planar"):
         bench_atlas.run(cases=["S4"])
 

@@ -63,9 +63,12 @@ def _atlas_table(doc: Document) -> str:
             target = f"{case['speedup']:.3g}x paper rate ({doc['sah_speedup_target']:g}x)"
         elif "baseline_charts" in case:
             target = f"C: {case['baseline_charts']} charts"
+        one = case.get("one_chart", {})
         rows.append((name, case["charts"], case["complete"], case["seconds"],
-                     case["charts_per_second"], target))  # fmt: skip
-    headers = ("case", "charts", "complete", "best [s]", "charts/s", "against")
+                     case["charts_per_second"], one.get("charts"), one.get("seconds"),
+                     target))  # fmt: skip
+    headers = ("case", "charts", "complete", "best [s]", "charts/s", "one-chart charts",
+               "one-chart [s]", "against")  # fmt: skip
     return "bench atlas\n" + format_table(headers, rows)
 
 
