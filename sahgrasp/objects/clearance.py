@@ -559,15 +559,15 @@ class HandObjectClearance:
     ) -> dict[int, float] | None:
         """The closest hand geometry and its distance [m], when no link touches the object.
 
-        The common case of an accepted start, answered in C++ without a Python call per link or
-        piece: Pinocchio places the links in the object frame and refits their broad-phase trees
-        (:class:`_LinkSet`); one collision test with a negative margin finds whether a contact
-        tip is deeper than its allowance (:meth:`PieceTree.clear_of`), and one distance query
-        between the piece tree and the other links' tree gives the smallest distance and its
-        two nearest points. The link is the one the hand's nearest point lies on: every link is
-        at least that distance from the object's nearest point, and none has the hand's point
-        inside it (it would be closer to the object), so the link with the smallest signed
-        distance to that point is it.
+        The common case of an accepted start, answered in C++ without a Python call per link
+        or piece: Pinocchio places the links in the object frame and refits their broad-phase
+        trees (:class:`_LinkSet`); one collision test tells whether a contact tip is deeper
+        than its allowance (:meth:`_tips_clear`), and one distance query between the piece
+        tree and the other links' tree gives their smallest distance and its two nearest
+        points (:meth:`PieceTree.nearest_apart`). The link is the one the hand's nearest point
+        lies on: every link is at least that distance from the object's nearest point, and
+        none has the hand's point inside it (it would be closer to the object), so the link
+        with the smallest signed distance to that point is it.
 
         Returns:
             ``{geometry: distance}``, or None when a link touches or enters the object (the
@@ -576,25 +576,40 @@ class HandObjectClearance:
         """
         if self._other.any():
             return None
-        q_object = self.hand.check_q(q).copy()
-        wrist = pin.SE3(T).actInv(self.hand.wrist_pose(q_object))
-        self.hand.wrist_part(q_object)[:] = pin.SE3ToXYZQUAT(wrist)
-        tips = np.flatnonzero(thresholds < 0.0)
-        if len(tips):  # every contact tip has the same threshold, -allowance
-            tip_set = self._link_set(tuple(tips.tolist()))
-            tip_set.place(q_object)
-            if not self._tree.clear_of(tip_set.manager, float(thresholds[tips[0]])):
-                return None
+        q_object = self._in_object_frame(q, T)
+        if not self._tips_clear(q_object, thresholds):
+            return None
         others = self._link_set(tuple(np.flatnonzero(thresholds >= 0.0).tolist()))
         others.place(q_object)
-        found = self._tree.nearest_apart(others.manager)
-        if found is None:
+        nearest = self._tree.nearest_apart(others.manager)
+        if nearest is None:
             return None
-        distance, points = found
+        distance, points = nearest
         H = np.array([M.homogeneous for M in others.geometry_data.oMg])  # object frame
         gaps = self._shape_gaps(others.geometries, points, (H[:, :3, :3], H[:, :3, 3]))
         hand_point = int(np.argmin(gaps.min(axis=0)))  # the other point is >= distance away
         return {int(others.geometries[int(np.argmin(gaps[:, hand_point]))]): distance}
+
+    def _in_object_frame(self, q: NDArray[np.float64], T: FloatArray) -> NDArray[np.float64]:
+        """``q`` with its wrist pose in the frame of the object at ``T``."""
+        q_object = self.hand.check_q(q).copy()
+        wrist = pin.SE3(T).actInv(self.hand.wrist_pose(q_object))
+        self.hand.wrist_part(q_object)[:] = pin.SE3ToXYZQUAT(wrist)
+        return q_object
+
+    def _tips_clear(self, q_object: NDArray[np.float64], thresholds: NDArray[np.float64]) -> bool:
+        """True unless a contact tip (threshold below 0) is deeper than its allowance.
+
+        One collision test in C++ between the piece tree and the tips' tree, placed at
+        ``q_object`` (:meth:`_in_object_frame`), with the negative margin ``-allowance``
+        (every contact tip has that threshold).
+        """
+        tips = np.flatnonzero(thresholds < 0.0)
+        if not len(tips):
+            return True
+        tip_set = self._link_set(tuple(tips.tolist()))
+        tip_set.place(q_object)
+        return self._tree.clear_of(tip_set.manager, float(thresholds[tips[0]]))
 
     def _link_set(self, geometries: tuple[int, ...]) -> _LinkSet:
         """The :class:`_LinkSet` of hand ``geometries`` (built once per set)."""
