@@ -122,40 +122,6 @@ class _Pair:
     normal: FloatArray  # from the object towards the hand link
 
 
-class _LinkSet:
-    """Some of a hand's collision geometries in a coal broad-phase tree that Pinocchio refits.
-
-    A geometry model of their own keeps the other geometries (the contact tips, or all but
-    them) out of the tree; :meth:`place` poses them and refits the tree in C++.
-
-    Args:
-        model: The hand's kinematic model.
-        geometry_model: The hand's collision geometry.
-        geometries: Indices of the geometries taken, in ``geometry_model``.
-    """
-
-    def __init__(
-        self, model: pin.Model, geometry_model: pin.GeometryModel, geometries: tuple[int, ...]
-    ) -> None:
-        self.geometries = np.array(geometries, dtype=np.intp)
-        self._model, self._data = model, model.createData()
-        self._geometry_model = pin.GeometryModel()
-        for g in geometries:
-            self._geometry_model.addGeometryObject(geometry_model.geometryObjects[g])
-        self.geometry_data = pin.GeometryData(self._geometry_model)
-        self._broad_phase = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(
-            model, self._geometry_model, self.geometry_data
-        )
-        self.manager: coal.BroadPhaseCollisionManager = self._broad_phase.getManager()
-
-    def place(self, q: NDArray[np.float64]) -> None:
-        """Pose the geometries at ``q`` (in the frame ``q``'s wrist pose is given in)."""
-        pin.updateGeometryPlacements(
-            self._model, self._data, self._geometry_model, self.geometry_data, q
-        )
-        self._broad_phase.update()
-
-
 class HandObjectClearance:
     """Signed distances between a hand's collision geometry and an object's convex pieces.
 
@@ -205,7 +171,6 @@ class HandObjectClearance:
         self._request.enable_signed_distance = True
         self._free: dict[str, _FreeFinger] = {}
         self._transforms_key = b""
-        self._link_sets: dict[tuple[int, ...], _LinkSet] = {}
 
     def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
         """Per hand geometry, the parameters :meth:`_shape_gaps` measures it with."""
@@ -300,18 +265,13 @@ class HandObjectClearance:
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        T = self._object_placement(T_world_object)
-        apart = None if all_links or not self._shapes else self._nearest_apart(q, T, thresholds)
-        if apart is not None:
-            measured = apart
-        elif all_links:
-            self._place(q, T_world_object)
+        T = self._place(q, T_world_object)
+        if all_links:
             every = range(len(self._links))
             self._pose_links(T, every)
             pairs = self._pairs(T, np.full(len(every), np.inf), True, every)
             measured = {p.geometry: p.distance_m for p in pairs}
         else:
-            self._place(q, T_world_object)
             measured = self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
@@ -477,10 +437,6 @@ class HandObjectClearance:
         )
         H = np.array([M.homogeneous for M in self._geometry_data.oMg])  # once per query
         self._link_R, self._link_t = H[:, :3, :3], H[:, :3, 3]
-        return self._object_placement(T_world_object)
-
-    def _object_placement(self, T_world_object: FloatArray | None) -> FloatArray:
-        """The object placement a query uses: its own unless ``T_world_object`` is given."""
         if T_world_object is None:
             return self.object.T_world_object
         return as_placement(T_world_object)
@@ -490,13 +446,11 @@ class HandObjectClearance:
 
         The piece tree stays in the object frame, built once, whatever the object's placement.
         """
-        chosen = list(geometries)
-        R_object = T[:3, :3]
-        R = np.matmul(R_object.T, self._link_R[chosen])  # R_o^T R_g
-        t = (self._link_t[chosen] - T[:3, 3]) @ R_object  # R_o^T (t_g - t_o)
-        for k, g in enumerate(chosen):
+        T_object_world = pin.SE3(T).inverse()
+        for g in geometries:
+            M = T_object_world * self._geometry_data.oMg[g]
             link = self._link_objects[g]
-            link.setTransform(coal.Transform3s(R[k], t[k]))
+            link.setTransform(coal.Transform3s(M.rotation, M.translation))
             link.computeAABB()
 
     def _screen(
@@ -553,69 +507,6 @@ class HandObjectClearance:
                 if pair.distance_m < smallest:  # exact below the limit
                     measured[g] = smallest = pair.distance_m
         return measured
-
-    def _nearest_apart(
-        self, q: NDArray[np.float64], T: FloatArray, thresholds: NDArray[np.float64]
-    ) -> dict[int, float] | None:
-        """The closest hand geometry and its distance [m], when no link touches the object.
-
-        The common case of an accepted start, answered in C++ without a Python call per link
-        or piece: Pinocchio places the links in the object frame and refits their broad-phase
-        trees (:class:`_LinkSet`); one collision test tells whether a contact tip is deeper
-        than its allowance (:meth:`_tips_clear`), and one distance query between the piece
-        tree and the other links' tree gives their smallest distance and its two nearest
-        points (:meth:`PieceTree.nearest_apart`). The link is the one the hand's nearest point
-        lies on: every link is at least that distance from the object's nearest point, and
-        none has the hand's point inside it (it would be closer to the object), so the link
-        with the smallest signed distance to that point is it.
-
-        Returns:
-            ``{geometry: distance}``, or None when a link touches or enters the object (the
-            exact search of :meth:`_closest_links` measures that case) or when a link's shape
-            is not a box, cylinder or sphere (:meth:`_shape_gaps` only bounds it).
-        """
-        if self._other.any():
-            return None
-        q_object = self._in_object_frame(q, T)
-        if not self._tips_clear(q_object, thresholds):
-            return None
-        others = self._link_set(tuple(np.flatnonzero(thresholds >= 0.0).tolist()))
-        others.place(q_object)
-        nearest = self._tree.nearest_apart(others.manager)
-        if nearest is None:
-            return None
-        distance, points = nearest
-        H = np.array([M.homogeneous for M in others.geometry_data.oMg])  # object frame
-        gaps = self._shape_gaps(others.geometries, points, (H[:, :3, :3], H[:, :3, 3]))
-        hand_point = int(np.argmin(gaps.min(axis=0)))  # the other point is >= distance away
-        return {int(others.geometries[int(np.argmin(gaps[:, hand_point]))]): distance}
-
-    def _in_object_frame(self, q: NDArray[np.float64], T: FloatArray) -> NDArray[np.float64]:
-        """``q`` with its wrist pose in the frame of the object at ``T``."""
-        q_object = self.hand.check_q(q).copy()
-        wrist = pin.SE3(T).actInv(self.hand.wrist_pose(q_object))
-        self.hand.wrist_part(q_object)[:] = pin.SE3ToXYZQUAT(wrist)
-        return q_object
-
-    def _tips_clear(self, q_object: NDArray[np.float64], thresholds: NDArray[np.float64]) -> bool:
-        """True unless a contact tip (threshold below 0) is deeper than its allowance.
-
-        One collision test in C++ between the piece tree and the tips' tree, placed at
-        ``q_object`` (:meth:`_in_object_frame`), with the negative margin ``-allowance``
-        (every contact tip has that threshold).
-        """
-        tips = np.flatnonzero(thresholds < 0.0)
-        if not len(tips):
-            return True
-        tip_set = self._link_set(tuple(tips.tolist()))
-        tip_set.place(q_object)
-        return self._tree.clear_of(tip_set.manager, float(thresholds[tips[0]]))
-
-    def _link_set(self, geometries: tuple[int, ...]) -> _LinkSet:
-        """The :class:`_LinkSet` of hand ``geometries`` (built once per set)."""
-        if geometries not in self._link_sets:
-            self._link_sets[geometries] = _LinkSet(self._model, self._geometry_model, geometries)
-        return self._link_sets[geometries]
 
     def _candidates(
         self, T: FloatArray, g: int, cell_bounds: FloatArray, limit_m: float
@@ -694,27 +585,15 @@ class HandObjectClearance:
                 out.append(best)
         return out
 
-    def _shape_gaps(
-        self,
-        geometries: NDArray[np.intp],
-        points_m: FloatArray,
-        placements: tuple[FloatArray, FloatArray] | None = None,
-    ) -> FloatArray:
+    def _shape_gaps(self, geometries: NDArray[np.intp], points_m: FloatArray) -> FloatArray:
         """Signed distances [m] from hand geometries, placed, to world points: (G, N).
-
-        ``placements``: the geometries' rotations (G, 3, 3) and translations (G, 3) in the
-        points' frame (default: the world placements of the last :meth:`_place`).
 
         Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
         to its bounding ball. A piece within a ball of radius r about a point is then at least
         this minus r from the link, inside as well (its penetration is at most the ball's): a
         much tighter bound than the link's own ball when the pieces are small.
         """
-        R, t = (
-            (self._link_R[geometries], self._link_t[geometries])
-            if placements is None
-            else placements
-        )
+        R, t = self._link_R[geometries], self._link_t[geometries]
         local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
         coords = np.abs(local)  # box (a sphere is a box of no size, rounded)
         cylinder = self._cylinder[geometries]

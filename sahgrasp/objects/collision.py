@@ -142,69 +142,29 @@ class PieceTree:
         self.boxes_m = _boxes(self._objects[0])
         self.coarse_boxes_m = _boxes(self._objects[1])
         self._callback = coal.CollisionCallBackDefault()
-        self._distance_callback = coal.DistanceCallBackDefault()
 
-    def clear_of(
-        self, link: coal.CollisionObject | coal.BroadPhaseCollisionManager, threshold_m: float
-    ) -> bool:
+    def clear_of(self, link: coal.CollisionObject, threshold_m: float) -> bool:
         """True if no piece is closer to ``link`` than ``threshold_m`` [m] (signed distance).
 
         Exact up to coal's GJK/EPA tolerances: the coarse hulls hold the pieces, so a link
-        clear of them is clear of the pieces; otherwise the pieces are tested. ``link`` may be
-        a tree of links (placed in the object frame) when ``threshold_m`` is not positive.
-
-        Raises:
-            ValueError: A tree of links with a positive threshold (its boxes cannot be grown).
+        clear of them is clear of the pieces; otherwise the pieces are tested.
         """
         return not (
             self._closer(self._coarse, link, threshold_m)
             and self._closer(self._fine, link, threshold_m)
         )
 
-    def nearest_apart(
-        self, links: coal.BroadPhaseCollisionManager
-    ) -> tuple[float, FloatArray] | None:
-        """The smallest distance [m] from the pieces to the shapes of ``links``, if positive.
-
-        One C++ broad-phase query over both trees (``links`` placed in the object frame and
-        updated). Coal's default distance callback keeps the smallest distance while the shapes
-        are apart, but stops at the first overlapping pair, so an overlap gives no distance:
-        None then (and when ``links`` is empty).
-
-        Returns:
-            The distance and the two nearest points (2, 3), object frame, in no stated order:
-            the bindings do not say which object each belongs to.
-        """
-        if links.empty() or not self._objects[0]:
-            return None
-        callback = self._distance_callback
-        callback.init()
-        self._fine.distance(links, callback)
-        result = callback.data.result
-        distance = float(result.min_distance)
-        if not distance > 0.0:
-            return None
-        points = np.array([result.getNearestPoint1(), result.getNearestPoint2()], dtype=np.float64)
-        return distance, points
-
     def _closer(
-        self,
-        manager: coal.BroadPhaseCollisionManager,
-        link: coal.CollisionObject | coal.BroadPhaseCollisionManager,
-        limit_m: float,
+        self, manager: coal.BroadPhaseCollisionManager, link: coal.CollisionObject, limit_m: float
     ) -> bool:
         """True if a shape of ``manager`` is closer to ``link`` than ``limit_m`` [m]."""
-        single = isinstance(link, coal.CollisionObject)
+        link.computeAABB()
         if limit_m > 0.0:  # the tree only pairs overlapping boxes: grow the link's by the margin
-            if not single:
-                raise ValueError(f"a tree of links needs a threshold <= 0 m, got {limit_m}")
-            link.computeAABB()
             link.getAABB().expand(limit_m)
         self._callback.init()
         self._callback.data.request.security_margin = limit_m
         manager.collide(link, self._callback)
-        if single:
-            link.computeAABB()  # leave the link's own box for the caller's bounds
+        link.computeAABB()  # leave the link's own box for the caller's bounds
         return bool(self._callback.data.result.isCollision())
 
 
