@@ -364,3 +364,37 @@ def test_a_few_penetrations_per_link_name_the_same_links(
             assert all((p.joint_b, round(p.depth_m, 9)) in found for p in few)
             counts.append((len(few), len(every)))
     assert any(n < m for n, m in counts)  # some link overlapped more pieces than asked for
+
+
+@pytest.mark.parametrize("name", GRASP_NAMES)
+def test_closest_link_matches_every_pair_about_the_paper_grasps(sah: Hand, name: str) -> None:
+    """The closest link and its distance equal a search over every (link, piece) pair.
+
+    Sixteen configurations about each paper grasp (joints and wrist perturbed: links clear of
+    the object, touching it, inside it), with the paper's contact fingers and with none.
+    """
+    from sahgrasp.objects import paper_grasp
+
+    obj, target = load_object(name), paper_grasp(name)
+    fingers = tuple(c.finger for c in target.contacts)
+    q0 = solve_ik(sah, target, obstacle=obj).q
+    rng = np.random.default_rng(11)
+    checker = HandObjectClearance(sah, obj)
+    signs = set()
+    for k in range(16):
+        q = q0.copy()
+        q[7:] = np.clip(q[7:] + rng.normal(0.0, 0.03 * (k % 4), len(q) - 7), sah.lower, sah.upper)
+        q[:3] += rng.normal(0.0, 2e-3 * (k % 3), 3)
+        nearest = _every_pair(sah, obj, q).min(axis=1)
+        for contacts in (fingers, ()):
+            tips = {f.tip_link for f in sah.description.fingers if f.name in contacts}
+            allowed = [
+                link in tips and d >= -1.5e-3
+                for link, d in zip(checker.links, nearest, strict=True)
+            ]
+            counted = np.where(allowed, np.inf, nearest)
+            closest = checker.clearance(q, contacts, all_links=False)
+            assert closest.link == checker.links[int(np.argmin(counted))]
+            assert closest.distance_m == pytest.approx(counted.min(), abs=1e-9)
+            signs.add(closest.clear())
+    assert signs == {True, False}  # configurations on both sides of the boundary
