@@ -453,6 +453,25 @@ class HandState:
         return _point_jacobians(J, self._supports, self._reduce, [joint], point[None])[0]
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """Constant matrices that turn the joint vector into rows of contact quantities.
+
+    Attributes:
+        select: (3 k, 6 F) from the joint vector ``(c_i, n_i)`` per finger to the ``k`` blocks'
+            values (points, centres [m] or normals).
+        lever: (6 F, 18 k) from the joint vector to the ``-[x]x`` entries of each block's
+            ``[I, -[x]x]`` (zero for a normal block).
+        base: (18 k,) the constant entries of those 3 x 6 blocks (``[I, 0]`` or ``[0, I]``).
+        mask: (3 k, nvExtended) 1 on the columns of ``data.J`` that move each block's body.
+    """
+
+    select: NDArray[np.float64]
+    lever: NDArray[np.float64]
+    base: NDArray[np.float64]
+    mask: NDArray[np.float64]
+
+
 class Hand:
     """A hand: Pinocchio model/data, coal self-collision, and the contact queries of the papers.
 
@@ -472,20 +491,27 @@ class Hand:
         for spec, tip in zip(description.fingers, self._tip_frames, strict=True):
             self._contact_frames.append(self._add_contact_joints(model, spec, tip))
         self.model = model
-        self.data = model.createData()
+        self.data = model.createData()  # never replaced: the views below point into it
         self._q_shape = (model.nq,)
         self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
-        self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
-        self._jacobian_frames = self._contact_frames + self._tip_frames
-        # Frames of Hand.contact_stack, (contact, fingertip-sphere centre) per finger.
-        self._stack_frames = [
-            f for pair in zip(self._contact_frames, self._tip_frames, strict=True) for f in pair
-        ]
-        # Per number of fingers: the matrix of Hand.contact_stack.
-        self._stack_selectors = [
-            _stack_selector(k, self.radius_m) for k in range(len(self.fingers) + 1)
-        ]
         self._supports, self._reduce = _support_masks(model)
+        # The contact frame of each finger hangs on its yaw joint, whose origin is the
+        # fingertip-sphere centre and whose x axis is the outward normal (_add_contact_joints).
+        self._yaw_joints = [int(model.frames[f].parentJoint) for f in self._contact_frames]
+        # Views into data.oMi and data.J (Pinocchio writes them in place): the centre and the
+        # normal of every finger after a kinematics pass, read without a call per frame.
+        self._views = [
+            view
+            for j in self._yaw_joints
+            for view in (self.data.oMi[j].translation, self.data.oMi[j].rotation[:, 0])
+        ]
+        self._world_jacobian = self.data.J
+        F = len(self.fingers)
+        self._state_layout = self._layout(
+            [(kind, i) for kind in ("point", "centre", "normal") for i in range(F)]
+        )
+        self._stack_layouts: dict[tuple[int, ...], _Layout] = {}
+        self._all_fingers = self._stack_layout(list(range(F)))
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -744,17 +770,12 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._state()
+        return self._state(np.concatenate(self._views))
 
-    def _state(self) -> ContactState:
-        # Contact placements after forward kinematics: x axis = normal, origin = point.
-        model, data = self.model, self.data
-        H = np.array(
-            [pin.updateFramePlacement(model, data, f).homogeneous for f in self._contact_frames]
-        )
-        # One product for the centres (r = p - R n): numpy's fixed cost per call dominates, and
-        # ndarray.dot dispatches faster than the @ operator.
-        return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
+    def _state(self, joints: NDArray[np.float64]) -> ContactState:
+        """The contact state from the joint vector ``joints`` of :attr:`_views` (one product)."""
+        points, centres, normals = self._state_layout.select.dot(joints).reshape(3, -1, 3)
+        return ContactState(points, centres, normals)
 
     def contact_stack(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -768,7 +789,8 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._stack(fingers)
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        return np.asarray(layout.select.dot(np.concatenate(self._views)))
 
     def contact_stack_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -778,8 +800,10 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        J = self.contact_jacobian(q, fingers)  # its joint pass leaves the placements too
-        return self._stack(fingers), J
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        joints = np.concatenate(self._views)
+        return np.asarray(layout.select.dot(joints)), self._rows_jacobian(layout, joints)
 
     def contact_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -789,24 +813,62 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, self._finite(q))
-        frames = self._stack_frames if fingers is None else self._stack_frames_of(fingers)
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in frames])
-        return J[:, :3].reshape(-1, self.model.nv)
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        return self._rows_jacobian(layout, np.concatenate(self._views))
 
-    def _stack_frames_of(self, fingers: list[int]) -> list[int]:
-        return [f for i in fingers for f in self._stack_frames[2 * i : 2 * i + 2]]
+    def _rows_jacobian(self, layout: _Layout, joints: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Jacobian (rows, nv) of ``layout``'s rows from ``data.J`` (joint Jacobians up to date).
 
-    def _stack(self, fingers: list[int] | None) -> NDArray[np.float64]:
-        """(6 k,) points and centres of ``fingers`` (joint placements up to date)."""
-        model, data = self.model, self.data
-        frames = (
-            self._contact_frames if fingers is None else [self._contact_frames[i] for i in fingers]
+        Each 3-row block is ``[I, -[x]x] J_w`` for a point ``x`` fixed to the finger's contact
+        body, or ``[0, I] J_w`` for its angular velocity, on the columns that move that body,
+        mimic columns folded into their leaders: four products on constant matrices (one
+        Python-to-C crossing each) instead of a Pinocchio call per frame.
+        """
+        blocks = (layout.base + joints.dot(layout.lever)).reshape(-1, 6)
+        J = blocks.dot(self._world_jacobian)
+        J *= layout.mask
+        return np.asarray(J.dot(self._reduce))
+
+    def _stack_layout(self, fingers: list[int]) -> _Layout:
+        """The layout of :meth:`contact_stack`, ``(p_i, r_i)`` per finger of ``fingers``."""
+        key = tuple(fingers)
+        layout = self._stack_layouts.get(key)
+        if layout is None:
+            rows = [(kind, i) for i in key for kind in ("point", "centre")]
+            layout = self._stack_layouts[key] = self._layout(rows)
+        return layout
+
+    def _layout(self, blocks: list[tuple[str, int]]) -> _Layout:
+        """Constant matrices of a list of (``point``/``centre``/``normal``, finger) 3-row blocks.
+
+        The joint vector is ``(c_i, n_i)`` per finger (centre and normal, :attr:`_views`); the
+        contact point is ``p_i = c_i + R n_i``. A normal block's Jacobian is the contact frame's
+        angular velocity (:attr:`ContactJacobians.angular`).
+        """
+        F, k = len(self.fingers), len(blocks)
+        select = np.zeros((3 * k, 6 * F))
+        base = np.zeros((k, 3, 6))
+        skew = np.zeros((3 * k, k, 3, 6))  # a block's point -> its -[x]x entries
+        eye = np.eye(3)
+        for b, (kind, i) in enumerate(blocks):
+            rows, centre, normal = slice(3 * b, 3 * b + 3), 6 * i, 6 * i + 3
+            if kind == "normal":
+                select[rows, normal : normal + 3] = eye
+                base[b, :, 3:] = eye
+                continue
+            select[rows, centre : centre + 3] = eye
+            select[rows, normal : normal + 3] = self.radius_m * eye if kind == "point" else 0.0
+            base[b, :, :3] = eye
+            for a in range(3):
+                skew[3 * b + a, b, :, 3:] = -_SKEW_BASIS[a].reshape(3, 3)
+        joints = [self._yaw_joints[i] for _, i in blocks]
+        return _Layout(
+            select=select,
+            lever=select.T.dot(skew.reshape(3 * k, -1)),
+            base=base.ravel(),
+            mask=np.repeat(self._supports[joints], 3, axis=0),
         )
-        H = np.array([pin.updateFramePlacement(model, data, f).homogeneous for f in frames])
-        # One matrix-vector product on the flat placements (docs/ik.md, "Cost").
-        return np.asarray(self._stack_selectors[len(frames)].dot(H.ravel()))
 
     def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
         """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
@@ -816,8 +878,8 @@ class Hand:
         """
         q = np.array(self._finite(q))
         if not jacobians:
-            pin.forwardKinematics(self.model, self.data, q)
-            return _frozen(HandState(q, self._state(), None, None, self._supports, self._reduce))
+            state = self.contact_state(q)
+            return _frozen(HandState(q, state, None, None, self._supports, self._reduce))
         jac = self._jacobians(q)
         J = np.array(self.data.J)
         return _frozen(HandState(q, jac.state, jac, J, self._supports, self._reduce))
@@ -833,12 +895,12 @@ class Hand:
         return self._jacobians(self._finite(q))
 
     def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
-        # Frame by frame: for this (F, 3, nv) layout faster than the folded data.J product.
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
-        F = len(self.fingers)
-        return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
+        pin.computeJointJacobians(self.model, self.data, q)
+        joints = np.concatenate(self._views)
+        points, centres, angular = self._rows_jacobian(self._state_layout, joints).reshape(
+            3, len(self.fingers), 3, -1
+        )
+        return ContactJacobians(self._state(joints), points, centres, angular)
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""
@@ -959,24 +1021,6 @@ def _point_jacobians(
     skews = (points @ _SKEW_BASIS).reshape(-1, 3, 3)
     moving = (world_jacobian[:3] - skews @ world_jacobian[3:]) * supports[joints][:, None, :]
     return np.asarray(moving @ reduce)
-
-
-def _stack_selector(fingers: int, radius_m: float) -> NDArray[np.float64]:
-    """Matrix (6 k, 16 k) from ``k`` flattened contact placements to ``(p_i, r_i)`` per finger.
-
-    In the row-major 4 x 4 placement of finger ``i`` (offset ``16 i``), entry ``4 a + 3`` is the
-    contact point's coordinate ``a`` and ``4 a`` the outward normal's; the sphere centre is
-    ``r = p - R n``. One matrix-vector product instead of a batched product on a transposed view
-    (measured: 10.2 -> 7.8 us per :meth:`Hand.contact_stack`). For :class:`ContactState` three
-    slices and one product measured faster than this product and a reshape.
-    """
-    S = np.zeros((6 * fingers, 16 * fingers))
-    for i in range(fingers):
-        for a in range(3):
-            S[6 * i + a, 16 * i + 4 * a + 3] = 1.0
-            S[6 * i + 3 + a, 16 * i + 4 * a + 3] = 1.0
-            S[6 * i + 3 + a, 16 * i + 4 * a] = -radius_m
-    return S
 
 
 def _support_masks(model: pin.Model) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
