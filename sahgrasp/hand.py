@@ -458,12 +458,13 @@ class _Layout:
     """Constant matrices that turn the joint vector into rows of contact quantities.
 
     Attributes:
-        select: (3 k, 6 F) from the joint vector ``(c_i, n_i)`` per finger to the ``k`` blocks'
-            values (points, centres [m] or normals).
-        lever: (6 F, 18 k) from the joint vector to the ``-[x]x`` entries of each block's
+        select: (3 k, 12 n) from :meth:`Hand._joint_vector` (``n`` joint placements) to the
+            ``k`` blocks' values (points, centres [m] or normals).
+        lever: (3 k, 18 k) from the blocks' values to the ``-[x]x`` entries of each block's
             ``[I, -[x]x]`` (zero for a normal block).
         base: (18 k,) the constant entries of those 3 x 6 blocks (``[I, 0]`` or ``[0, I]``).
-        mask: (3 k, nvExtended) 1 on the columns of ``data.J`` that move each block's body.
+        mask: (3 k, nvExtended or nv) 1 on the columns that move each block's body (those of
+            ``v`` when the hand folds the mimic columns first).
     """
 
     select: NDArray[np.float64]
@@ -498,14 +499,22 @@ class Hand:
         # The contact frame of each finger hangs on its yaw joint, whose origin is the
         # fingertip-sphere centre and whose x axis is the outward normal (_add_contact_joints).
         self._yaw_joints = [int(model.frames[f].parentJoint) for f in self._contact_frames]
-        # Views into data.oMi and data.J (Pinocchio writes them in place): the centre and the
-        # normal of every finger after a kinematics pass, read without a call per frame.
-        self._views = [
-            view
-            for j in self._yaw_joints
-            for view in (self.data.oMi[j].translation, self.data.oMi[j].rotation[:, 0])
-        ]
+        # Views into data.oMi and data.J, which Pinocchio writes in place: the world placements
+        # of the yaw joints are read after a kinematics pass without a call per frame.
+        self._first_yaw = min(self._yaw_joints)
+        self._placement_parts, self._placements = _placement_views(
+            self.data, range(self._first_yaw, max(self._yaw_joints) + 1)
+        )
         self._world_jacobian = self.data.J
+        # Folding the mimic columns before masking (6 rows instead of one per Jacobian row)
+        # gives the same rows when every mimic joint moves the same contacts as its leader.
+        # Per finger: its mask on the columns of data.J, or on those of v when folding first.
+        self._finger_masks = self._supports[self._yaw_joints]
+        folds = (self._reduce != 0).astype(np.float64)  # ext column -> the v column it joins
+        hits = self._finger_masks.dot(folds)  # per finger and v column: moving ext columns
+        self._fold_first = bool(np.all((hits == 0) | (hits == folds.sum(axis=0))))
+        if self._fold_first:
+            self._finger_masks = (hits > 0).astype(np.float64)
         F = len(self.fingers)
         self._state_layout = self._layout(
             [(kind, i) for kind in ("point", "centre", "normal") for i in range(F)]
@@ -770,12 +779,18 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._state(np.concatenate(self._views))
+        return _contact_state(self._state_layout.select.dot(self._joint_vector()))
 
-    def _state(self, joints: NDArray[np.float64]) -> ContactState:
-        """The contact state from the joint vector ``joints`` of :attr:`_views` (one product)."""
-        points, centres, normals = self._state_layout.select.dot(joints).reshape(3, -1, 3)
-        return ContactState(points, centres, normals)
+    def _joint_vector(self) -> NDArray[np.float64]:
+        """The world placements of the joints from the first to the last yaw joint, flat.
+
+        Per joint its rotation (column-major) then its translation, 12 values. A view of
+        ``data.oMi`` itself when Pinocchio stores them contiguously (no copy), else one
+        concatenation of per-joint views.
+        """
+        if self._placements is not None:
+            return self._placements
+        return np.concatenate(self._placement_parts)
 
     def contact_stack(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -790,7 +805,7 @@ class Hand:
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
         layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
-        return np.asarray(layout.select.dot(np.concatenate(self._views)))
+        return np.asarray(layout.select.dot(self._joint_vector()))
 
     def contact_stack_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -802,8 +817,8 @@ class Hand:
         """
         pin.computeJointJacobians(self.model, self.data, self._finite(q))
         layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
-        joints = np.concatenate(self._views)
-        return np.asarray(layout.select.dot(joints)), self._rows_jacobian(layout, joints)
+        stack = np.asarray(layout.select.dot(self._joint_vector()))
+        return stack, self._rows_jacobian(layout, stack)
 
     def contact_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -815,17 +830,23 @@ class Hand:
         """
         pin.computeJointJacobians(self.model, self.data, self._finite(q))
         layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
-        return self._rows_jacobian(layout, np.concatenate(self._views))
+        return self._rows_jacobian(layout, layout.select.dot(self._joint_vector()))
 
-    def _rows_jacobian(self, layout: _Layout, joints: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Jacobian (rows, nv) of ``layout``'s rows from ``data.J`` (joint Jacobians up to date).
+    def _rows_jacobian(self, layout: _Layout, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Jacobian (rows, nv) of ``layout``'s ``values`` from ``data.J`` (joint Jacobians set).
 
         Each 3-row block is ``[I, -[x]x] J_w`` for a point ``x`` fixed to the finger's contact
         body, or ``[0, I] J_w`` for its angular velocity, on the columns that move that body,
-        mimic columns folded into their leaders: four products on constant matrices (one
-        Python-to-C crossing each) instead of a Pinocchio call per frame.
+        mimic columns folded into their leaders: a few products on constant matrices (one
+        Python-to-C crossing each) instead of a Pinocchio call per frame. The fold goes first
+        (on the 6 rows of ``data.J``) when every mimic joint moves the same fingers as its
+        leader, the case of the built-in hands; otherwise after the mask.
         """
-        blocks = (layout.base + joints.dot(layout.lever)).reshape(-1, 6)
+        blocks = (layout.base + values.dot(layout.lever)).reshape(-1, 6)
+        if self._fold_first:
+            J = blocks.dot(self._world_jacobian.dot(self._reduce))
+            J *= layout.mask
+            return J
         J = blocks.dot(self._world_jacobian)
         J *= layout.mask
         return np.asarray(J.dot(self._reduce))
@@ -842,17 +863,22 @@ class Hand:
     def _layout(self, blocks: list[tuple[str, int]]) -> _Layout:
         """Constant matrices of a list of (``point``/``centre``/``normal``, finger) 3-row blocks.
 
-        The joint vector is ``(c_i, n_i)`` per finger (centre and normal, :attr:`_views`); the
-        contact point is ``p_i = c_i + R n_i``. A normal block's Jacobian is the contact frame's
+        In :meth:`_joint_vector`, finger ``i``'s yaw joint holds the outward normal ``n_i`` as
+        the first rotation column and the sphere centre ``c_i`` as the translation; the contact
+        point is ``p_i = c_i + R n_i``. A normal block's Jacobian is the contact frame's
         angular velocity (:attr:`ContactJacobians.angular`).
         """
-        F, k = len(self.fingers), len(blocks)
-        select = np.zeros((3 * k, 6 * F))
+        k = len(blocks)
+        select = np.zeros((3 * k, _SE3_SIZE * (max(self._yaw_joints) - self._first_yaw + 1)))
         base = np.zeros((k, 3, 6))
         skew = np.zeros((3 * k, k, 3, 6))  # a block's point -> its -[x]x entries
         eye = np.eye(3)
         for b, (kind, i) in enumerate(blocks):
-            rows, centre, normal = slice(3 * b, 3 * b + 3), 6 * i, 6 * i + 3
+            rows, normal = (
+                slice(3 * b, 3 * b + 3),
+                _SE3_SIZE * (self._yaw_joints[i] - self._first_yaw),
+            )
+            centre = normal + 9
             if kind == "normal":
                 select[rows, normal : normal + 3] = eye
                 base[b, :, 3:] = eye
@@ -862,12 +888,12 @@ class Hand:
             base[b, :, :3] = eye
             for a in range(3):
                 skew[3 * b + a, b, :, 3:] = -_SKEW_BASIS[a].reshape(3, 3)
-        joints = [self._yaw_joints[i] for _, i in blocks]
+        fingers = [i for _, i in blocks]
         return _Layout(
             select=select,
-            lever=select.T.dot(skew.reshape(3 * k, -1)),
+            lever=skew.reshape(3 * k, -1),
             base=base.ravel(),
-            mask=np.repeat(self._supports[joints], 3, axis=0),
+            mask=np.repeat(self._finger_masks[fingers], 3, axis=0),
         )
 
     def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
@@ -896,11 +922,9 @@ class Hand:
 
     def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
         pin.computeJointJacobians(self.model, self.data, q)
-        joints = np.concatenate(self._views)
-        points, centres, angular = self._rows_jacobian(self._state_layout, joints).reshape(
-            3, len(self.fingers), 3, -1
-        )
-        return ContactJacobians(self._state(joints), points, centres, angular)
+        values = self._state_layout.select.dot(self._joint_vector())
+        J = self._rows_jacobian(self._state_layout, values).reshape(3, len(self.fingers), 3, -1)
+        return ContactJacobians(_contact_state(values), J[0], J[1], J[2])
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""
@@ -1021,6 +1045,47 @@ def _point_jacobians(
     skews = (points @ _SKEW_BASIS).reshape(-1, 3, 3)
     moving = (world_jacobian[:3] - skews @ world_jacobian[3:]) * supports[joints][:, None, :]
     return np.asarray(moving @ reduce)
+
+
+_SE3_SIZE = 12
+"""Doubles in Pinocchio's SE3: the rotation (column-major 3 x 3), then the translation."""
+
+
+def _placement_views(
+    data: pin.Data, joints: range
+) -> tuple[list[NDArray[np.float64]], NDArray[np.float64] | None]:
+    """Views of the world placements of ``joints`` in ``data.oMi``, and one view of them all.
+
+    The parts are each joint's rotation (column-major, 9) and translation (3). The single view
+    exists when the parts lie back to back in memory (checked address by address: Pinocchio's
+    ``std::vector<SE3>`` of 96-byte elements), else it is None. Both stay valid while ``data``
+    lives: Pinocchio never reallocates ``oMi``.
+    """
+    parts = [
+        part
+        for j in joints
+        for part in (data.oMi[j].rotation.ravel(order="F"), data.oMi[j].translation)
+    ]
+    start = parts[0].__array_interface__["data"][0]
+    offset, adjacent = 0, True
+    for part in parts:
+        itemsize = part.dtype.itemsize
+        adjacent &= part.__array_interface__["data"][0] == start + offset * itemsize
+        adjacent &= part.strides == (itemsize,)
+        offset += len(part)
+    if not adjacent:
+        return parts, None
+    whole = np.lib.stride_tricks.as_strided(
+        parts[0], shape=(offset,), strides=(parts[0].itemsize,), writeable=False
+    )
+    return parts, whole
+
+
+def _contact_state(values: NDArray[np.float64]) -> ContactState:
+    """The contact state from the values (points, centres, normals; (9 F,)) of its layout."""
+    # Indexing, not tuple unpacking: iterating over an array measured about 1 us slower.
+    rows = values.reshape(3, -1, 3)
+    return ContactState(rows[0], rows[1], rows[2])
 
 
 def _support_masks(model: pin.Model) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

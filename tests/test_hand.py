@@ -594,3 +594,25 @@ def test_penetrations_refuse_non_finite_q(sah: Hand) -> None:
     q[9] = np.nan
     with pytest.raises(InvalidConfigurationError, match="NaN"):
         sah.penetrations(q, 1e-3)
+
+
+def test_jacobians_of_a_mimic_joint_moving_another_finger_than_its_leader(tmp_path: Path) -> None:
+    # The middle finger's distal joint follows the index's: data.J is masked before the mimic
+    # columns are folded (the built-in hands fold first), and the rows match finite differences.
+    urdf = tmp_path / "crossed.urdf"
+    urdf.write_text(_edited('<mimic joint="middle_j3"', '<mimic joint="index_j3"'))
+    hand = load_hand(_description_json(tmp_path, urdf=str(urdf)))
+    assert not hand._fold_first
+    assert load_hand("sah")._fold_first
+    rng = np.random.default_rng(31)
+    q = hand.random_configuration(rng)
+    stack, J = hand.contact_stack_jacobian(q)
+    np.testing.assert_allclose(J.reshape(-1, 2, 3, hand.nv)[:, 0], hand.contact_jacobians(q).points)
+    index_j3 = np.eye(hand.nv)[6 + hand.coordinate_index("index_j3")]
+    eps = 1e-7
+    for v in (rng.normal(size=hand.nv), index_j3):
+        fd = (hand.contact_stack(hand.integrate(q, eps * v)) - stack) / eps
+        np.testing.assert_allclose(fd, J @ v, atol=1e-5)
+    # The index's j3 moves the middle's contact point, through the mimic joint only.
+    middle = 6 * hand.fingers.index("middle")
+    assert np.abs(J[middle : middle + 3] @ index_j3).max() > 1e-3
