@@ -616,3 +616,19 @@ def test_jacobians_of_a_mimic_joint_moving_another_finger_than_its_leader(tmp_pa
     # The index's j3 moves the middle's contact point, through the mimic joint only.
     middle = 6 * hand.fingers.index("middle")
     assert np.abs(J[middle : middle + 3] @ index_j3).max() > 1e-3
+
+
+def test_joint_placements_view_follows_pinocchio(any_hand: Hand) -> None:
+    # The single view of data.oMi and the per-joint views it stands for hold the same values,
+    # those of the latest query, and the contact frames agree with them.
+    rng = np.random.default_rng(33)
+    for _ in range(2):
+        q = any_hand.random_configuration(rng)
+        state = any_hand.contact_state(q)
+        np.testing.assert_array_equal(
+            any_hand._joint_vector(), np.concatenate(any_hand._placement_parts)
+        )
+        for i, finger in enumerate(any_hand.fingers):
+            placement = any_hand.contact_placement(q, finger)
+            np.testing.assert_allclose(state.points[i], placement.translation, atol=1e-15)
+            np.testing.assert_allclose(state.normals[i], placement.rotation[:, 0], atol=1e-15)
