@@ -785,12 +785,12 @@ class Hand:
         """The world placements of the joints from the first to the last yaw joint, flat.
 
         Per joint its rotation (column-major) then its translation, 12 values. A view of
-        ``data.oMi`` itself when Pinocchio stores them contiguously (no copy), else one
-        concatenation of per-joint views.
+        ``data.oMi`` itself when Pinocchio stores them contiguously (no copy), else a
+        concatenation of per-joint views (:func:`_flattened`).
         """
         if self._placements is not None:
             return self._placements
-        return np.concatenate(self._placement_parts)
+        return _flattened(self._placement_parts)
 
     def contact_stack(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -1054,31 +1054,32 @@ _SE3_SIZE = 12
 def _placement_views(
     data: pin.Data, joints: range
 ) -> tuple[list[NDArray[np.float64]], NDArray[np.float64] | None]:
-    """Views of the world placements of ``joints`` in ``data.oMi``, and one view of them all.
+    """Views of the world placements of ``joints`` in ``data.oMi``, and one flat view of them all.
 
-    The parts are each joint's rotation (column-major, 9) and translation (3). The single view
-    exists when the parts lie back to back in memory (checked address by address: Pinocchio's
-    ``std::vector<SE3>`` of 96-byte elements), else it is None. Both stay valid while ``data``
-    lives: Pinocchio never reallocates ``oMi``.
+    The parts are each joint's rotation (3 x 3) and translation (3,), views that Pinocchio's
+    in-place writes update. The flat view, :func:`_flattened` of the parts without a copy,
+    exists when they lie back to back in memory, rotations column-major (checked address by
+    address: Pinocchio's ``std::vector<SE3>`` of 96-byte elements); else it is None. Both stay
+    valid while ``data`` lives: Pinocchio never reallocates ``oMi``.
     """
-    parts = [
-        part
-        for j in joints
-        for part in (data.oMi[j].rotation.ravel(order="F"), data.oMi[j].translation)
-    ]
+    parts = [part for j in joints for part in (data.oMi[j].rotation, data.oMi[j].translation)]
     start = parts[0].__array_interface__["data"][0]
     offset, adjacent = 0, True
     for part in parts:
-        itemsize = part.dtype.itemsize
-        adjacent &= part.__array_interface__["data"][0] == start + offset * itemsize
-        adjacent &= part.strides == (itemsize,)
-        offset += len(part)
+        adjacent &= part.__array_interface__["data"][0] == start + offset * part.itemsize
+        adjacent &= part.flags.f_contiguous and part.itemsize == parts[0].itemsize
+        offset += part.size
     if not adjacent:
         return parts, None
     whole = np.lib.stride_tricks.as_strided(
         parts[0], shape=(offset,), strides=(parts[0].itemsize,), writeable=False
     )
     return parts, whole
+
+
+def _flattened(parts: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """The parts of :func:`_placement_views` flat, rotations column-major (a new array)."""
+    return np.concatenate([part.ravel(order="F") for part in parts])
 
 
 def _contact_state(values: NDArray[np.float64]) -> ContactState:
