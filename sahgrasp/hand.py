@@ -453,6 +453,26 @@ class HandState:
         return _point_jacobians(J, self._supports, self._reduce, [joint], point[None])[0]
 
 
+@dataclass(frozen=True)
+class _Layout:
+    """Constant matrices that turn the joint vector into rows of contact quantities.
+
+    Attributes:
+        select: (3 k, 12 n) from :meth:`Hand._joint_vector` (``n`` joint placements) to the
+            ``k`` blocks' values (points, centres [m] or normals).
+        lever: (3 k, 18 k) from the blocks' values to the ``-[x]x`` entries of each block's
+            ``[I, -[x]x]`` (zero for a normal block).
+        base: (18 k,) the constant entries of those 3 x 6 blocks (``[I, 0]`` or ``[0, I]``).
+        mask: (3 k, nvExtended or nv) 1 on the columns that move each block's body (those of
+            ``v`` when the hand folds the mimic columns first).
+    """
+
+    select: NDArray[np.float64]
+    lever: NDArray[np.float64]
+    base: NDArray[np.float64]
+    mask: NDArray[np.float64]
+
+
 class Hand:
     """A hand: Pinocchio model/data, coal self-collision, and the contact queries of the papers.
 
@@ -472,20 +492,35 @@ class Hand:
         for spec, tip in zip(description.fingers, self._tip_frames, strict=True):
             self._contact_frames.append(self._add_contact_joints(model, spec, tip))
         self.model = model
-        self.data = model.createData()
+        self.data = model.createData()  # never replaced: the views below point into it
         self._q_shape = (model.nq,)
         self._finite_weights = np.full(model.nq, _FINITE_WEIGHT)
-        self._centre_selector = np.array([-self.radius_m, 0.0, 0.0, 1.0])
-        self._jacobian_frames = self._contact_frames + self._tip_frames
-        # Frames of Hand.contact_stack, (contact, fingertip-sphere centre) per finger.
-        self._stack_frames = [
-            f for pair in zip(self._contact_frames, self._tip_frames, strict=True) for f in pair
-        ]
-        # Per number of fingers: the matrix of Hand.contact_stack.
-        self._stack_selectors = [
-            _stack_selector(k, self.radius_m) for k in range(len(self.fingers) + 1)
-        ]
         self._supports, self._reduce = _support_masks(model)
+        # The contact frame of each finger hangs on its yaw joint, whose origin is the
+        # fingertip-sphere centre and whose x axis is the outward normal (_add_contact_joints).
+        self._yaw_joints = [int(model.frames[f].parentJoint) for f in self._contact_frames]
+        # Views into data.oMi and data.J, which Pinocchio writes in place: the world placements
+        # of the yaw joints are read after a kinematics pass without a call per frame.
+        self._first_yaw = min(self._yaw_joints)
+        self._placement_parts, self._placements = _placement_views(
+            self.data, range(self._first_yaw, max(self._yaw_joints) + 1)
+        )
+        self._world_jacobian = self.data.J
+        # Folding the mimic columns before masking (6 rows instead of one per Jacobian row)
+        # gives the same rows when every mimic joint moves the same contacts as its leader.
+        # Per finger: its mask on the columns of data.J, or on those of v when folding first.
+        self._finger_masks = self._supports[self._yaw_joints]
+        folds = (self._reduce != 0).astype(np.float64)  # ext column -> the v column it joins
+        hits = self._finger_masks.dot(folds)  # per finger and v column: moving ext columns
+        self._fold_first = bool(np.all((hits == 0) | (hits == folds.sum(axis=0))))
+        if self._fold_first:
+            self._finger_masks = (hits > 0).astype(np.float64)
+        F = len(self.fingers)
+        self._state_layout = self._layout(
+            [(kind, i) for kind in ("point", "centre", "normal") for i in range(F)]
+        )
+        self._stack_layouts: dict[tuple[int, ...], _Layout] = {}
+        self._all_fingers = self._stack_layout(list(range(F)))
         self._check_excluded(description.excluded_collisions)
         self.collision = SelfCollision(model, geometry, description.excluded_collisions)
 
@@ -744,17 +779,18 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._state()
+        return _contact_state(self._state_layout.select.dot(self._joint_vector()))
 
-    def _state(self) -> ContactState:
-        # Contact placements after forward kinematics: x axis = normal, origin = point.
-        model, data = self.model, self.data
-        H = np.array(
-            [pin.updateFramePlacement(model, data, f).homogeneous for f in self._contact_frames]
-        )
-        # One product for the centres (r = p - R n): numpy's fixed cost per call dominates, and
-        # ndarray.dot dispatches faster than the @ operator.
-        return ContactState(H[:, :3, 3], H[:, :3].dot(self._centre_selector), H[:, :3, 0])
+    def _joint_vector(self) -> NDArray[np.float64]:
+        """The world placements of the joints from the first to the last yaw joint, flat.
+
+        Per joint its rotation (column-major) then its translation, 12 values. A view of
+        ``data.oMi`` itself when Pinocchio stores them contiguously (no copy), else a
+        concatenation of per-joint views (:func:`_flattened`).
+        """
+        if self._placements is not None:
+            return self._placements
+        return _flattened(self._placement_parts)
 
     def contact_stack(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -768,7 +804,8 @@ class Hand:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.forwardKinematics(self.model, self.data, self._finite(q))
-        return self._stack(fingers)
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        return np.asarray(layout.select.dot(self._joint_vector()))
 
     def contact_stack_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -778,8 +815,10 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        J = self.contact_jacobian(q, fingers)  # its joint pass leaves the placements too
-        return self._stack(fingers), J
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        stack = np.asarray(layout.select.dot(self._joint_vector()))
+        return stack, self._rows_jacobian(layout, stack)
 
     def contact_jacobian(
         self, q: NDArray[np.float64], fingers: list[int] | None = None
@@ -789,24 +828,73 @@ class Hand:
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, self._finite(q))
-        frames = self._stack_frames if fingers is None else self._stack_frames_of(fingers)
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in frames])
-        return J[:, :3].reshape(-1, self.model.nv)
+        pin.computeJointJacobians(self.model, self.data, self._finite(q))
+        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
+        return self._rows_jacobian(layout, layout.select.dot(self._joint_vector()))
 
-    def _stack_frames_of(self, fingers: list[int]) -> list[int]:
-        return [f for i in fingers for f in self._stack_frames[2 * i : 2 * i + 2]]
+    def _rows_jacobian(self, layout: _Layout, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Jacobian (rows, nv) of ``layout``'s ``values`` from ``data.J`` (joint Jacobians set).
 
-    def _stack(self, fingers: list[int] | None) -> NDArray[np.float64]:
-        """(6 k,) points and centres of ``fingers`` (joint placements up to date)."""
-        model, data = self.model, self.data
-        frames = (
-            self._contact_frames if fingers is None else [self._contact_frames[i] for i in fingers]
+        Each 3-row block is ``[I, -[x]x] J_w`` for a point ``x`` fixed to the finger's contact
+        body, or ``[0, I] J_w`` for its angular velocity, on the columns that move that body,
+        mimic columns folded into their leaders: a few products on constant matrices (one
+        Python-to-C crossing each) instead of a Pinocchio call per frame. The fold goes first
+        (on the 6 rows of ``data.J``) when every mimic joint moves the same fingers as its
+        leader, the case of the built-in hands; otherwise after the mask.
+        """
+        blocks = (layout.base + values.dot(layout.lever)).reshape(-1, 6)
+        if self._fold_first:
+            J = blocks.dot(self._world_jacobian.dot(self._reduce))
+            J *= layout.mask
+            return J
+        J = blocks.dot(self._world_jacobian)
+        J *= layout.mask
+        return np.asarray(J.dot(self._reduce))
+
+    def _stack_layout(self, fingers: list[int]) -> _Layout:
+        """The layout of :meth:`contact_stack`, ``(p_i, r_i)`` per finger of ``fingers``."""
+        key = tuple(fingers)
+        layout = self._stack_layouts.get(key)
+        if layout is None:
+            rows = [(kind, i) for i in key for kind in ("point", "centre")]
+            layout = self._stack_layouts[key] = self._layout(rows)
+        return layout
+
+    def _layout(self, blocks: list[tuple[str, int]]) -> _Layout:
+        """Constant matrices of a list of (``point``/``centre``/``normal``, finger) 3-row blocks.
+
+        In :meth:`_joint_vector`, finger ``i``'s yaw joint holds the outward normal ``n_i`` as
+        the first rotation column and the sphere centre ``c_i`` as the translation; the contact
+        point is ``p_i = c_i + R n_i``. A normal block's Jacobian is the contact frame's
+        angular velocity (:attr:`ContactJacobians.angular`).
+        """
+        k = len(blocks)
+        select = np.zeros((3 * k, _SE3_SIZE * (max(self._yaw_joints) - self._first_yaw + 1)))
+        base = np.zeros((k, 3, 6))
+        skew = np.zeros((3 * k, k, 3, 6))  # a block's point -> its -[x]x entries
+        eye = np.eye(3)
+        for b, (kind, i) in enumerate(blocks):
+            rows, normal = (
+                slice(3 * b, 3 * b + 3),
+                _SE3_SIZE * (self._yaw_joints[i] - self._first_yaw),
+            )
+            centre = normal + 9
+            if kind == "normal":
+                select[rows, normal : normal + 3] = eye
+                base[b, :, 3:] = eye
+                continue
+            select[rows, centre : centre + 3] = eye
+            select[rows, normal : normal + 3] = self.radius_m * eye if kind == "point" else 0.0
+            base[b, :, :3] = eye
+            for a in range(3):
+                skew[3 * b + a, b, :, 3:] = -_SKEW_BASIS[a].reshape(3, 3)
+        fingers = [i for _, i in blocks]
+        return _Layout(
+            select=select,
+            lever=skew.reshape(3 * k, -1),
+            base=base.ravel(),
+            mask=np.repeat(self._finger_masks[fingers], 3, axis=0),
         )
-        H = np.array([pin.updateFramePlacement(model, data, f).homogeneous for f in frames])
-        # One matrix-vector product on the flat placements (docs/ik.md, "Cost").
-        return np.asarray(self._stack_selectors[len(frames)].dot(H.ravel()))
 
     def state(self, q: NDArray[np.float64], jacobians: bool = False) -> HandState:
         """Immutable snapshot of the hand at ``q`` (see :class:`HandState`).
@@ -816,8 +904,8 @@ class Hand:
         """
         q = np.array(self._finite(q))
         if not jacobians:
-            pin.forwardKinematics(self.model, self.data, q)
-            return _frozen(HandState(q, self._state(), None, None, self._supports, self._reduce))
+            state = self.contact_state(q)
+            return _frozen(HandState(q, state, None, None, self._supports, self._reduce))
         jac = self._jacobians(q)
         J = np.array(self.data.J)
         return _frozen(HandState(q, jac.state, jac, J, self._supports, self._reduce))
@@ -833,12 +921,10 @@ class Hand:
         return self._jacobians(self._finite(q))
 
     def _jacobians(self, q: NDArray[np.float64]) -> ContactJacobians:
-        # Frame by frame: for this (F, 3, nv) layout faster than the folded data.J product.
-        model, data = self.model, self.data
-        pin.computeJointJacobians(model, data, q)
-        J = np.array([pin.getFrameJacobian(model, data, f, _LWA) for f in self._jacobian_frames])
-        F = len(self.fingers)
-        return ContactJacobians(self._state(), J[:F, :3], J[F:, :3], J[:F, 3:])
+        pin.computeJointJacobians(self.model, self.data, q)
+        values = self._state_layout.select.dot(self._joint_vector())
+        J = self._rows_jacobian(self._state_layout, values).reshape(3, len(self.fingers), 3, -1)
+        return ContactJacobians(_contact_state(values), J[0], J[1], J[2])
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
         """World placement of every body frame (link) at ``q``, by link name."""
@@ -961,22 +1047,46 @@ def _point_jacobians(
     return np.asarray(moving @ reduce)
 
 
-def _stack_selector(fingers: int, radius_m: float) -> NDArray[np.float64]:
-    """Matrix (6 k, 16 k) from ``k`` flattened contact placements to ``(p_i, r_i)`` per finger.
+_SE3_SIZE = 12
+"""Doubles in Pinocchio's SE3: the rotation (column-major 3 x 3), then the translation."""
 
-    In the row-major 4 x 4 placement of finger ``i`` (offset ``16 i``), entry ``4 a + 3`` is the
-    contact point's coordinate ``a`` and ``4 a`` the outward normal's; the sphere centre is
-    ``r = p - R n``. One matrix-vector product instead of a batched product on a transposed view
-    (measured: 10.2 -> 7.8 us per :meth:`Hand.contact_stack`). For :class:`ContactState` three
-    slices and one product measured faster than this product and a reshape.
+
+def _placement_views(
+    data: pin.Data, joints: range
+) -> tuple[list[NDArray[np.float64]], NDArray[np.float64] | None]:
+    """Views of the world placements of ``joints`` in ``data.oMi``, and one flat view of them all.
+
+    The parts are each joint's rotation (3 x 3) and translation (3,), views that Pinocchio's
+    in-place writes update. The flat view, :func:`_flattened` of the parts without a copy,
+    exists when they lie back to back in memory, rotations column-major (checked address by
+    address: Pinocchio's ``std::vector<SE3>`` of 96-byte elements); else it is None. Both stay
+    valid while ``data`` lives: Pinocchio never reallocates ``oMi``.
     """
-    S = np.zeros((6 * fingers, 16 * fingers))
-    for i in range(fingers):
-        for a in range(3):
-            S[6 * i + a, 16 * i + 4 * a + 3] = 1.0
-            S[6 * i + 3 + a, 16 * i + 4 * a + 3] = 1.0
-            S[6 * i + 3 + a, 16 * i + 4 * a] = -radius_m
-    return S
+    parts = [part for j in joints for part in (data.oMi[j].rotation, data.oMi[j].translation)]
+    start = parts[0].__array_interface__["data"][0]
+    offset, adjacent = 0, True
+    for part in parts:
+        adjacent &= part.__array_interface__["data"][0] == start + offset * part.itemsize
+        adjacent &= part.flags.f_contiguous and part.itemsize == parts[0].itemsize
+        offset += part.size
+    if not adjacent:
+        return parts, None
+    whole = np.lib.stride_tricks.as_strided(
+        parts[0], shape=(offset,), strides=(parts[0].itemsize,), writeable=False
+    )
+    return parts, whole
+
+
+def _flattened(parts: list[NDArray[np.float64]]) -> NDArray[np.float64]:
+    """The parts of :func:`_placement_views` flat, rotations column-major (a new array)."""
+    return np.concatenate([part.ravel(order="F") for part in parts])
+
+
+def _contact_state(values: NDArray[np.float64]) -> ContactState:
+    """The contact state from the values (points, centres, normals; (9 F,)) of its layout."""
+    # Indexing, not tuple unpacking: iterating over an array measured about 1 us slower.
+    rows = values.reshape(3, -1, 3)
+    return ContactState(rows[0], rows[1], rows[2])
 
 
 def _support_masks(model: pin.Model) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

@@ -9,6 +9,7 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
+from sahgrasp import hand as hand_module
 from sahgrasp.collision import Penetration
 from sahgrasp.errors import HandModelError, InvalidConfigurationError, InvalidSettingsError
 from sahgrasp.hand import Hand, HandDescription, load_hand, sah_description
@@ -594,3 +595,41 @@ def test_penetrations_refuse_non_finite_q(sah: Hand) -> None:
     q[9] = np.nan
     with pytest.raises(InvalidConfigurationError, match="NaN"):
         sah.penetrations(q, 1e-3)
+
+
+def test_jacobians_of_a_mimic_joint_moving_another_finger_than_its_leader(tmp_path: Path) -> None:
+    # The middle finger's distal joint follows the index's: data.J is masked before the mimic
+    # columns are folded (the built-in hands fold first), and the rows match finite differences.
+    urdf = tmp_path / "crossed.urdf"
+    urdf.write_text(_edited('<mimic joint="middle_j3"', '<mimic joint="index_j3"'))
+    hand = load_hand(_description_json(tmp_path, urdf=str(urdf)))
+    assert not hand._fold_first
+    assert load_hand("sah")._fold_first
+    rng = np.random.default_rng(31)
+    q = hand.random_configuration(rng)
+    stack, J = hand.contact_stack_jacobian(q)
+    np.testing.assert_allclose(J.reshape(-1, 2, 3, hand.nv)[:, 0], hand.contact_jacobians(q).points)
+    index_j3 = np.eye(hand.nv)[6 + hand.coordinate_index("index_j3")]
+    eps = 1e-7
+    for v in (rng.normal(size=hand.nv), index_j3):
+        fd = (hand.contact_stack(hand.integrate(q, eps * v)) - stack) / eps
+        np.testing.assert_allclose(fd, J @ v, atol=1e-5)
+    # The index's j3 moves the middle's contact point, through the mimic joint only.
+    middle = 6 * hand.fingers.index("middle")
+    assert np.abs(J[middle : middle + 3] @ index_j3).max() > 1e-3
+
+
+def test_joint_placements_view_follows_pinocchio(any_hand: Hand) -> None:
+    # The single view of data.oMi and the per-joint views it stands for hold the same values,
+    # those of the latest query, and the contact frames agree with them.
+    rng = np.random.default_rng(33)
+    for _ in range(2):
+        q = any_hand.random_configuration(rng)
+        state = any_hand.contact_state(q)
+        flat = any_hand._joint_vector()
+        assert flat.base is not None  # the single view of data.oMi: no copy per query
+        np.testing.assert_array_equal(flat, hand_module._flattened(any_hand._placement_parts))
+        for i, finger in enumerate(any_hand.fingers):
+            placement = any_hand.contact_placement(q, finger)
+            np.testing.assert_allclose(state.points[i], placement.translation, atol=1e-15)
+            np.testing.assert_allclose(state.normals[i], placement.rotation[:, 0], atol=1e-15)

@@ -1,8 +1,11 @@
 """Benchmark of the hand's kinematic queries against the raw Pinocchio calls they wrap.
 
-The floor performs the same Pinocchio calls with no sahgrasp code around them: forward kinematics
-plus the placement of every contact and centre frame, and the joint Jacobians plus the frame
-Jacobian of every contact and centre frame. The query and its floor are timed in alternating
+The floor computes what the query returns with Pinocchio's own per-frame calls and no sahgrasp
+code around them: forward kinematics plus the placement of every contact frame (point and
+normal) and fingertip-sphere centre frame, for :meth:`Hand.contact_state` and
+:meth:`Hand.contact_stack`; the joint Jacobians plus, for each of those frames, its placement and
+its frame Jacobian, for :meth:`Hand.contact_jacobians` and :meth:`Hand.contact_stack_jacobian`
+(both also return the contact state or stack). The query and its floor are timed in alternating
 chunks of calls, so load from other processes falls on both alike; each reports its best chunk.
 """
 
@@ -60,8 +63,9 @@ def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
             pin.updateFramePlacement(model, data, f)
 
     def raw_jacobians() -> None:
-        pin.computeJointJacobians(model, data, q)
+        pin.computeJointJacobians(model, data, q)  # also the joint placements
         for f in frames:
+            pin.updateFramePlacement(model, data, f)
             pin.getFrameJacobian(model, data, f, _LWA)
 
     fk, fk_raw = _per_call_us((lambda: hand.contact_state(q), raw_fk), calls)

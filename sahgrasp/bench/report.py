@@ -74,12 +74,14 @@ def _atlas_table(doc: Document) -> str:
 
 def _kinematics_table(doc: Document) -> str:
     rows = [
-        (name, h["contact_state_us"], h["raw_fk_us"], h["contact_state_ratio"],
-         h["contact_jacobians_us"], h["raw_jacobians_us"], h["contact_jacobians_ratio"])
+        (name, h["raw_fk_us"], h["contact_state_us"], h["contact_state_ratio"],
+         h["contact_stack_us"], h["contact_stack_ratio"], h["raw_jacobians_us"],
+         h["contact_jacobians_us"], h["contact_jacobians_ratio"],
+         h["contact_stack_jacobian_us"], h["contact_stack_jacobian_ratio"])
         for name, h in doc["hands"].items()
     ]  # fmt: skip
-    headers = ("hand", "state [us]", "raw fk [us]", "ratio", "jacobians [us]", "raw [us]",
-               "ratio")  # fmt: skip
+    headers = ("hand", "raw fk [us]", "state [us]", "ratio", "stack [us]", "ratio",
+               "raw jac [us]", "jacobians [us]", "ratio", "stack jac [us]", "ratio")  # fmt: skip
     title = f"bench kinematics: {doc['calls']} calls, target ratio <= {doc['target_ratio']:g}"
     return f"{title}\n{format_table(headers, rows)}"
 
