@@ -122,7 +122,7 @@ class RevolvedSurface:
     def jet(self, u: ArrayLike, v: ArrayLike) -> SurfaceJet:
         """Return the point, outward normal and their ``(u, v)`` derivatives.
 
-        Float ``u`` and ``v`` take the scalar path (:meth:`scalar_jet`), arrays the broadcast one;
+        Float ``u`` and ``v`` take the scalar path (:meth:`columns`), arrays the broadcast one;
         both compute the same expressions.
         """
         scalars = _scalars(u, v)
