@@ -156,6 +156,8 @@ class GraspSystem:
         self.contacts = tuple(contacts)
         self.q_first = np.array(q_first, dtype=np.float64)
         self.T_palm_object0 = hand.wrist_pose(q_first).inverse()
+        self._rotation0 = self.T_palm_object0.rotation  # copies, kept for F's hot path
+        self._origin0 = self.T_palm_object0.translation
         self._rotation_basis = self._rotations(symmetry_axis)  # rotation vector = basis @ x_o[3:]
         pose = 3 + self._rotation_basis.shape[1] if free_object else 0
         self.pose_slice = slice(offset, offset + pose)
@@ -244,11 +246,21 @@ class GraspSystem:
 
     def object_pose(self, x: NDArray[np.float64]) -> pin.SE3:
         """Object pose in the palm frame at ``x``."""
-        T0 = self.T_palm_object0
         if not self.free_object:
-            return T0
+            return self.T_palm_object0
+        return pin.SE3(*self._pose(x, self._rotation_vector(x)))
+
+    def _pose(
+        self, x: NDArray[np.float64], rotation_vector: FloatArray
+    ) -> tuple[FloatArray, FloatArray]:
+        """Object rotation (3, 3) and origin (3,) in the palm frame at ``x``, as numpy arrays.
+
+        F's hot path: no ``pin.SE3`` is built and the rotation vector is computed once.
+        """
+        if not self.free_object:
+            return self._rotation0, self._origin0
         shift = x[self.pose_slice.start : self.pose_slice.start + 3]
-        return pin.SE3(pin.exp3(self._rotation_vector(x)) @ T0.rotation, T0.translation + shift)
+        return pin.exp3(rotation_vector) @ self._rotation0, self._origin0 + shift
 
     # ----- F and its Jacobian ----------------------------------------------------------------
     def _frames(self, x: NDArray[np.float64]) -> tuple[FloatArray, FloatArray]:
@@ -268,8 +280,8 @@ class GraspSystem:
             return self._last
         placements, frame_jacobians = self._frames(x)
         jets = [c.region.evaluate(x[c.params]) for c in self.contacts]
-        T = self.object_pose(x)
-        rotation, origin = T.rotation, T.translation
+        rotation_vector = self._rotation_vector(x)
+        rotation, origin = self._pose(x, rotation_vector)
         points = np.array([j.point for j in jets]) @ rotation.T + origin
         normals = np.array([j.normal for j in jets]) @ rotation.T
         axes = placements[:, :3, 1:3]
@@ -280,7 +292,7 @@ class GraspSystem:
         residual.flags.writeable = False
         self._last = _Point(
             key=key,
-            rotation_vector=self._rotation_vector(x),
+            rotation_vector=rotation_vector,
             rotation=rotation,
             origin=origin,
             axes=axes,

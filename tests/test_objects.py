@@ -23,6 +23,7 @@ from sahgrasp.objects import (
     GraspPatches,
     Patch,
     RevolvedSolid,
+    RevolvedSurface,
     Segment,
     SurfaceJet,
     as_placement,
@@ -207,6 +208,46 @@ def test_patch_derivatives_match_central_differences() -> None:
             np.testing.assert_allclose(
                 jet.normal_jacobian, fd_normal, rtol=1e-6, atol=1e-5, err_msg=region.name
             )
+
+
+def test_scalar_jets_equal_the_array_jets() -> None:
+    """The scalar path (float u, v: plain math) gives the broadcast path's jet to 1e-12."""
+    rng = np.random.default_rng(13)
+    pieces = [
+        Segment((0.033, 0.0), (0.033, 0.115)),
+        Segment((0.01, 0.02), (0.04, 0.07)),
+        Arc((0.02, 0.05), 0.01, 0.3, 1.2),
+        Arc((0.02, 0.05), 0.015, 2.0, -1.5),
+    ]
+    for piece in pieces:
+        surface = RevolvedSurface(piece)
+        u = rng.uniform(-math.pi, math.pi, 200)
+        v = rng.uniform(0.0, piece.length_m, 200)
+        batch = surface.jet(u, v).transformed(POSE)
+        for i in range(len(u)):
+            for one in (surface.jet(u[i], v[i]).transformed(POSE), _placed(surface, u[i], v[i])):
+                assert one.point_jacobian.shape == (3, 2)
+                for got, want in zip(_fields(one), _fields(batch), strict=True):
+                    np.testing.assert_allclose(got, want[i], rtol=0.0, atol=1e-12)
+    curve = bottle_patches(POSE).regions["index"]
+    assert isinstance(curve, CurvePatch)
+    u = rng.uniform(*curve.u_range, 50)
+    batch = curve.surface.jet(u, curve.v_fixed).transformed(curve.placement)
+    for i in range(len(u)):
+        one = curve.evaluate((u[i],))
+        assert one.point_jacobian.shape == (3, 1)
+        for got, want in zip(_fields(one), _fields(batch), strict=True):
+            np.testing.assert_allclose(
+                got, want[i][..., :1] if got.ndim == 2 else want[i], atol=1e-12
+            )
+
+
+def _placed(surface: RevolvedSurface, u: float, v: float) -> SurfaceJet:
+    return Patch("p", surface, (-4.0, 4.0), (0.0, 1.0), (0.0, 0.0), POSE).evaluate((u, v))
+
+
+def _fields(jet: SurfaceJet) -> tuple[NDArray[np.float64], ...]:
+    return jet.point, jet.normal, jet.point_jacobian, jet.normal_jacobian
 
 
 def test_patch_accessors_agree_with_evaluate() -> None:

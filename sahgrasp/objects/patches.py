@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike
 from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.errors import InvalidTargetError
 from sahgrasp.objects.frames import FloatArray, as_placement
-from sahgrasp.objects.surfaces import Surface, SurfaceJet
+from sahgrasp.objects.surfaces import Surface, SurfaceJet, placed_jet
 
 __all__ = ["ContactRegion", "CurvePatch", "FixedContact", "GraspPatches", "Patch"]
 
@@ -114,7 +114,7 @@ class Patch:
     def evaluate(self, params: ArrayLike) -> SurfaceJet:
         """Return point, normal and their (3, 2) Jacobians at ``params = (u, v)``."""
         u, v = np.asarray(params, dtype=np.float64)
-        return self.surface.jet(u, v).transformed(self.placement)
+        return placed_jet(self.surface, u, v, self.placement)
 
     def point(self, u: float, v: float) -> FloatArray:
         """Contact point ``O(u, v)`` [m], shape (3,)."""
@@ -179,8 +179,7 @@ class CurvePatch:
     def evaluate(self, params: ArrayLike) -> SurfaceJet:
         """Return point, normal and their (3, 1) Jacobians at ``params = (u,)``."""
         (u,) = np.atleast_1d(np.asarray(params, dtype=np.float64))
-        jet = self.surface.jet(u, self.v_fixed).parameter_columns([0])
-        return jet.transformed(self.placement)
+        return placed_jet(self.surface, u, self.v_fixed, self.placement, curve=True)
 
     def point(self, u: float) -> FloatArray:
         """Contact point [m], shape (3,)."""

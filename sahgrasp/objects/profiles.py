@@ -24,6 +24,7 @@ __all__ = [
     "Arc",
     "ProfileJet",
     "ProfilePiece",
+    "ScalarProfileJet",
     "Segment",
     "chord_count",
     "piece_chords",
@@ -33,6 +34,9 @@ __all__ = [
 
 ProfileJet: TypeAlias = tuple[FloatArray, FloatArray, FloatArray]
 """``(rz, d_rz/ds, d2_rz/ds2)``, each of shape (..., 2)."""
+
+ScalarProfileJet: TypeAlias = tuple[float, float, float, float, float, float]
+"""``(r, z, dr/ds, dz/ds, d2r/ds2, d2z/ds2)`` at one arc length, as plain floats."""
 
 _LENGTH_TOLERANCE_M = 1e-12
 
@@ -56,6 +60,16 @@ class Segment:
         direction = (np.asarray(self.end_m) - start) / self.length_m
         shape = (*s.shape[:-1], 2)
         return start + s * direction, np.broadcast_to(direction, shape).copy(), np.zeros(shape)
+
+    def evaluate_scalar(self, s_m: float) -> ScalarProfileJet:
+        """:meth:`evaluate` at one arc length ``s_m`` [m], in plain floats (same operations).
+
+        The contact regions evaluate one point at a time inside the atlas's Newton steps, where
+        numpy's per-call overhead would cost several times the arithmetic.
+        """
+        (r0, z0), (r1, z1), length = self.start_m, self.end_m, self.length_m
+        dr, dz = (r1 - r0) / length, (z1 - z0) / length
+        return r0 + s_m * dr, z0 + s_m * dz, dr, dz, 0.0, 0.0
 
 
 @dataclass(frozen=True)
@@ -84,6 +98,14 @@ class Arc:
         radial = np.stack([np.cos(angle), np.sin(angle)], axis=-1)
         tangent = sign * np.stack([-np.sin(angle), np.cos(angle)], axis=-1)
         return np.asarray(self.centre_m) + self.radius_m * radial, tangent, -radial / self.radius_m
+
+    def evaluate_scalar(self, s_m: float) -> ScalarProfileJet:
+        """:meth:`evaluate` at one arc length ``s_m`` [m], in plain floats (same operations)."""
+        sign = math.copysign(1.0, self.sweep_rad)
+        angle = self.start_rad + sign * s_m / self.radius_m
+        c, s = math.cos(angle), math.sin(angle)
+        (r0, z0), radius = self.centre_m, self.radius_m
+        return r0 + radius * c, z0 + radius * s, sign * -s, sign * c, -c / radius, -s / radius
 
 
 ProfilePiece: TypeAlias = Segment | Arc

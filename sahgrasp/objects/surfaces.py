@@ -1,13 +1,17 @@
 """Parametrised surfaces ``(u, v) -> (point, outward unit normal)`` with exact first derivatives.
 
 Every surface evaluates on arrays (broadcast ``u`` against ``v``) and returns a :class:`SurfaceJet`
-in its own frame; patches place it (see :mod:`sahgrasp.objects.patches`). Three families cover the
-catalog: surfaces of revolution of one profile piece (cylinders, cones, discs, spheres, tori,
-fillets), triaxial ellipsoids, and planar rectangles (box faces).
+in its own frame; patches place it (see :mod:`sahgrasp.objects.patches`, :func:`placed_jet`).
+Surfaces of revolution also take a scalar path for float ``u`` and ``v`` (plain ``math`` and one
+small array): the grasp equations evaluate one point at a time, where numpy's per-call overhead
+outweighs the arithmetic. Three families cover the catalog: surfaces of revolution of one
+profile piece (cylinders, cones, discs, spheres, tori, fillets), triaxial ellipsoids, and planar
+rectangles (box faces).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -17,7 +21,14 @@ from numpy.typing import ArrayLike
 from sahgrasp.objects.frames import FloatArray
 from sahgrasp.objects.profiles import ProfilePiece
 
-__all__ = ["EllipsoidSurface", "RectangleSurface", "RevolvedSurface", "Surface", "SurfaceJet"]
+__all__ = [
+    "EllipsoidSurface",
+    "RectangleSurface",
+    "RevolvedSurface",
+    "Surface",
+    "SurfaceJet",
+    "placed_jet",
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,6 +46,17 @@ class SurfaceJet:
     normal: FloatArray
     point_jacobian: FloatArray
     normal_jacobian: FloatArray
+
+    @classmethod
+    def from_columns(cls, columns: FloatArray) -> SurfaceJet:
+        """The jet of one point from its columns ``[point, normal, d point, d normal]``.
+
+        Args:
+            columns: Shape (3, 2 + 2k): the point, the normal, the k point derivatives and the
+                k normal derivatives; the jet's arrays are views of it.
+        """
+        k = (columns.shape[1] - 2) // 2
+        return cls(columns[:, 0], columns[:, 1], columns[:, 2 : 2 + k], columns[:, 2 + k :])
 
     def transformed(self, T: FloatArray) -> SurfaceJet:
         """Return the jet expressed through placement ``T`` (rotate everything, move the point)."""
@@ -70,6 +92,13 @@ def _parameters(u: ArrayLike, v: ArrayLike) -> tuple[FloatArray, FloatArray]:
     return u_arr, v_arr
 
 
+def _scalars(u: ArrayLike, v: ArrayLike) -> tuple[float, float] | None:
+    """``u`` and ``v`` as floats if both are plain numbers (numpy's float64 included), else None."""
+    if isinstance(u, float | int) and isinstance(v, float | int):
+        return float(u), float(v)
+    return None
+
+
 def _stack(*columns: FloatArray | float, shape: tuple[int, ...]) -> FloatArray:
     """Stack broadcast scalar fields into a trailing vector axis."""
     return np.stack([np.broadcast_to(c, shape) for c in columns], axis=-1)
@@ -91,7 +120,14 @@ class RevolvedSurface:
     piece: ProfilePiece
 
     def jet(self, u: ArrayLike, v: ArrayLike) -> SurfaceJet:
-        """Return the point, outward normal and their ``(u, v)`` derivatives."""
+        """Return the point, outward normal and their ``(u, v)`` derivatives.
+
+        Float ``u`` and ``v`` take the scalar path (:meth:`columns`), arrays the broadcast one;
+        both compute the same expressions.
+        """
+        scalars = _scalars(u, v)
+        if scalars is not None:
+            return SurfaceJet.from_columns(self.columns(*scalars))
         u_arr, v_arr = _parameters(u, v)
         (r, z), (dr, dz), (ddr, ddz) = (np.moveaxis(a, -1, 0) for a in self.piece.evaluate(v_arr))
         c, s, shape = np.cos(u_arr), np.sin(u_arr), u_arr.shape
@@ -105,6 +141,22 @@ class RevolvedSurface:
                 _stack(-dz * s, dz * c, 0.0, shape=shape),
                 _stack(ddz * c, ddz * s, -ddr, shape=shape),
             ),
+        )
+
+    def columns(self, u: float, v: float) -> FloatArray:
+        """:meth:`jet` at one ``(u, v)`` in plain floats, as ``SurfaceJet.from_columns`` takes it.
+
+        Returns:
+            Shape (3, 6): point, normal, d point / d(u, v), d normal / d(u, v).
+        """
+        r, z, dr, dz, ddr, ddz = self.piece.evaluate_scalar(v)
+        c, s = math.cos(u), math.sin(u)
+        return np.array(
+            [
+                [r * c, dz * c, -r * s, dr * c, -dz * s, ddz * c],
+                [r * s, dz * s, r * c, dr * s, dz * c, ddz * s],
+                [z, -dr, 0.0, dz, 0.0, -ddr],
+            ]
         )
 
 
@@ -169,3 +221,32 @@ class RectangleSurface:
             jacobian,
             np.zeros((*shape, 2)),
         )
+
+
+_CURVE_COLUMNS = np.array([0, 1, 2, 4])
+"""Of the (3, 6) columns of a surface point, those of a curve ``u -> surface(u, v_fixed)``."""
+
+
+def placed_jet(
+    surface: Surface, u: ArrayLike, v: ArrayLike, T: FloatArray, *, curve: bool = False
+) -> SurfaceJet:
+    """``surface.jet(u, v)`` through placement ``T``; only the ``u`` derivatives if ``curve``.
+
+    One point of a surface of revolution takes the scalar path: its (3, 6) columns are rotated by
+    one matrix product (the patches of the grasp equations are evaluated one point at a time).
+
+    Args:
+        surface: The surface, in its own frame.
+        u: First parameter(s).
+        v: Second parameter(s).
+        T: Placement (4x4) of the surface frame.
+        curve: Keep only the ``u`` derivatives (a curve at fixed ``v``).
+    """
+    scalars = _scalars(u, v)
+    if isinstance(surface, RevolvedSurface) and scalars is not None:
+        columns = surface.columns(*scalars)
+        moved = T[:3, :3] @ (columns[:, _CURVE_COLUMNS] if curve else columns)
+        moved[:, 0] += T[:3, 3]
+        return SurfaceJet.from_columns(moved)
+    jet = surface.jet(u, v)
+    return (jet.parameter_columns([0]) if curve else jet).transformed(T)
