@@ -198,3 +198,14 @@ def test_targets_files_give_a_default_object_and_per_problem_ones(tmp_path: Path
     names = [getattr(getattr(p, "object_spec", None), "name", None) for p in read[:3]]
     assert names == ["can", None, "cup"]
     assert isinstance(read[3], InvalidProblem) and "unit quaternion" in read[3].detail
+
+
+def test_a_pickled_target_comes_back_equal_bit_for_bit_and_read_only() -> None:
+    import pickle
+
+    target = GraspTarget("p", [ContactTarget("thumb", [0.1, 1 / 3, -2e-300], [0.0, 0.6, 0.8])])
+    back = pickle.loads(pickle.dumps(target, pickle.HIGHEST_PROTOCOL))
+    assert back == target and back.contacts[0].point.tobytes() == target.contacts[0].point.tobytes()
+    assert (
+        not back.contacts[0].point.flags.writeable and not back.contacts[0].normal.flags.writeable
+    )
