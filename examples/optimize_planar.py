@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument
 from sahgrasp.experiments.atlas_examples import planar_drawing
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
+from sahgrasp.experiments.report import result_lines
 from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.planar import PlanarGraspProblem
 from sahgrasp.quality import SINGULAR_THRESHOLDS
@@ -43,13 +44,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     atlas, paper = result.atlas, PAPER_ATLAS_REPORT["planar"]
     print(f"planar: {atlas.n_charts} charts (paper about {paper.charts}), r = {atlas.radius:g}, "
           f"epsilon = {atlas.epsilon:g}, k = {atlas.dim}")  # fmt: skip
-    checks = result.checks  # a chart centre is valid when the hand collides with nothing
-    print(f"valid: {np.count_nonzero(result.valid)} of {atlas.n_charts} charts; colliding: "
-          f"{np.count_nonzero(checks.self_collision)} self, "
-          f"{np.count_nonzero(checks.object_collision)} hand-object")  # fmt: skip
-    print(f"time: atlas {result.atlas_seconds:.1f} s, quality {result.quality_seconds:.1f} s")
-    for which, chart in (("best", result.best), ("worst", result.worst)):
-        print(f"{which} grasp: chart {chart}, {result.index} = {result.values[chart]:.4g}")
+    print("\n".join(result_lines(result)))
 
     def draw(viewer: Viewer, path: str, chart: int, T: NDArray[np.float64]) -> NDArray[np.float64]:
         fingers, circles = planar_drawing(hand, atlas.centres[chart])  # drawn in the x-z plane

@@ -16,10 +16,9 @@ import sys
 from collections.abc import Sequence
 from typing import cast
 
-import numpy as np
-
 from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument, atlas_geometry
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
+from sahgrasp.experiments.report import result_lines
 from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.grasp import SahGraspManifold
 from sahgrasp.progress import StderrProgress
@@ -47,13 +46,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"{args.experiment}: {atlas.n_charts} charts (paper {paper.charts}), "
           f"n = {atlas.ambient_dim} (paper {paper.n}), t = {problem.t} (paper {paper.t}), "
           f"k = {atlas.dim}")  # fmt: skip
-    checks = result.checks  # a chart centre is valid when the hand collides with nothing
-    print(f"valid: {np.count_nonzero(result.valid)} of {atlas.n_charts} charts; colliding: "
-          f"{np.count_nonzero(checks.self_collision)} self, "
-          f"{np.count_nonzero(checks.object_collision)} hand-object")  # fmt: skip
-    print(f"time: atlas {result.atlas_seconds:.1f} s, quality {result.quality_seconds:.1f} s")
-    for which, chart in (("best", result.best), ("worst", result.worst)):
-        print(f"{which} grasp: chart {chart}, {result.index} = {result.values[chart]:.4g}")
+    print("\n".join(result_lines(result)))
 
     def grasp(chart: int) -> ChartGrasp:
         x = problem.x_of(atlas.centres[chart])  # the chart centre in the system's variables

@@ -16,7 +16,7 @@ from sahgrasp.optimization import OptimizationResult
 from sahgrasp.planar import PlanarGraspProblem
 from sahgrasp.quality import INDICES, SINGULAR_THRESHOLDS
 
-__all__ = ["collision_notes", "describe_grasp", "summary"]
+__all__ = ["collision_notes", "describe_grasp", "result_lines", "summary"]
 
 
 def describe_grasp(result: OptimizationResult, chart: int) -> dict[str, Any]:
@@ -108,3 +108,18 @@ def collision_notes(result: OptimizationResult) -> tuple[str, ...]:
             f"{result.index} = {value:.4g}"
         )
     return tuple(notes)
+
+
+def result_lines(result: OptimizationResult) -> tuple[str, ...]:
+    """Report lines of an example: valid and colliding charts, times, best and worst grasps."""
+    atlas, checks = result.atlas, result.checks  # a chart centre is valid when nothing collides
+    return (
+        f"valid: {int(result.valid.sum())} of {atlas.n_charts} charts; colliding: "
+        f"{int(checks.self_collision.sum())} self, "
+        f"{int(checks.object_collision.sum())} hand-object",
+        f"time: atlas {result.atlas_seconds:.1f} s, quality {result.quality_seconds:.1f} s",
+        *(
+            f"{which} grasp: chart {chart}, {result.index} = {result.values[chart]:.4g}"
+            for which, chart in (("best", result.best), ("worst", result.worst))
+        ),
+    )
