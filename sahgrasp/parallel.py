@@ -18,14 +18,12 @@ case the other covers:
   becomes ready when the parent ends; it also catches a parent that died before the worker
   armed ``PR_SET_PDEATHSIG``.
 
-Linux sends the parent-death signal when the *thread* that started the worker ends, and the pool
-starts workers lazily, from the thread that calls ``submit``: submit from the thread that holds
-the ``with`` block (as a plain ``with process_pool(...)`` does), not from short-lived threads.
-
-All workers are started before the pool is handed out, with the stop signals (SIGINT, SIGTERM,
-SIGHUP) held meanwhile: a stop that unwinds the parent while it writes a spawned worker's start-up
-data makes that worker print a traceback (``EOFError``, ``FileNotFoundError``); held, it is acted
-on once the workers are up, as a ``KeyboardInterrupt`` in the parent.
+All workers are started before the pool is handed out, from the thread that enters the ``with``
+block (Linux sends the parent-death signal when the *thread* that started a worker ends, so enter
+it from a thread that lives as long as the pool), with the stop signals (SIGINT, SIGTERM, SIGHUP)
+held meanwhile: a stop that unwinds the parent while it writes a spawned worker's start-up data
+makes that worker print a traceback (``EOFError``, ``FileNotFoundError``); held, it is acted on
+once the workers are up, as a ``KeyboardInterrupt`` in the parent.
 
 SIGINT ends a worker at once and silently (the default action, not Python's
 ``KeyboardInterrupt``): Ctrl-C in a terminal reaches the whole process group, so the workers stop
