@@ -129,6 +129,7 @@ class _Builder:
         n = self.lower.size
         self.X = np.empty((1024, n))
         self.PHI = np.empty((1024, n, k))
+        self.closed = np.zeros(1024, dtype=bool)  # left the queue and not boundary: takes no cuts
         self.charts: list[_Chart] = []  # chart i: centre X[i], basis PHI[i], the rest here
         self.singular: list[FloatArray] = []
         self.count = 0
@@ -139,9 +140,9 @@ class _Builder:
     # -- adding a chart ------------------------------------------------------------------------
 
     def _grow(self) -> None:
-        for name in ("X", "PHI"):
+        for name in ("X", "PHI", "closed"):
             old = getattr(self, name)
-            new = np.empty((2 * old.shape[0], *old.shape[1:]))
+            new = np.zeros((2 * old.shape[0], *old.shape[1:]), dtype=old.dtype)
             new[: self.count] = old[: self.count]
             setattr(self, name, new)
 
@@ -181,26 +182,26 @@ class _Builder:
         B = 0.5 * (U * U).sum(axis=1)
         Bc = 0.5 * (Uc * Uc).sum(axis=1)
         small = self.tol * self.r  # a neighbour straight along the normal gives no plane
-        mine, theirs = similar & (small < B), similar & (small < Bc)
-        ends = np.cumsum(sizes).tolist()
+        mine = similar & (small < B)
+        # A closed chart ignores new planes for good: select only the rest (see _give_plane).
+        theirs = similar & (small < Bc) & ~self.closed[nbrs]
+        # Everything the per-chart loop needs as plain lists: one conversion per wave.
+        kept, own, give = (np.cumsum(np.bincount(owner[m], minlength=len(points))).tolist()
+                           for m in (similar, mine, theirs))  # fmt: skip
+        kept_nbrs = nbrs[similar]
+        planes, offsets = U[mine].tolist(), B[mine].tolist()
+        targets, normals, given = nbrs[theirs].tolist(), Uc[theirs].tolist(), Bc[theirs].tolist()
+        start = [0, 0, 0]
         for q, (point, parent) in enumerate(zip(points, parents, strict=True)):
-            rows = slice(ends[q] - sizes[q], ends[q])
-            own_rows, give = mine[rows], theirs[rows]
-            chart_nbrs = nbrs[rows]
+            (k0, o0, g0), k1, o1, g1 = start, kept[q], own[q], give[q]
             self.charts.append(
-                _Chart(
-                    point.sign,
-                    parent,
-                    chart_nbrs[similar[rows]],
-                    U[rows][own_rows].tolist(),
-                    B[rows][own_rows].tolist(),
-                )
+                _Chart(point.sign, parent, kept_nbrs[k0:k1], planes[o0:o1], offsets[o0:o1])
             )
             self.count = j0 + q + 1
-            targets, normals = chart_nbrs[give].tolist(), Uc[rows][give].tolist()
-            for c, a, b in zip(targets, normals, Bc[rows][give].tolist(), strict=True):
+            for c, a, b in zip(targets[g0:g1], normals[g0:g1], given[g0:g1], strict=True):
                 self._give_plane(c, a, b)
             self._enqueue(self.count - 1)
+            start = [k1, o1, g1]
         self.index.added(self.X, self.count)
 
     def _similar(self, bases: FloatArray, phis: FloatArray) -> NDArray[np.bool_]:
@@ -250,6 +251,16 @@ class _Builder:
                 chart.queued = True
                 self.queue.append(c)
 
+    def _dequeue(self, i: int) -> None:
+        """Chart ``i`` left the queue with no expandable vertex.
+
+        Unless it is a boundary chart (a later cut may uncover a blocked vertex), no plane can
+        make it expandable again: it is closed and :meth:`add_charts` gives it no more planes.
+        """
+        chart = self.charts[i]
+        chart.queued = False
+        self.closed[i] = not chart.boundary
+
     # -- expanding -----------------------------------------------------------------------------
 
     def run(self, progress: ProgressCallback | None) -> None:
@@ -268,7 +279,7 @@ class _Builder:
             v = self._polytope(i).expandable(r2)
             if v < 0:
                 self.queue.popleft()
-                self.charts[i].queued = False
+                self._dequeue(i)
                 continue
             if self.expand(i, v) and progress is not None:
                 progress(_PROGRESS_STAGE, self.count, cap)
@@ -317,7 +328,7 @@ class _Builder:
             i = queue.popleft()
             v = self._polytope(i).expandable(r2)
             if v < 0:
-                self.charts[i].queued = False
+                self._dequeue(i)
             else:
                 picks.append((i, v))
         queue.extendleft(reversed([i for i, _ in picks]))
