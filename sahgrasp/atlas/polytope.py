@@ -15,6 +15,7 @@ __all__ = ["CUT_TOL", "Polytope"]
 
 _MASK_BITS = 62  # facets a Qhull-built polytope may have (one bit each of an int64 mask)
 CUT_TOL = 1e-9  # a vertex closer than this (times r) to a plane lies on it
+_BITS = np.left_shift(1, np.arange(_MASK_BITS, dtype=np.int64))  # face h's bit in a mask
 
 
 @functools.cache
@@ -81,9 +82,8 @@ class Polytope:
                 cube + [[a / b, c / b] for (a, c), b in zip(planes, offsets, strict=True)]
             )
         if k >= 3:
-            A = np.concatenate((_cube_normals(k), np.reshape(planes, (-1, k))))
-            b = np.concatenate((np.full(2 * k, r), offsets))
-            poly = cls._from_qhull(A / b[:, None], tol)
+            dual = np.array(planes).reshape(-1, k) / np.array(offsets)[:, None]
+            poly = cls._from_qhull(np.concatenate((_cube_normals(k) / r, dual)), tol)
             if poly is not None:
                 return poly
         poly = cls.cube(k, r)
@@ -98,14 +98,19 @@ class Polytope:
             hull = ConvexHull(dual)
         except QhullError:
             return None
-        faces = hull.vertices  # the planes that are facets of the polytope
+        # The planes that are facets of the polytope: the dual points on the hull (marked rather
+        # than hull.vertices, which sorts them with np.unique at several times the cost).
+        on_hull = np.zeros(len(dual), dtype=bool)
+        on_hull[hull.simplices] = True
+        faces = np.flatnonzero(on_hull)
         if len(faces) > _MASK_BITS:
             return None
         eq = hull.equations  # n . p + c = 0 on a hull facet: the polytope vertex is -n / c
         verts = eq[:, :-1] / -eq[:, -1:]
         facet_dual = dual[faces]  # distance of v to plane h: |p_h . v - 1| / |p_h|
-        tight = np.abs(verts @ facet_dual.T - 1.0) <= tol * np.linalg.norm(facet_dual, axis=1)
-        masks = tight @ np.left_shift(1, np.arange(len(faces), dtype=np.int64))
+        size = np.sqrt(np.einsum("ij,ij->i", facet_dual, facet_dual))
+        tight = np.abs(verts @ facet_dual.T - 1.0) <= tol * size
+        masks = tight @ _BITS[: len(faces)]
         norm2 = np.einsum("ij,ij->i", verts, verts).tolist()
         return cls(list(map(tuple, verts.tolist())), masks.tolist(), norm2)
 
