@@ -5,6 +5,7 @@ from __future__ import annotations
 import operator
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -370,8 +371,10 @@ class _Builder:
     def _compatible(self, wave: _Wave, ok: IndexArray) -> list[int]:
         """The successful first tries ``ok`` that can all be added, in order.
 
-        One whose picked vertex the plane of an earlier accepted one would cut off (as
-        :meth:`add_charts` would cut its chart's polytope) is left out: its chart stays queued.
+        Each must be the try one-chart expansion would make after the earlier accepted ones:
+        their planes (as :meth:`add_charts` would cut its chart's polytope) must neither cut off
+        its picked vertex nor create a nearer exterior vertex. One that fails is left out; its
+        chart stays queued.
         """
         if ok.size == 0:
             return []
@@ -381,25 +384,41 @@ class _Builder:
         Uc = np.einsum("pqn,qnk->pqk", diff, phi)
         Bc = 0.5 * (Uc * Uc).sum(axis=2)
         vertices = np.array([wave.vertices[p] for p in ok.tolist()])
-        cut = (diff * diff).sum(axis=2) < 4 * self.r**2
-        cut &= (self.tol * self.r < Bc) & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
-        np.fill_diagonal(cut, False)
-        p_idx, q_idx = np.nonzero(cut)
-        if p_idx.size:  # the branch test of add_charts, only where a cut would happen
+        near = (diff * diff).sum(axis=2) < 4 * self.r**2
+        near &= self.tol * self.r < Bc
+        np.fill_diagonal(near, False)
+        p_idx, q_idx = np.nonzero(near)
+        if p_idx.size:  # the branch test of add_charts: only alike charts cut each other
             alike = self._similar(phi[q_idx], wave.phi[ok][p_idx])
-            cut[p_idx[~alike], q_idx[~alike]] = False
+            near[p_idx[~alike], q_idx[~alike]] = False
+        off = near & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
+        # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
+        # nearer than the picked vertex can create a nearer one.
+        closer = (near & ~off & (0.5 * Bc < (vertices * vertices).sum(axis=1)[None])).T.tolist()
         accepted: list[int] = []
-        for q, column in enumerate(cut.T.tolist()):
-            if not any(column[p] for p in accepted):
+        for q, column in enumerate(off.T.tolist()):
+            if any(column[p] for p in accepted):
+                continue
+            planes = [(Uc[p, q].tolist(), float(Bc[p, q])) for p in accepted if closer[q][p]]
+            i, vertex = wave.picks[ok[q]][0], wave.vertices[ok[q]]
+            if not planes or self._still_picked(i, vertex, planes) >= 0:
                 accepted.append(q)
         return ok[accepted].tolist()
 
-    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
+    def _still_picked(
+        self, i: int, vertex: tuple[float, ...], planes: Sequence[tuple[list[float], float]] = ()
+    ) -> int:
         """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
 
-        A new chart's plane may have cut it off or created a nearer exterior vertex.
+        A new chart's plane may have cut it off or created a nearer exterior vertex. ``planes``
+        (``a . w <= b`` pairs) are planes still to come: the test is made on a copy cut by them.
         """
         poly = self._polytope(i)
+        if planes:
+            poly = poly.copy()
+            for a, b in planes:
+                if 0.5 * b < poly.reach2:
+                    poly.cut(a, b, self.tol)
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.verts[v] == vertex else -1
 

@@ -132,6 +132,12 @@ class Polytope:
             masks.append((1 << s) | (1 << t))
         return cls(verts, masks)
 
+    def copy(self) -> Polytope:
+        """An independent copy (cuts of one leave the other as it is)."""
+        poly = Polytope(self.verts, self.masks, self.norm2)
+        poly.blocked = list(self.blocked)
+        return poly
+
     def expandable(self, r2: float) -> int:
         """Index of the nearest unblocked vertex not inside the ball of squared radius ``r2``.
 
