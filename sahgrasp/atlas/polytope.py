@@ -42,7 +42,8 @@ class Polytope:
     """Convex polytope in a chart's parameter space, vertex/face incidence as integer bit masks.
 
     Plain Python lists: a polytope has a handful of vertices (k <= 3), where per-call numpy overhead
-    would dominate the incremental cuts.
+    would dominate the incremental cuts. For k = 2 the vertices go round the polygon counter-
+    clockwise, so that a cut is a clip of consecutive vertices (:meth:`_clip`).
     """
 
     __slots__ = ("blocked", "masks", "norm2", "reach2", "verts")
@@ -61,6 +62,8 @@ class Polytope:
     def cube(cls, k: int, r: float) -> Polytope:
         """The k-cube ``[-r, r]^k`` enclosing the ball ``B_i`` (Fig. 6a); face 2d+s is x_d = -+r."""
         verts = list(itertools.product((-r, r), repeat=k))
+        if k == 2:  # counter-clockwise, as the polygon cut expects
+            verts = [verts[0], verts[2], verts[3], verts[1]]
         masks = [sum(1 << (2 * d + (c < 0)) for d, c in enumerate(v)) for v in verts]
         return cls(verts, masks)
 
@@ -155,6 +158,8 @@ class Polytope:
         Vertices on the plane (within ``tol``) gain the new face; every edge from a kept vertex to a
         removed one (two vertices sharing at least k-1 faces) yields a new vertex on the plane.
         """
+        if len(a) == 2:
+            return self._clip(a, b, tol)
         verts, masks = self.verts, self.masks
         d = [sum(map(operator.mul, a, v)) - b for v in verts]
         if max(d) <= tol:
@@ -185,4 +190,49 @@ class Polytope:
                     norm2.append(sum(map(operator.mul, v, v)))
         self.verts, self.masks, self.blocked, self.norm2 = new_verts, new_masks, blocked, norm2
         self.reach2 = max(norm2)
+        return True
+
+    def _clip(self, a: list[float], b: float, tol: float) -> bool:
+        """:meth:`cut` of a polygon (vertices counter-clockwise): one pass round its edges.
+
+        Kept vertices stay in order; an edge from a vertex strictly inside to one strictly
+        outside (or back) gives a new vertex on the plane in its place. About twice as fast
+        as the general edge search over vertex pairs.
+        """
+        a0, a1 = a
+        verts = self.verts
+        d = [a0 * x + a1 * y - b for x, y in verts]
+        if max(d) <= tol:
+            return False
+        masks, blocked, norm2 = self.masks, self.blocked, self.norm2
+        used = 0
+        for i, di in enumerate(d):
+            if di <= tol:
+                used |= masks[i]
+        bit = ~used & (used + 1)  # lowest face bit no kept vertex uses
+        new_verts: list[tuple[float, ...]] = []
+        new_masks: list[int] = []
+        new_blocked: list[bool] = []
+        new_norm2: list[float] = []
+        last = len(d) - 1
+        for i, di in enumerate(d):
+            j = i + 1 if i < last else 0
+            dj = d[j]
+            if di <= tol:
+                new_verts.append(verts[i])
+                new_masks.append(masks[i] | bit if di >= -tol else masks[i])
+                new_blocked.append(blocked[i])
+                new_norm2.append(norm2[i])
+            if (di < -tol and dj > tol) or (di > tol and dj < -tol):
+                t = di / (di - dj)
+                (px, py), (qx, qy) = verts[i], verts[j]
+                x, y = px + t * (qx - px), py + t * (qy - py)
+                new_verts.append((x, y))
+                new_masks.append((masks[i] & masks[j]) | bit)
+                new_blocked.append(False)
+                new_norm2.append(x * x + y * y)
+        self.verts, self.masks, self.blocked, self.norm2 = (
+            new_verts, new_masks, new_blocked, new_norm2
+        )  # fmt: skip
+        self.reach2 = max(new_norm2)
         return True
