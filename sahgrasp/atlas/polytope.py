@@ -224,8 +224,9 @@ class Polytope:
                 new_blocked.append(blocked[i])
                 new_norm2.append(norm2[i])
             if (di < -tol and dj > tol) or (di > tol and dj < -tol):
-                t = di / (di - dj)
-                (px, py), (qx, qy) = verts[i], verts[j]
+                # From the inner end, as cut does: the same vertex to the last bit.
+                inner, outer, t = (i, j, di / (di - dj)) if di < 0 else (j, i, dj / (dj - di))
+                (px, py), (qx, qy) = verts[inner], verts[outer]
                 x, y = px + t * (qx - px), py + t * (qy - py)
                 new_verts.append((x, y))
                 new_masks.append((masks[i] & masks[j]) | bit)
