@@ -258,8 +258,9 @@ def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int, k: int) ->
     assert len(at_once.verts) == len(one_by_one.verts) and gap.max() <= 1e-12
     assert at_once.reach2 == pytest.approx(one_by_one.reach2)
     if k == 2:  # the polygon clip keeps the vertices counter-clockwise, as the dual build does
-        x, y = np.array(one_by_one.verts).T
-        assert np.all(x * np.roll(y, -1) - np.roll(x, -1) * y > 0)
+        for poly in (at_once, one_by_one):
+            x, y = np.array(poly.verts).T
+            assert np.all(x * np.roll(y, -1) - np.roll(x, -1) * y > 0)
 
 
 def test_import_loads_neither_pinocchio_nor_tqdm() -> None:
