@@ -242,10 +242,11 @@ def test_bounded_atlas_is_deterministic_and_its_records_agree() -> None:
     assert (atlas.edges[:, 0] < atlas.edges[:, 1]).all()
 
 
+@pytest.mark.parametrize("k", [2, 3])
 @pytest.mark.parametrize("seed", range(5))
-def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int) -> None:
+def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int, k: int) -> None:
     rng = np.random.default_rng(seed)
-    r, k = 0.1, 3
+    r = 0.1
     u = rng.normal(size=(20, k))
     u *= (rng.uniform(0.5, 2.0, 20) * r / np.linalg.norm(u, axis=1))[:, None]
     planes, offsets = u.tolist(), (0.5 * np.einsum("ij,ij->i", u, u)).tolist()
@@ -256,6 +257,10 @@ def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int) -> None:
     gap, _ = cKDTree(at_once.verts).query(one_by_one.verts)
     assert len(at_once.verts) == len(one_by_one.verts) and gap.max() <= 1e-12
     assert at_once.reach2 == pytest.approx(one_by_one.reach2)
+    if k == 2:  # the polygon clip keeps the vertices counter-clockwise, as the dual build does
+        for poly in (at_once, one_by_one):
+            x, y = np.array(poly.verts).T
+            assert np.all(x * np.roll(y, -1) - np.roll(x, -1) * y > 0)
 
 
 def test_import_loads_neither_pinocchio_nor_tqdm() -> None:

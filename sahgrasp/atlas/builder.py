@@ -5,6 +5,7 @@ from __future__ import annotations
 import operator
 import time
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,6 +130,7 @@ class _Builder:
         n = self.lower.size
         self.X = np.empty((1024, n))
         self.PHI = np.empty((1024, n, k))
+        self.closed = np.zeros(1024, dtype=bool)  # left the queue and not boundary: takes no cuts
         self.charts: list[_Chart] = []  # chart i: centre X[i], basis PHI[i], the rest here
         self.singular: list[FloatArray] = []
         self.count = 0
@@ -139,9 +141,9 @@ class _Builder:
     # -- adding a chart ------------------------------------------------------------------------
 
     def _grow(self) -> None:
-        for name in ("X", "PHI"):
+        for name in ("X", "PHI", "closed"):
             old = getattr(self, name)
-            new = np.empty((2 * old.shape[0], *old.shape[1:]))
+            new = np.zeros((2 * old.shape[0], *old.shape[1:]), dtype=old.dtype)
             new[: self.count] = old[: self.count]
             setattr(self, name, new)
 
@@ -181,26 +183,26 @@ class _Builder:
         B = 0.5 * (U * U).sum(axis=1)
         Bc = 0.5 * (Uc * Uc).sum(axis=1)
         small = self.tol * self.r  # a neighbour straight along the normal gives no plane
-        mine, theirs = similar & (small < B), similar & (small < Bc)
-        ends = np.cumsum(sizes).tolist()
+        mine = similar & (small < B)
+        # A closed chart ignores new planes for good: select only the rest (see _give_plane).
+        theirs = similar & (small < Bc) & ~self.closed[nbrs]
+        # Everything the per-chart loop needs as plain lists: one conversion per wave.
+        kept, own, give = (np.cumsum(np.bincount(owner[m], minlength=len(points))).tolist()
+                           for m in (similar, mine, theirs))  # fmt: skip
+        kept_nbrs = nbrs[similar]
+        planes, offsets = U[mine].tolist(), B[mine].tolist()
+        targets, normals, given = nbrs[theirs].tolist(), Uc[theirs].tolist(), Bc[theirs].tolist()
+        start = [0, 0, 0]
         for q, (point, parent) in enumerate(zip(points, parents, strict=True)):
-            rows = slice(ends[q] - sizes[q], ends[q])
-            own_rows, give = mine[rows], theirs[rows]
-            chart_nbrs = nbrs[rows]
+            (k0, o0, g0), k1, o1, g1 = start, kept[q], own[q], give[q]
             self.charts.append(
-                _Chart(
-                    point.sign,
-                    parent,
-                    chart_nbrs[similar[rows]],
-                    U[rows][own_rows].tolist(),
-                    B[rows][own_rows].tolist(),
-                )
+                _Chart(point.sign, parent, kept_nbrs[k0:k1], planes[o0:o1], offsets[o0:o1])
             )
             self.count = j0 + q + 1
-            targets, normals = chart_nbrs[give].tolist(), Uc[rows][give].tolist()
-            for c, a, b in zip(targets, normals, Bc[rows][give].tolist(), strict=True):
+            for c, a, b in zip(targets[g0:g1], normals[g0:g1], given[g0:g1], strict=True):
                 self._give_plane(c, a, b)
             self._enqueue(self.count - 1)
+            start = [k1, o1, g1]
         self.index.added(self.X, self.count)
 
     def _similar(self, bases: FloatArray, phis: FloatArray) -> NDArray[np.bool_]:
@@ -250,6 +252,16 @@ class _Builder:
                 chart.queued = True
                 self.queue.append(c)
 
+    def _dequeue(self, i: int) -> None:
+        """Chart ``i`` left the queue with no expandable vertex.
+
+        Unless it is a boundary chart (a later cut may uncover a blocked vertex), no plane can
+        make it expandable again: it is closed and :meth:`add_charts` gives it no more planes.
+        """
+        chart = self.charts[i]
+        chart.queued = False
+        self.closed[i] = not chart.boundary
+
     # -- expanding -----------------------------------------------------------------------------
 
     def run(self, progress: ProgressCallback | None) -> None:
@@ -268,7 +280,7 @@ class _Builder:
             v = self._polytope(i).expandable(r2)
             if v < 0:
                 self.queue.popleft()
-                self.charts[i].queued = False
+                self._dequeue(i)
                 continue
             if self.expand(i, v) and progress is not None:
                 progress(_PROGRESS_STAGE, self.count, cap)
@@ -317,7 +329,7 @@ class _Builder:
             i = queue.popleft()
             v = self._polytope(i).expandable(r2)
             if v < 0:
-                self.charts[i].queued = False
+                self._dequeue(i)
             else:
                 picks.append((i, v))
         queue.extendleft(reversed([i for i, _ in picks]))
@@ -359,8 +371,10 @@ class _Builder:
     def _compatible(self, wave: _Wave, ok: IndexArray) -> list[int]:
         """The successful first tries ``ok`` that can all be added, in order.
 
-        One whose picked vertex the plane of an earlier accepted one would cut off (as
-        :meth:`add_charts` would cut its chart's polytope) is left out: its chart stays queued.
+        Each must be the try one-chart expansion would make after the earlier accepted ones:
+        their planes (as :meth:`add_charts` would cut its chart's polytope) must neither cut off
+        its picked vertex nor create a nearer exterior vertex. One that fails is left out; its
+        chart stays queued.
         """
         if ok.size == 0:
             return []
@@ -370,25 +384,41 @@ class _Builder:
         Uc = np.einsum("pqn,qnk->pqk", diff, phi)
         Bc = 0.5 * (Uc * Uc).sum(axis=2)
         vertices = np.array([wave.vertices[p] for p in ok.tolist()])
-        cut = (diff * diff).sum(axis=2) < 4 * self.r**2
-        cut &= (self.tol * self.r < Bc) & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
-        np.fill_diagonal(cut, False)
-        p_idx, q_idx = np.nonzero(cut)
-        if p_idx.size:  # the branch test of add_charts, only where a cut would happen
+        near = (diff * diff).sum(axis=2) < 4 * self.r**2
+        near &= self.tol * self.r < Bc
+        np.fill_diagonal(near, False)
+        p_idx, q_idx = np.nonzero(near)
+        if p_idx.size:  # the branch test of add_charts: only alike charts cut each other
             alike = self._similar(phi[q_idx], wave.phi[ok][p_idx])
-            cut[p_idx[~alike], q_idx[~alike]] = False
+            near[p_idx[~alike], q_idx[~alike]] = False
+        off = near & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
+        # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
+        # nearer than the picked vertex can create a nearer one.
+        closer = (near & ~off & (0.5 * Bc < (vertices * vertices).sum(axis=1)[None])).T.tolist()
         accepted: list[int] = []
-        for q, column in enumerate(cut.T.tolist()):
-            if not any(column[p] for p in accepted):
+        for q, column in enumerate(off.T.tolist()):
+            if any(column[p] for p in accepted):
+                continue
+            planes = [(Uc[p, q].tolist(), float(Bc[p, q])) for p in accepted if closer[q][p]]
+            i, vertex = wave.picks[ok[q]][0], wave.vertices[ok[q]]
+            if not planes or self._still_picked(i, vertex, planes) >= 0:
                 accepted.append(q)
         return ok[accepted].tolist()
 
-    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
+    def _still_picked(
+        self, i: int, vertex: tuple[float, ...], planes: Sequence[tuple[list[float], float]] = ()
+    ) -> int:
         """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
 
-        A new chart's plane may have cut it off or created a nearer exterior vertex.
+        A new chart's plane may have cut it off or created a nearer exterior vertex. ``planes``
+        (``a . w <= b`` pairs) are planes still to come: the test is made on a copy cut by them.
         """
         poly = self._polytope(i)
+        if planes:
+            poly = poly.copy()
+            for a, b in planes:
+                if 0.5 * b < poly.reach2:
+                    poly.cut(a, b, self.tol)
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.verts[v] == vertex else -1
 
