@@ -574,12 +574,12 @@ class Hand:
             )
 
     # ----- sizes and names ----------------------------------------------------------------------
-    @property
+    @cached_property
     def nq(self) -> int:
         """Size of ``q``."""
         return int(self.model.nq)
 
-    @property
+    @cached_property  # read in every IK iteration: a plain attribute after the first read
     def nv(self) -> int:
         """Size of ``v``: 6 wrist + independent finger joints + 2 per finger."""
         return int(self.model.nv)
