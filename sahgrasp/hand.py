@@ -574,12 +574,12 @@ class Hand:
             )
 
     # ----- sizes and names ----------------------------------------------------------------------
-    @property
+    @cached_property
     def nq(self) -> int:
         """Size of ``q``."""
         return int(self.model.nq)
 
-    @property
+    @cached_property  # read in every IK iteration: a plain attribute after the first read
     def nv(self) -> int:
         """Size of ``v``: 6 wrist + independent finger joints + 2 per finger."""
         return int(self.model.nv)
@@ -821,16 +821,27 @@ class Hand:
         return stack, self._rows_jacobian(layout, stack)
 
     def contact_jacobian(
-        self, q: NDArray[np.float64], fingers: list[int] | None = None
+        self,
+        q: NDArray[np.float64],
+        fingers: list[int] | None = None,
+        stack: NDArray[np.float64] | None = None,
     ) -> NDArray[np.float64]:
         """The Jacobian of :meth:`contact_stack_jacobian` alone, for a caller that has the stack.
+
+        Args:
+            q: Configuration.
+            fingers: As in :meth:`contact_stack`.
+            stack: ``contact_stack(q, fingers)`` if the caller has it (it is not computed again;
+                it must be that of ``q``).
 
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
         pin.computeJointJacobians(self.model, self.data, self._finite(q))
         layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
-        return self._rows_jacobian(layout, layout.select.dot(self._joint_vector()))
+        if stack is None:
+            stack = np.asarray(layout.select.dot(self._joint_vector()))
+        return self._rows_jacobian(layout, stack)
 
     def _rows_jacobian(self, layout: _Layout, values: NDArray[np.float64]) -> NDArray[np.float64]:
         """Jacobian (rows, nv) of ``layout``'s ``values`` from ``data.J`` (joint Jacobians set).

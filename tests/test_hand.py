@@ -136,6 +136,34 @@ def test_random_configuration_within_limits_and_collision_free(any_hand: Hand) -
         assert not any_hand.in_collision(q)
 
 
+def test_broad_phase_verdict_matches_every_pair(any_hand: Hand) -> None:
+    """``in_collision`` goes through coal's broad phase; it must agree with querying every pair."""
+    rng = np.random.default_rng(7)
+    verdicts = []
+    for _ in range(300):
+        q = any_hand.random_configuration(rng)
+        verdicts.append(any_hand.in_collision(q))
+        assert verdicts[-1] == bool(any_hand.collision.colliding_pairs(q))
+    assert 0 < sum(verdicts) < len(verdicts)  # both answers were exercised
+
+
+@pytest.mark.parametrize("margin_m", [1e-3, 5e-3])
+def test_penetrations_found_exactly_when_a_pair_is_within_the_margin(
+    any_hand: Hand, margin_m: float
+) -> None:
+    """The broad-phase gate of ``penetrations`` prunes no pair within the margin."""
+    rng = np.random.default_rng(8)
+    found = []
+    for _ in range(300):
+        q = any_hand.random_configuration(rng)
+        distance = any_hand.min_distance(q)
+        if abs(distance - margin_m) < 1e-7:  # on the boundary either answer is right
+            continue
+        found.append(bool(any_hand.penetrations(q, margin_m)))
+        assert found[-1] == (distance < margin_m)
+    assert 0 < sum(found) < len(found)
+
+
 def test_open_and_closed_without_abduction_are_collision_free(sah: Hand) -> None:
     j3_open = -4 * DEG
     open_hand = _zero_pose(sah, **{f"{f}_j3": j3_open for f in sah.fingers})

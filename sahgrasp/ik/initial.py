@@ -256,16 +256,14 @@ def _default_sequence(digest: str, hand: Hand) -> Sequence:
     return sequence
 
 
-_NEXT, _PREV = [1, 2, 0], [2, 0, 1]
-
-
 def cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``a x b`` of 3-vectors (or of stacks of them along the last axis).
+    """``a x b`` of two 3-vectors.
 
-    The products of ``np.cross`` without its Python wrapper, which costs about ten times the
-    arithmetic on 3-vectors (docs/ik.md, "Where the time goes").
+    In Python floats: ``np.cross``'s wrapper, and even the fancy-indexed products that replaced
+    it, cost ten times the arithmetic on 3-vectors (docs/ik.md, "Where the time goes").
     """
-    return np.asarray(a[..., _NEXT] * b[..., _PREV] - a[..., _PREV] * b[..., _NEXT])
+    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def rotation_aligning_x(direction: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -16,6 +16,7 @@ so no IK runs to build the database. Its seeds (:data:`LEARN_SEED`) are used now
 from __future__ import annotations
 
 import io
+import math
 import os
 import zipfile
 from collections.abc import Iterator
@@ -29,13 +30,13 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
+from scipy.linalg.lapack import dgesdd
 from scipy.spatial import cKDTree
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
-from sahgrasp.ik.initial import cross3
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -82,36 +83,59 @@ def rigid_features(points: NDArray[np.float64], normals: NDArray[np.float64]) ->
     Returns:
         Shape (..., 6 F).
     """
+    if points.ndim > 2:  # a batch (building a database): one contact set at a time
+        flat_points, flat_normals = (
+            points.reshape(-1, *points.shape[-2:]),
+            normals.reshape(-1, *normals.shape[-2:]),
+        )
+        each = [rigid_features(p, n) for p, n in zip(flat_points, flat_normals, strict=True)]
+        return np.array(each).reshape(*points.shape[:-2], -1)
     frame, centroid = _contact_frame(points)
-    # Points and scaled normals in one product: (..., 2F, 3) rows times the frame's axes.
-    rows = np.concatenate([points - centroid, normals * NORMAL_WEIGHT_M], axis=-2)
-    return np.asarray((rows @ np.swapaxes(frame, -1, -2)).reshape(*points.shape[:-2], -1))
+    # Points and scaled normals in one product: (2F, 3) rows times the frame's axes.
+    rows = np.concatenate([points - centroid, normals * NORMAL_WEIGHT_M])
+    return np.asarray(rows.dot(frame.T).ravel())
 
 
 def _contact_frame(
     points: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Rows: the axes of :func:`rigid_features`' frame in world, shape (..., 3, 3); centroid."""
-    centroid = points.mean(axis=-2, keepdims=True)
-    x = _unit(points[..., 0, :] - centroid[..., 0, :])
-    side = points[..., -1, :] - points[..., 1, :]
-    y = _unit(side - np.sum(side * x, axis=-1, keepdims=True) * x)
-    return np.stack([x, y, cross3(x, y)], axis=-2), centroid
+    """Rows: the axes of :func:`rigid_features`' frame in world, shape (3, 3); the centroid (3,).
+
+    In Python floats: on a few 3-vectors numpy's fixed cost per call (several microseconds for
+    ``np.sum``, ``np.stack``, fancy indexing) is many times the arithmetic; this was about 60 us
+    in numpy and is about 10 in floats (docs/ik.md, "Where the time goes").
+    """
+    rows = points.tolist()
+    n = len(rows)
+    centroid = [sum(column) / n for column in zip(*rows, strict=True)]
+    x = _unit([a - c for a, c in zip(rows[0], centroid, strict=True)])
+    side = [a - b for a, b in zip(rows[-1], rows[1], strict=True)]
+    along = sum(a * b for a, b in zip(side, x, strict=True))
+    y = _unit([a - along * b for a, b in zip(side, x, strict=True)])
+    z = [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
+    return np.array([x, y, z]), np.array(centroid)
 
 
-def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
-    norm = np.sqrt(np.sum(v * v, axis=-1, keepdims=True))
-    return np.asarray(v / np.maximum(norm, 1e-12))
+def _unit(v: list[float]) -> list[float]:
+    norm = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), 1e-12)
+    return [v[0] / norm, v[1] / norm, v[2] / norm]
 
 
 def kabsch(source: NDArray[np.float64], target: NDArray[np.float64]) -> pin.SE3:
-    """The rigid transform ``T`` minimising ``sum |T source_i - target_i|^2`` (rows are points)."""
-    cs, ct = source.mean(axis=0), target.mean(axis=0)
-    U, _, Vt = np.linalg.svd((source - cs).T.dot(target - ct))
-    R = Vt.T.dot(U.T)
+    """The rigid transform ``T`` minimising ``sum |T source_i - target_i|^2`` (rows are points).
+
+    LAPACK's ``dgesdd`` directly: ``np.linalg.svd``'s checks cost twice the 3 x 3 decomposition.
+    """
+    scale = 1.0 / len(source)
+    cs, ct = source.sum(axis=0) * scale, target.sum(axis=0) * scale
+    # The centred source sums to zero, so the target needs no centring in the covariance.
+    U, _, Vt, info = dgesdd((source - cs).T.dot(target))
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgesdd failed ({info}) on a 3 x 3 covariance")
+    R = U.dot(Vt).T
     if _det3(R) < 0.0:  # a reflection: flip the axis of the smallest singular value
         Vt[2] *= -1.0
-        R = Vt.T.dot(U.T)
+        R = U.dot(Vt).T
     return pin.SE3(R, ct - R.dot(cs))
 
 

@@ -445,14 +445,15 @@ def _lm_loop(
             return Attempt(
                 q, "converged" if error < s.d_min_m else "no_progress", k, error, history
             )
-        q_new, r_new, damping = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
-        if q_new is None or r_new is None:
+        step = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
+        q_new, r_new, stack_new, damping = step
+        if q_new is None or r_new is None or stack_new is None:
             continue
         q, residual = q_new, r_new
         if history is not None:
             history.append(q.copy())
-        # The step's kinematics gave the residual; only the Jacobian is new.
-        J = hand.contact_jacobian(q, problem.stack_fingers)
+        # The step's kinematics gave the residual and the stack; only the Jacobian is new.
+        J = hand.contact_jacobian(q, problem.stack_fingers, stack_new)
         costs.append(float(residual.dot(residual)))
     error = _max_error(residual)
     outcome = "converged" if error < s.d_min_m else "max_iterations"
@@ -477,10 +478,12 @@ def _free_coordinates(
     x, g = hand.finger_part(q), gradient[6:]
     at_lower, at_upper = hand.bound_tests
     fixed = ((x <= at_lower) & (g < 0.0)) | ((x >= at_upper) & (g > 0.0))
-    if not fixed.any():
+    # count_nonzero is a plain C call; ndarray.any() and np.ones go through Python wrappers.
+    if not np.count_nonzero(fixed):
         return None
-    free = np.ones(hand.nv, dtype=bool)
-    free[6:] = ~fixed
+    free = np.empty(hand.nv, dtype=bool)
+    free[:6] = True
+    np.logical_not(fixed, out=free[6:])
     return free
 
 
@@ -530,24 +533,29 @@ def _damped_step(
     residual: NDArray[np.float64],
     cost: float,
     damping: float,
-) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, float]:
+) -> tuple[
+    NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None, float
+]:
     """One Marquardt step, its damping adapted until the cost decreases.
 
-    Returns the new configuration and its residual (None, None if the damping ran out) and the
-    new damping.
+    Returns the new configuration, its residual and its :meth:`Hand.contact_stack` (None, None,
+    None if the damping ran out) and the new damping.
     """
-    free = _free_coordinates(hand, q, J.T.dot(residual))
-    JF = J if free is None else J[:, free]
-    A, g = JF.T.dot(JF), JF.T.dot(residual)
+    gradient = J.T.dot(residual)
+    free = _free_coordinates(hand, q, gradient)
+    # With every coordinate free the gradient is g itself: no second product.
+    JF, g = (J, gradient) if free is None else (J[:, free], gradient[free])
+    A = JF.T.dot(JF)
     while damping <= 1e4:
         x = _damped_solve(A, g, damping)
         if x is not None:
             candidate = _clamped_step(hand, q, _full_step(hand, free, x))
-            r_new = problem.target_stack - hand.contact_stack(candidate, problem.stack_fingers)
+            stack = hand.contact_stack(candidate, problem.stack_fingers)
+            r_new = problem.target_stack - stack
             if float(r_new.dot(r_new)) < cost:
-                return candidate, r_new, max(damping / 3.0, 1e-7)
+                return candidate, r_new, stack, max(damping / 3.0, 1e-7)
         damping *= 4.0
-    return None, None, damping
+    return None, None, None, damping
 
 
 def _separate(
