@@ -614,23 +614,31 @@ class HandObjectClearance:
         """The signed distance [m] of geometry ``g`` to its nearest piece, and that piece.
 
         Exact up to ``limit_m``; else some distance above it (infinite, piece -1, if none was
-        measured). Branch and bound over the coarse hulls by increasing bound:
-        a hull bounded at or above the nearest distance found holds no nearer piece. The search
+        measured). Branch and bound: pieces by increasing lower bound (for a few pieces, by
+        their hulls' bounds), until the bound reaches the nearest distance found. The search
         ends at the first distance below ``stop_m``.
         """
         members, distance = self._tree.members, self._gjk(T, g)
         if limit_m < math.inf and self._tree_says_clear(g, cell_bounds, limit_m):
             return math.inf, -1
+        cells = np.flatnonzero(cell_bounds <= limit_m)
         best, nearest = math.inf, -1
-        for cell in np.argsort(cell_bounds).tolist():
-            if cell_bounds[cell] > limit_m or cell_bounds[cell] >= best:
-                break
-            pieces, bounds = members[cell], None
-            if len(pieces) > _FEW_PIECES:  # numpy bounds cost less than that many GJK calls
-                pieces, bounds = self._piece_bounds(T, g, pieces, min(limit_m, best))
-            for k, piece in enumerate(pieces.tolist()):
-                if bounds is not None and bounds[k] >= best:
+        if self._tree.sizes[cells].sum() > _FEW_PIECES:  # numpy bounds beat that many GJK calls
+            pieces = np.concatenate([members[c] for c in cells.tolist()])
+            pieces, bounds = self._piece_bounds(T, g, pieces, limit_m)
+            for piece, bound in zip(pieces.tolist(), bounds.tolist(), strict=True):
+                if bound >= best:
                     break
+                d = distance(piece)
+                if d < best:
+                    best, nearest = d, piece
+                    if d < stop_m:
+                        break
+            return best, nearest
+        for cell in cells[np.argsort(cell_bounds[cells])].tolist():
+            if cell_bounds[cell] >= best:
+                break
+            for piece in members[cell].tolist():
                 d = distance(piece)
                 if d < best:
                     best, nearest = d, piece
