@@ -205,19 +205,21 @@ class HandObjectClearance:
         """Per hand geometry, the rounded box :meth:`_shape_gaps` measures it as.
 
         A box is itself, a sphere a box of no size rounded by its radius: their gaps are exact.
-        A cylinder is measured as its bounding box, another shape as its bounding ball: their
-        gaps are lower bounds only.
+        A cylinder is measured as its bounding box (exactly, by :meth:`_piece_bounds`), another
+        shape as its bounding ball: their gaps are lower bounds only.
         """
         self._half_m = np.zeros((len(shapes), 1, 3))
         self._rounding_m = np.zeros((len(shapes), 1))
         self._offset_m = np.zeros((len(shapes), 1, 3))  # the box's centre in the link frame
         self._exact = np.zeros(len(shapes), dtype=bool)
+        self._cylinder_m = np.zeros((len(shapes), 1, 3))  # (radius, half length, inf)
         for g, shape in enumerate(shapes):
             if isinstance(shape, coal.Box):
                 self._half_m[g] = shape.halfSide
                 self._exact[g] = True
             elif isinstance(shape, coal.Cylinder):
                 self._half_m[g] = shape.radius, shape.radius, shape.halfLength
+                self._cylinder_m[g] = shape.radius, shape.halfLength, np.inf
             elif isinstance(shape, coal.Sphere):
                 self._rounding_m[g] = shape.radius
                 self._exact[g] = True
@@ -668,8 +670,9 @@ class HandObjectClearance:
         distance = self._gjk(T, g)
         if len(pieces) <= _FEW_PIECES:  # measure them all, then order the few found
             found = np.array([p for p in pieces.tolist() if distance(p) < threshold_m])
-            if per_link is None or len(found) <= per_link:
+            if len(found) <= 1:
                 return found.tolist()
+            # In the order of a search by bound: the repair's rows come in the same order.
             pieces = self._piece_bounds(T, g, found, math.inf)[0]
         else:
             pieces, bounds = self._piece_bounds(T, g, pieces, threshold_m)
@@ -726,12 +729,23 @@ class HandObjectClearance:
     ) -> tuple[NDArray[np.intp], FloatArray]:
         """``pieces`` bounded at most ``limit_m`` [m] from geometry ``g``, and their bounds.
 
-        By increasing bound: the larger of the link's shape against the piece's ball and of
-        their boxes' gap (the link posed here).
+        By increasing bound: the larger of the link's shape (a cylinder exactly) against the
+        piece's ball and of their boxes' gap (the link posed here).
         """
         self._pose_links((g,))
-        centres = self._placed_pieces(T)[0]
-        bounds = self._shape_gaps(np.array([g]), centres[pieces])[0] - self._piece_radii[pieces]
+        centres = self._placed_pieces(T)[0][pieces]
+        if self._cylinder_m[g, 0, 2] == np.inf:  # measured as (radial, axial, none)
+            local = np.matmul(centres - self._link_t[g], self._link_R[g])
+            coords = np.abs(local)
+            coords[:, 0] = np.hypot(local[:, 0], local[:, 1])
+            coords[:, 1] = coords[:, 2]
+            excess = coords - self._cylinder_m[g]
+            outside = np.maximum(excess, 0.0)
+            gaps = np.sqrt(np.einsum("ni,ni->n", outside, outside))
+            gaps += np.minimum(excess.max(axis=1), 0.0)
+        else:
+            gaps = self._shape_gaps(np.array([g]), centres)[0]
+        bounds = gaps - self._piece_radii[pieces]
         bounds = np.maximum(bounds, self._box_gaps(g, pieces))
         kept = bounds <= limit_m
         pieces, bounds = pieces[kept], bounds[kept]
