@@ -16,11 +16,15 @@ object by up to ``allowance_m``. Only the tip link's geometry is excepted; the d
 the same joint is checked as every other link.
 
 Cost. The object may have thousands of small pieces (one per mesh triangle, or per sector of a
-revolved band), so no query tries them all: a pair's distance is bounded from below by the
-link's own shape (sphere, box, cylinder) against a ball about the piece, and by their boxes; a
-coal broad phase (:class:`~sahgrasp.objects.collision.PieceTree`, in the object frame, built
-once) answers in C++ whether a link comes closer than a margin; only the pairs those leave are
-measured with GJK/EPA one by one. The results are those of measuring every pair.
+revolved band), so no query tries them all. One numpy pass bounds every link against every
+coarse hull of the :class:`~sahgrasp.objects.collision.PieceTree` (the link's box or sphere, a
+cylinder's box, against the hull's ball, and the two boxes' gap) and, through one anchor point
+inside each hull, bounds the closest distance from above: links bounded away cost nothing more.
+A remaining link's pieces are taken by increasing lower bound (the link's shape against the
+piece's ball, and their boxes) and measured with bare ``coal.distance`` calls (GJK/EPA, about
+2 us each); up to :data:`_FEW_PIECES` candidates are measured directly, more are bounded first
+and the piece tree (C++, object frame, built once) is asked whether any is closer at all. The
+results are those of measuring every pair (docs/objects.md, "Cost of the hand-object queries").
 
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
