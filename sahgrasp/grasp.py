@@ -503,10 +503,9 @@ class SahGraspManifold:
                 if free:
                     configurations[i] = checker.place_free_fingers(configurations[i], free,
                                                                    T_world_object=T).q  # fmt: skip
-                # Any penetration, not the clearance: only pieces whose bounding balls overlap a
-                # link are measured.
-                inside = checker.penetrations(configurations[i], 0.0, contacts, T_world_object=T)
-                object_collision[i] = bool(inside)
+                # The verdict only, not the clearance: the search ends at the first penetration.
+                object_collision[i] = checker.penetrated(configurations[i], contacts,
+                                                         T_world_object=T)  # fmt: skip
         self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
         return ChartChecks(configurations, self_collision, object_collision)
 

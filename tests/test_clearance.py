@@ -327,6 +327,7 @@ def test_solver_and_clearance_share_one_definition(
         checker = HandObjectClearance(sah, obj)
         inside = not checker.clearance(q, contacts, all_links=False).clear()
         assert bool(checker.penetrations(q, 0.0, contacts)) == inside
+        assert checker.penetrated(q, contacts) == inside
         assert Obstacle(sah, obj, contacts, 1.5e-3).penetrated(q) == inside
         verdicts.append(inside)
     assert True in verdicts and False in verdicts  # both sides of the boundary were tried

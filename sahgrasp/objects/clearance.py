@@ -16,11 +16,15 @@ object by up to ``allowance_m``. Only the tip link's geometry is excepted; the d
 the same joint is checked as every other link.
 
 Cost. The object may have thousands of small pieces (one per mesh triangle, or per sector of a
-revolved band), so no query tries them all: a pair's distance is bounded from below by the
-link's own shape (sphere, box, cylinder) against a ball about the piece, and by their boxes; a
-coal broad phase (:class:`~sahgrasp.objects.collision.PieceTree`, in the object frame, built
-once) answers in C++ whether a link comes closer than a margin; only the pairs those leave are
-measured with GJK/EPA one by one. The results are those of measuring every pair.
+revolved band), so no query tries them all. One numpy pass bounds every link against every
+coarse hull of the :class:`~sahgrasp.objects.collision.PieceTree` (the link's box or sphere, a
+cylinder's box, against the hull's ball, and the two boxes' gap) and, through one anchor point
+inside each hull, bounds the closest distance from above: links bounded away cost nothing more.
+A remaining link's pieces are taken by increasing lower bound (the link's shape against the
+piece's ball, and their boxes) and measured with bare ``coal.distance`` calls (GJK/EPA, about
+2 us each); up to :data:`_FEW_PIECES` candidates are measured directly, more are bounded first
+and the piece tree (C++, object frame, built once) is asked whether any is closer at all. The
+results are those of measuring every pair (docs/objects.md, "Cost of the hand-object queries").
 
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
@@ -29,7 +33,7 @@ not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with `
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 import coal
@@ -59,6 +63,11 @@ FREE_FINGER_MARGIN_M = 2e-3
 """Default clearance [m] a free finger keeps from the object and from the other links."""
 
 _GRID_STEPS = 6
+"""Values per joint of a free finger tried by :meth:`HandObjectClearance.place_free_fingers`."""
+
+_FEW_PIECES = 12
+"""Up to this many candidate pieces, a link is measured against each (about 2 us per GJK call)
+rather than bounded in numpy or asked about in the piece tree (tens of microseconds each)."""
 """Values per joint of a free finger tried by :meth:`HandObjectClearance.place_free_fingers`."""
 
 
@@ -107,7 +116,7 @@ class _FreeFinger:
 
     coordinates: NDArray[np.intp]  # indices in Hand.finger_part(q)
     grid: NDArray[np.float64]  # candidate values of those coordinates, (N, len(coordinates))
-    geometries: tuple[int, ...]
+    geometries: NDArray[np.intp]  # hand geometries moved by the coordinates
     pairs: NDArray[np.intp]  # hand geometry pairs (P, 2) the hand checks for self-collision
 
 
@@ -159,34 +168,69 @@ class HandObjectClearance:
         self._link_centres = np.array(centres)
         self._link_radii = np.array(radii)
         self._link_halves = np.array(halves)  # local box half extents [m]
-        self._link_R = np.zeros((len(geometries), 3, 3))  # placements at the last _place
-        self._link_t = np.zeros((len(geometries), 3))
+        # The placements at the last _place: views of oMg, which Pinocchio writes in place.
+        views = _placement_views(self._geometry_data)
+        self._copy_placements = views is None
+        self._link_R, self._link_t = views or (
+            np.zeros((len(geometries), 3, 3)),
+            np.zeros((len(geometries), 3)),
+        )
+        self._every = np.arange(len(geometries))
         self._link_objects = [
             coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
         ]
+        self._geometries = [g.geometry for g in geometries]
+        self._link_transforms: list[coal.Transform3s | None] = [None] * len(geometries)
+        self._posed = [False] * len(geometries)  # link objects in the object frame
+        self._centred = not self._link_centres.any()  # boxes about the link origins
         self._describe_shapes([g.geometry for g in geometries])
         self._tree = PieceTree(self._shapes)
+        # Per coarse hull, the centre of its piece nearest its ball's centre: inside the object.
+        self._anchors = np.array(
+            [
+                self._piece_centres[m][
+                    np.argmin(np.linalg.norm(self._piece_centres[m] - c, axis=1))
+                ]
+                for m, c in zip(self._tree.members, self._tree.coarse_centres_m, strict=True)
+            ]
+        ).reshape(-1, 3)
+        self._coarse_points = np.vstack([self._tree.coarse_centres_m, self._anchors])
         self._tips = {f.name: f.tip_link for f in hand.description.fingers}
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
+        self._result = coal.DistanceResult()  # cleared before each use
         self._free: dict[str, _FreeFinger] = {}
         self._transforms_key = b""
+        self._thresholds_cache: dict[tuple[frozenset[str], float, float], FloatArray] = {}
+        self._placement_key = b""
+        self._object_world = pin.SE3.Identity()  # T^-1 of the last _place
 
     def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
-        """Per hand geometry, the parameters :meth:`_shape_gaps` measures it with."""
-        self._half_m = np.zeros((len(shapes), 3))
-        self._rounding_m = np.zeros(len(shapes))
-        self._cylinder = np.array([isinstance(s, coal.Cylinder) for s in shapes])
-        self._other = np.zeros(len(shapes), dtype=bool)
+        """Per hand geometry, the rounded box :meth:`_shape_gaps` measures it as.
+
+        A box is itself, a sphere a box of no size rounded by its radius: their gaps are exact.
+        A cylinder is measured as its bounding box (exactly, by :meth:`_piece_bounds`), another
+        shape as its bounding ball: their gaps are lower bounds only.
+        """
+        self._half_m = np.zeros((len(shapes), 1, 3))
+        self._rounding_m = np.zeros((len(shapes), 1))
+        self._offset_m = np.zeros((len(shapes), 1, 3))  # the box's centre in the link frame
+        self._exact = np.zeros(len(shapes), dtype=bool)
+        self._cylinder_m = np.zeros((len(shapes), 1, 3))  # (radius, half length, inf)
         for g, shape in enumerate(shapes):
             if isinstance(shape, coal.Box):
                 self._half_m[g] = shape.halfSide
-            elif isinstance(shape, coal.Cylinder):  # measured as (radial, axial, none)
-                self._half_m[g] = shape.radius, shape.halfLength, np.inf
+                self._exact[g] = True
+            elif isinstance(shape, coal.Cylinder):
+                self._half_m[g] = shape.radius, shape.radius, shape.halfLength
+                self._cylinder_m[g] = shape.radius, shape.halfLength, np.inf
             elif isinstance(shape, coal.Sphere):
                 self._rounding_m[g] = shape.radius
+                self._exact[g] = True
             else:
-                self._other[g] = True
+                self._rounding_m[g] = self._link_radii[g]
+                self._offset_m[g] = self._link_centres[g]
+        self._offset = bool(self._offset_m.any())
 
     @property
     def links(self) -> tuple[str, ...]:
@@ -222,9 +266,13 @@ class HandObjectClearance:
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, margin_m, allowance_m)
-        T = self._place(q, T_world_object)
-        near = self._screen(T, thresholds, range(len(self._links)))
-        pairs = self._pairs(T, thresholds, False, near, per_link=per_link)
+        T = self._placement(T_world_object)
+        self._place(q, T)
+        pairs = [
+            self._pair(T, g, piece)
+            for g, bounds in self._near_links(T, thresholds, None)
+            for piece in self._link_pieces(T, g, bounds, thresholds[g], per_link)
+        ]
         return [
             Penetration(
                 0,
@@ -235,8 +283,30 @@ class HandObjectClearance:
                 float(thresholds[p.geometry] - p.distance_m),
             )
             for p in pairs
-            if p.distance_m < thresholds[p.geometry]
         ]
+
+    def penetrated(
+        self,
+        q: NDArray[np.float64],
+        contacts: Iterable[str] = (),
+        allowance_m: float = CONTACT_ALLOWANCE_M,
+        T_world_object: FloatArray | None = None,
+    ) -> bool:
+        """Whether a link is inside the object at ``q`` (contact tips: deeper than allowed).
+
+        The verdict of ``bool(penetrations(q, 0.0, contacts, allowance_m))`` and of
+        ``not clearance(...).clear()``, found at the first such pair: a grasp optimization
+        checking thousands of chart centres needs the verdict only.
+
+        Raises:
+            InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
+            InvalidSettingsError: ``allowance_m`` is negative or not finite.
+        """
+        thresholds = self._thresholds(contacts, 0.0, allowance_m)
+        T = self._placement(T_world_object)
+        self._place(q, T)
+        near = self._near_links(T, thresholds, None)
+        return any(self._link_pieces(T, g, bounds, thresholds[g], 1) for g, bounds in near)
 
     def clearance(
         self,
@@ -265,14 +335,9 @@ class HandObjectClearance:
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        T = self._place(q, T_world_object)
-        if all_links:
-            every = range(len(self._links))
-            self._pose_links(T, every)
-            pairs = self._pairs(T, np.full(len(every), np.inf), True, every)
-            measured = {p.geometry: p.distance_m for p in pairs}
-        else:
-            measured = self._closest_links(T, thresholds)
+        T = self._placement(T_world_object)
+        self._place(q, T)
+        measured = self._every_link(T) if all_links else self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
         for g in sorted(measured):  # in geometry order: a tie goes to the first link
@@ -306,20 +371,16 @@ class HandObjectClearance:
         """
         self._thresholds((), margin_m, 0.0)
         q = self.hand.check_q(q).copy()
+        T = self._placement(T_world_object)
         distance = math.inf
         for finger in fingers:
-            q, finger_distance = self._place_finger(q, self._free_finger(finger), margin_m,
-                                                    T_world_object)  # fmt: skip
+            q, finger_distance = self._place_finger(q, self._free_finger(finger), margin_m, T)
             distance = min(distance, finger_distance)
         return FreeFingerPlacement(q, distance, distance >= margin_m)
 
     # ----- internals ------------------------------------------------------------------------
     def _place_finger(
-        self,
-        q: NDArray[np.float64],
-        finger: _FreeFinger,
-        margin_m: float,
-        T_world_object: FloatArray | None,
+        self, q: NDArray[np.float64], finger: _FreeFinger, margin_m: float, T: FloatArray
     ) -> tuple[NDArray[np.float64], float]:
         current = self.hand.finger_part(q)[finger.coordinates]
         grid = np.vstack([current, finger.grid])
@@ -329,11 +390,11 @@ class HandObjectClearance:
             candidate = q.copy()
             self.hand.finger_part(candidate)[finger.coordinates] = values
             # A candidate fails at its first pair closer than the margin: cheap rejections.
-            distance = self._finger_distance(candidate, finger, T_world_object, margin_m, True)
+            distance = self._finger_distance(candidate, finger, T, margin_m, True)
             if distance >= margin_m:
                 return candidate, distance
             candidates.append(candidate)
-        exact = [self._finger_distance(c, finger, T_world_object, margin_m) for c in candidates]
+        exact = [self._finger_distance(c, finger, T, margin_m) for c in candidates]
         best = int(np.argmax(exact))
         return candidates[best], exact[best]
 
@@ -341,7 +402,7 @@ class HandObjectClearance:
         self,
         q: NDArray[np.float64],
         finger: _FreeFinger,
-        T_world_object: FloatArray | None,
+        T: FloatArray,
         limit_m: float,
         fail_fast: bool = False,
     ) -> float:
@@ -353,28 +414,25 @@ class HandObjectClearance:
         """
         stop = limit_m if fail_fast else -math.inf
         limits = np.full(len(self._links), limit_m)
-        T = self._place(q, T_world_object)
-        near = self._screen(T, limits, finger.geometries)
-        pairs = self._pairs(T, limits, True, near, stop)
-        distance = min((p.distance_m for p in pairs), default=math.inf)
-        if distance < stop:
-            return distance
-        placements = self._geometry_data.oMg
-        objects = self._geometry_model.geometryObjects
-        centres = np.array([M.act(c) for M, c in zip(placements, self._link_centres, strict=True)])
+        self._place(q, T)
+        distance = math.inf
+        for g, bounds in self._near_links(T, limits, finger.geometries):
+            distance = min(distance, self._link_nearest(T, g, bounds, limit_m, stop)[0])
+            if distance < stop:
+                return distance
+        shapes, result = self._geometries, self._result
+        centres = self._ball_centres()
         a, b = finger.pairs.T
         bounds = np.linalg.norm(centres[a] - centres[b], axis=1)
         bounds -= self._link_radii[a] + self._link_radii[b]
-        for k in np.argsort(bounds):
-            if bounds[k] >= min(distance, limit_m):
+        order = np.argsort(bounds)
+        for bound, (a, b) in zip(bounds[order].tolist(), finger.pairs[order].tolist(), strict=True):
+            if bound >= min(distance, limit_m):
                 break
-            a, b = (int(i) for i in finger.pairs[k])
-            Ma, Mb = placements[a], placements[b]
+            result.clear()  # coal keeps the smaller of the result's and the new distance
             signed = coal.distance(
-                objects[a].geometry, coal.Transform3s(Ma.rotation, Ma.translation),
-                objects[b].geometry, coal.Transform3s(Mb.rotation, Mb.translation),
-                self._request, coal.DistanceResult(),
-            )  # fmt: skip
+                shapes[a], self._at_link(a), shapes[b], self._at_link(b), self._request, result
+            )
             distance = min(distance, float(signed))
             if distance < stop:
                 break
@@ -398,8 +456,9 @@ class HandObjectClearance:
             dtype=np.intp,
         )
         joints = {int(model.getJointId(hand.coordinate_names[i])) for i in coordinates}
-        geometries = tuple(
-            g for g, joint in enumerate(self._joints) if joints & set(model.supports[joint])
+        geometries = np.array(
+            [g for g, joint in enumerate(self._joints) if joints & set(model.supports[joint])],
+            dtype=np.intp,
         )
         pairs = np.array(
             [
@@ -416,219 +475,335 @@ class HandObjectClearance:
     def _thresholds(
         self, contacts: Iterable[str], margin_m: float, allowance_m: float
     ) -> NDArray[np.float64]:
-        """Smallest accepted signed distance [m] per hand geometry."""
+        """Smallest accepted signed distance [m] per hand geometry (kept per argument set)."""
+        key = (frozenset(contacts), margin_m, allowance_m)
+        cached = self._thresholds_cache.get(key)
+        if cached is not None:
+            return cached
         for name, value in (("margin_m", margin_m), ("allowance_m", allowance_m)):
             if not (math.isfinite(value) and value >= 0.0):
                 raise InvalidSettingsError(f"{name} must be a finite length >= 0 m, got {value}")
         tips = set()
-        for finger in contacts:
+        for finger in key[0]:
             if finger not in self._tips:
                 raise InvalidTargetError(
                     f"unknown contact finger {finger!r} for hand {self.hand.description.name}; "
                     f"valid: {list(self._tips)}"
                 )
             tips.add(self._tips[finger])
-        return np.array([-allowance_m if link in tips else margin_m for link in self._links])
+        thresholds = np.array([-allowance_m if link in tips else margin_m for link in self._links])
+        thresholds.setflags(write=False)
+        self._thresholds_cache[key] = thresholds
+        return thresholds
 
-    def _place(self, q: NDArray[np.float64], T_world_object: FloatArray | None) -> FloatArray:
-        """Place the hand geometries at ``q``; return the object placement to use."""
-        pin.updateGeometryPlacements(
-            self._model, self._data, self._geometry_model, self._geometry_data, self.hand.check_q(q)
-        )
-        H = np.array([M.homogeneous for M in self._geometry_data.oMg])  # once per query
-        self._link_R, self._link_t = H[:, :3, :3], H[:, :3, 3]
+    def _placement(self, T_world_object: FloatArray | None) -> FloatArray:
+        """The object placement a query uses: its own, or ``T_world_object`` validated."""
         if T_world_object is None:
             return self.object.T_world_object
         return as_placement(T_world_object)
 
-    def _pose_links(self, T: FloatArray, geometries: Iterable[int]) -> None:
-        """Place the coal objects of hand ``geometries`` in the frame of the object at ``T``.
+    def _place(self, q: NDArray[np.float64], T: FloatArray) -> None:
+        """Place the hand geometries at ``q`` and the object at ``T`` (a validated placement).
+
+        ``_link_R`` and ``_link_t`` (views of Pinocchio's placements) then hold the links'
+        world placements; ``_object_world`` the inverse of ``T``, computed when ``T`` changes.
+        """
+        pin.updateGeometryPlacements(
+            self._model, self._data, self._geometry_model, self._geometry_data, self.hand.check_q(q)
+        )
+        if self._copy_placements:
+            H = np.array([M.homogeneous for M in self._geometry_data.oMg])
+            self._link_R, self._link_t = H[:, :3, :3], H[:, :3, 3]
+        self._link_transforms = [None] * len(self._links)
+        self._posed = [False] * len(self._links)
+        key = T.tobytes()
+        if key != self._placement_key:
+            self._placement_key = key
+            self._object_world = pin.SE3(T).inverse()
+
+    def _pose_links(self, geometries: Iterable[int]) -> None:
+        """Place the coal objects of hand ``geometries`` in the frame of the object (at _place).
 
         The piece tree stays in the object frame, built once, whatever the object's placement.
+        A geometry is posed once per placement.
         """
-        T_object_world = pin.SE3(T).inverse()
+        T_object_world = self._object_world  # T^-1, from _place
         for g in geometries:
+            if self._posed[g]:
+                continue
             M = T_object_world * self._geometry_data.oMg[g]
             link = self._link_objects[g]
             link.setTransform(coal.Transform3s(M.rotation, M.translation))
             link.computeAABB()
+            self._posed[g] = True
 
-    def _screen(
-        self, T: FloatArray, thresholds: NDArray[np.float64], geometries: Iterable[int]
-    ) -> list[int]:
-        """The ``geometries`` that may have a piece closer than their threshold [m].
+    def _near_links(
+        self, T: FloatArray, thresholds: NDArray[np.float64], geometries: NDArray[np.intp] | None
+    ) -> list[tuple[int, FloatArray]]:
+        """The ``geometries`` (None: all) whose coarse bounds come below their thresholds [m].
 
-        Every geometry left out has none (exact, from the piece tree), so only the ones returned
-        need the pair-by-pair search of :meth:`_pairs`.
+        Every geometry left out has no piece closer than its threshold (numpy only, no coal
+        call); each one returned comes with its bounds to the coarse hulls, (K,).
         """
-        chosen = list(geometries)
-        self._pose_links(T, chosen)
-        tree, links = self._tree, self._link_objects
-        return [g for g in chosen if not tree.clear_of(links[g], float(thresholds[g]))]
+        if not self._shapes:
+            return []
+        cell_bounds = self._coarse_bounds(T, geometries)[0]
+        chosen = self._every if geometries is None else geometries
+        near = np.flatnonzero(cell_bounds.min(axis=1) < thresholds[chosen]).tolist()
+        return [(int(chosen[i]), cell_bounds[i]) for i in near]
 
-    def _coarse_bounds(self, T: FloatArray) -> FloatArray:
-        """Lower bounds [m] of each hand geometry's signed distance to each coarse hull: (G, K).
+    def _coarse_bounds(
+        self, T: FloatArray, geometries: NDArray[np.intp] | None
+    ) -> tuple[FloatArray, FloatArray]:
+        """Bounds [m] of hand geometries' signed distances to the coarse hulls and the object.
 
-        The larger of two bounds: the link's own shape against the hull's ball, and their boxes'
-        gap (object at ``T``). Numpy only.
+        ``geometries``: None for all. Lower bounds to each hull, (G, K): the larger of the
+        link's own shape against the hull's ball and of their boxes' gap (object at ``T``).
+        Upper bounds to the object, (G,): the link's distance to the nearest anchor (a point
+        inside a piece; infinite for a link measured by a bound only). Numpy only.
         """
         tree = self._tree
-        coarse = tree.coarse_centres_m @ T[:3, :3].T + T[:3, 3]  # world
-        balls = self._shape_gaps(np.arange(len(self._links)), coarse) - tree.coarse_radii_m
-        return np.maximum(balls, self._link_box_gaps(T, tree.coarse_boxes_m))
+        gaps = self._shape_gaps(geometries, self._placed_pieces(T)[2])
+        K = len(tree.coarse_radii_m)
+        lower = np.maximum(
+            gaps[:, :K] - tree.coarse_radii_m,
+            self._link_box_gaps(T, geometries, tree.coarse_boxes_m),
+        )
+        exact = self._exact if geometries is None else self._exact[geometries]
+        return lower, np.where(exact, gaps[:, K:].min(axis=1), np.inf)
+
+    def _every_link(self, T: FloatArray) -> dict[int, float]:
+        """Signed distance [m] of every hand geometry to the object (none without pieces)."""
+        if not self._shapes:
+            return {}
+        cell_bounds = self._coarse_bounds(T, None)[0]
+        return {
+            g: self._link_nearest(T, g, cell_bounds[g], math.inf)[0] for g in self._every.tolist()
+        }
 
     def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
         Geometries are taken by increasing lower bound (:meth:`_coarse_bounds`) until the bound
-        exceeds the smallest distance found. A contact tip the
-        piece tree finds within its allowance is excepted; the others are measured against the
-        pieces whose bounds are below that distance, so a far link costs no GJK call. Only the
-        geometries taken are posed in the object frame.
+        exceeds the smallest distance found. A contact tip with no piece deeper than its
+        allowance is excepted; the others are measured against the pieces whose bounds are
+        below that distance, so a far link costs no GJK call.
         """
         if not self._shapes:
             return {}
-        tree = self._tree
-        every = np.arange(len(self._links))
-        cell_bounds = self._coarse_bounds(T)
+        cell_bounds, upper = self._coarse_bounds(T, None)
         bounds = cell_bounds.min(axis=1)
+        # No counted link is farther than the nearest anchor to a link that is no contact tip.
+        ceiling = float(np.where(thresholds < 0.0, np.inf, upper).min())
         measured: dict[int, float] = {}
         smallest = math.inf
-        for g in (int(i) for i in np.argsort(bounds, kind="stable")):
-            if bounds[g] > smallest:
+        for g in np.argsort(bounds, kind="stable").tolist():
+            limit = min(smallest, ceiling)
+            if bounds[g] > limit:
                 break
-            self._pose_links(T, (g,))
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
-            limit = float(thresholds[g]) if tip else smallest
-            if limit < math.inf and tree.clear_of(self._link_objects[g], limit):
-                continue  # one C++ query instead of bounding every piece in numpy
-            pieces = self._candidates(T, g, cell_bounds[g], smallest)
-            for pair in self._pairs(T, np.full(len(every), smallest), True, [g], pieces=pieces):
-                if pair.distance_m < smallest:  # exact below the limit
-                    measured[g] = smallest = pair.distance_m
+            if tip and not self._link_pieces(T, g, cell_bounds[g], float(thresholds[g]), 1):
+                continue
+            distance = self._link_nearest(T, g, cell_bounds[g], limit)[0]
+            if distance < smallest:  # exact up to the limit
+                measured[g] = smallest = distance
         return measured
 
-    def _candidates(
-        self, T: FloatArray, g: int, cell_bounds: FloatArray, limit_m: float
-    ) -> NDArray[np.intp]:
-        """The pieces that may be the nearest to geometry ``g``, by the coarse hulls' bounds.
-
-        The pieces of the hull with the smallest bound give an upper bound of the distance
-        (a piece's centre lies inside it); only hulls bounded below that, and ``limit_m``, can
-        hold the nearest piece.
-        """
-        members = self._tree.members
-        if not self._other[g]:
-            first = members[int(np.argmin(cell_bounds))]
-            centres, _ = self._placed_pieces(T)
-            limit_m = min(limit_m, float(self._shape_gaps(np.array([g]), centres[first]).min()))
-        cells = np.flatnonzero(cell_bounds <= limit_m)
-        return np.concatenate([members[c] for c in cells]) if len(cells) else cells
-
-    def _pairs(
+    def _link_nearest(
         self,
         T: FloatArray,
-        thresholds: NDArray[np.float64],
-        nearest_only: bool,
-        geometries: Sequence[int],
-        stop_below_m: float = -math.inf,
-        pieces: NDArray[np.intp] | None = None,
-        per_link: int | None = None,
-    ) -> list[_Pair]:
-        """Signed distances of hand geometries to the object pieces that may matter.
+        g: int,
+        cell_bounds: FloatArray,
+        limit_m: float,
+        stop_m: float = -math.inf,
+    ) -> tuple[float, int]:
+        """The signed distance [m] of geometry ``g`` to its nearest piece, and that piece.
 
-        The hand is placed (:meth:`_place`), its ``geometries`` posed (:meth:`_pose_links`) and
-        the object at ``T``. ``nearest_only``: one pair per geometry, its nearest piece if closer
-        than the geometry's threshold (else some pair at least that far, or none). Otherwise
-        every pair whose bounds come closer than the threshold, or the first ``per_link`` of
-        them found closer than it. The search ends at the first pair closer than
-        ``stop_below_m``. ``pieces``: only these pieces (default: all).
+        Exact up to ``limit_m``; else some distance above it (infinite, piece -1, if none was
+        measured). Branch and bound: pieces by increasing lower bound (for a few pieces, by
+        their hulls' bounds), until the bound reaches the nearest distance found. The search
+        ends at the first distance below ``stop_m``.
         """
-        placements = self._geometry_data.oMg
-        piece_centres, transforms = self._placed_pieces(T)
-        out: list[_Pair] = []
-        for g in geometries:
-            M = placements[g]
-            geometry = self._geometry_model.geometryObjects[g].geometry
-            chosen = self._all_pieces if pieces is None else pieces
-            to_centres = self._shape_gaps(np.array([g]), piece_centres[chosen])[0]
-            bounds = to_centres - self._piece_radii[chosen]
-            limit = thresholds[g]
-            if nearest_only and not self._other[g] and len(chosen):
-                # A piece's centre lies inside it, so the link is no farther from the object
-                # than from the nearest centre: no piece bounded above that can be the nearest.
-                limit = min(limit, float(to_centres.min()))
-            kept = bounds <= limit  # no other piece can be kept
-            near, bounds = chosen[kept], bounds[kept]
-            bounds = np.maximum(bounds, self._box_gaps(g, near))
-            at_link = coal.Transform3s(M.rotation, M.translation)
-            best: _Pair | None = None
-            found = 0
-            order = np.argsort(bounds)
-            for i, bound in zip(near[order].tolist(), bounds[order].tolist(), strict=True):
-                limit = thresholds[g] if best is None else min(best.distance_m, thresholds[g])
-                if bound >= limit:
+        members, distance = self._tree.members, self._gjk(T, g)
+        if limit_m < math.inf and self._tree_says_clear(g, cell_bounds, limit_m):
+            return math.inf, -1
+        cells = np.flatnonzero(cell_bounds <= limit_m)
+        best, nearest = math.inf, -1
+        if self._tree.sizes[cells].sum() > _FEW_PIECES:  # numpy bounds beat that many GJK calls
+            pieces = np.concatenate([members[c] for c in cells.tolist()])
+            pieces, bounds = self._piece_bounds(T, g, pieces, limit_m)
+            for piece, bound in zip(pieces.tolist(), bounds.tolist(), strict=True):
+                if bound >= best:
                     break
-                if transforms[i] is None:
-                    transforms[i] = self._shapes[i].transform(T)
-                pair = self._distance(g, geometry, at_link, i, transforms[i])
-                if pair.distance_m < stop_below_m:
-                    return [*out, pair]
-                if nearest_only:
-                    best = pair if best is None or pair.distance_m < best.distance_m else best
-                else:
-                    out.append(pair)
-                    found += pair.distance_m < thresholds[g]
-                    if per_link is not None and found >= per_link:
+                d = distance(piece)
+                if d < best:
+                    best, nearest = d, piece
+                    if d < stop_m:
                         break
-            if best is not None:
-                out.append(best)
+            return best, nearest
+        for cell in cells[np.argsort(cell_bounds[cells])].tolist():
+            if cell_bounds[cell] >= best:
+                break
+            for piece in members[cell].tolist():
+                d = distance(piece)
+                if d < best:
+                    best, nearest = d, piece
+                    if d < stop_m:
+                        return best, nearest
+        return best, nearest
+
+    def _link_pieces(
+        self,
+        T: FloatArray,
+        g: int,
+        cell_bounds: FloatArray,
+        threshold_m: float,
+        per_link: int | None,
+    ) -> list[int]:
+        """The pieces closer than ``threshold_m`` [m] to geometry ``g``.
+
+        The first ``per_link`` (None: all) of them by increasing lower bound: the ones a search
+        in that order finds first.
+        """
+        if self._tree_says_clear(g, cell_bounds, threshold_m):
+            return []
+        cells = np.flatnonzero(cell_bounds < threshold_m).tolist()
+        if not cells:
+            return []
+        pieces = np.concatenate([self._tree.members[c] for c in cells])
+        distance = self._gjk(T, g)
+        if len(pieces) <= _FEW_PIECES:  # measure them all, then order the few found
+            found = np.array([p for p in pieces.tolist() if distance(p) < threshold_m])
+            if len(found) <= 1:
+                return found.tolist()
+            # In the order of a search by bound: the repair's rows come in the same order.
+            pieces = self._piece_bounds(T, g, found, math.inf)[0]
+        else:
+            pieces, bounds = self._piece_bounds(T, g, pieces, threshold_m)
+            pieces = pieces[bounds < threshold_m]
+        out: list[int] = []
+        for piece in pieces.tolist():
+            if distance(piece) < threshold_m:
+                out.append(piece)
+                if per_link is not None and len(out) >= per_link:
+                    break
         return out
 
-    def _shape_gaps(self, geometries: NDArray[np.intp], points_m: FloatArray) -> FloatArray:
+    def _tree_says_clear(self, g: int, cell_bounds: FloatArray, limit_m: float) -> bool:
+        """True if the piece tree finds no piece closer than ``limit_m`` [m] to geometry ``g``.
+
+        Asked only when more than a few pieces lie in the hulls bounded below ``limit_m``: one
+        C++ query then costs less than their GJK calls. False when not asked.
+        """
+        if len(self._shapes) <= _FEW_PIECES:
+            return False
+        count = int(self._tree.sizes[cell_bounds < limit_m].sum())
+        if count <= _FEW_PIECES:
+            return False
+        self._pose_links((g,))
+        return self._tree.clear_of(self._link_objects[g], limit_m)
+
+    def _gjk(self, T: FloatArray, g: int) -> Callable[[int], float]:
+        """Signed distance [m] of geometry ``g`` (placed) to a piece: coal's GJK/EPA, no more."""
+        geometry, at_link = self._geometries[g], self._at_link(g)
+        shapes, transforms = self._shapes, self._placed_pieces(T)[1]
+        request, result = self._request, self._result
+
+        def distance(piece: int) -> float:
+            at_piece = transforms[piece]
+            if at_piece is None:
+                at_piece = transforms[piece] = shapes[piece].transform(T)
+            result.clear()  # coal keeps the smaller of the result's and the new distance
+            return float(
+                coal.distance(shapes[piece].geometry, at_piece, geometry, at_link, request, result)
+            )
+
+        return distance
+
+    def _at_link(self, g: int) -> coal.Transform3s:
+        """Geometry ``g``'s world placement as a coal transform (built once per placement)."""
+        at_link = self._link_transforms[g]
+        if at_link is None:
+            M = self._geometry_data.oMg[g]
+            at_link = self._link_transforms[g] = coal.Transform3s(M.rotation, M.translation)
+        return at_link
+
+    def _piece_bounds(
+        self, T: FloatArray, g: int, pieces: NDArray[np.intp], limit_m: float
+    ) -> tuple[NDArray[np.intp], FloatArray]:
+        """``pieces`` bounded at most ``limit_m`` [m] from geometry ``g``, and their bounds.
+
+        By increasing bound: the larger of the link's shape (a cylinder exactly) against the
+        piece's ball and of their boxes' gap (the link posed here).
+        """
+        self._pose_links((g,))
+        centres = self._placed_pieces(T)[0][pieces]
+        if self._cylinder_m[g, 0, 2] == np.inf:  # measured as (radial, axial, none)
+            local = np.matmul(centres - self._link_t[g], self._link_R[g])
+            coords = np.abs(local)
+            coords[:, 0] = np.hypot(local[:, 0], local[:, 1])
+            coords[:, 1] = coords[:, 2]
+            excess = coords - self._cylinder_m[g]
+            outside = np.maximum(excess, 0.0)
+            gaps = np.sqrt(np.einsum("ni,ni->n", outside, outside))
+            gaps += np.minimum(excess.max(axis=1), 0.0)
+        else:
+            gaps = self._shape_gaps(np.array([g]), centres)[0]
+        bounds = gaps - self._piece_radii[pieces]
+        bounds = np.maximum(bounds, self._box_gaps(g, pieces))
+        kept = bounds <= limit_m
+        pieces, bounds = pieces[kept], bounds[kept]
+        order = np.argsort(bounds)
+        return pieces[order], bounds[order]
+
+    def _ball_centres(self) -> FloatArray:
+        """Centres (G, 3) of the links' bounding balls in the world, at the last _place."""
+        return np.einsum("gij,gj->gi", self._link_R, self._link_centres) + self._link_t
+
+    def _shape_gaps(self, geometries: NDArray[np.intp] | None, points_m: FloatArray) -> FloatArray:
         """Signed distances [m] from hand geometries, placed, to world points: (G, N).
 
-        Exact for a sphere, box or cylinder (negative inside); for another shape, the distance
-        to its bounding ball. A piece within a ball of radius r about a point is then at least
-        this minus r from the link, inside as well (its penetration is at most the ball's): a
-        much tighter bound than the link's own ball when the pieces are small.
+        ``geometries``: None for all. Exact for a box or a sphere (negative inside); for a
+        cylinder, the distance to its bounding box, for another shape to its bounding ball
+        (:meth:`_describe_shapes`). A piece within a ball of radius r about a point is then at
+        least this minus r from the link, inside as well (its penetration is at most the
+        ball's): a much tighter bound than the link's own ball when the pieces are small.
         """
-        R, t = self._link_R[geometries], self._link_t[geometries]
+        if geometries is None:
+            R, t, half, rounding = self._link_R, self._link_t, self._half_m, self._rounding_m
+        else:
+            R, t = self._link_R[geometries], self._link_t[geometries]
+            half, rounding = self._half_m[geometries], self._rounding_m[geometries]
         local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
-        coords = np.abs(local)  # box (a sphere is a box of no size, rounded)
-        cylinder = self._cylinder[geometries]
-        if cylinder.any():  # axis z: (radial, axial); the third half extent is infinite
-            axial = local[cylinder]
-            coords[cylinder, :, 0] = np.hypot(axial[..., 0], axial[..., 1])
-            coords[cylinder, :, 1] = coords[cylinder, :, 2]
-        excess = coords - self._half_m[geometries][:, None]
+        if self._offset:
+            local -= self._offset_m if geometries is None else self._offset_m[geometries]
+        excess = np.abs(local) - half
         outside = np.maximum(excess, 0.0)
         gaps = np.sqrt(np.einsum("gni,gni->gn", outside, outside))
-        gaps += np.minimum(excess.max(axis=2), 0.0) - self._rounding_m[geometries][:, None]
-        other = self._other[geometries]
-        if other.any():
-            ball = local[other] - self._link_centres[geometries[other]][:, None]
-            gaps[other] = (
-                np.linalg.norm(ball, axis=2) - self._link_radii[geometries[other]][:, None]
-            )
+        gaps += np.minimum(excess.max(axis=2), 0.0) - rounding
         return gaps
 
-    def _link_box_gaps(self, T: FloatArray, boxes_m: FloatArray) -> FloatArray:
-        """Gaps [m] between every hand geometry's box and ``boxes_m`` (K, 2, 3): (G, K).
+    def _link_box_gaps(
+        self, T: FloatArray, geometries: NDArray[np.intp] | None, boxes_m: FloatArray
+    ) -> FloatArray:
+        """Gaps [m] between hand geometries' boxes and ``boxes_m`` (K, 2, 3): (G, K).
 
-        Boxes in the object frame at placement ``T``, the links' from their local boxes and
-        their placements at the last :meth:`_place` (no coal call). Disjoint boxes bound the
-        distance from below; overlapping ones bound nothing (-inf).
+        ``geometries``: None for all. Boxes in the object frame at placement ``T``, the links'
+        from their local boxes and their placements at the last :meth:`_place` (no coal call).
+        Disjoint boxes bound the distance from below; overlapping ones bound nothing (-inf).
         """
+        every = slice(None) if geometries is None else geometries
         R_object = T[:3, :3]
-        R = np.matmul(R_object.T, self._link_R)  # link frame -> object frame
-        centres = np.einsum("gij,gj->gi", R, self._link_centres)
-        centres += (self._link_t - T[:3, 3]) @ R_object
-        halves = np.einsum("gij,gj->gi", np.abs(R), self._link_halves)
-        low, high = (centres - halves)[:, None], (centres + halves)[:, None]
-        gaps = np.maximum(low - boxes_m[None, :, 1], boxes_m[None, :, 0] - high)
-        gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=2)
-        return np.where(gaps > 0.0, gaps, -np.inf)
+        R = np.matmul(R_object.T, self._link_R[every])  # link frame -> object frame
+        centres = (self._link_t[every] - T[:3, 3]) @ R_object
+        if not self._centred:
+            centres += np.einsum("gij,gj->gi", R, self._link_centres[every])
+        halves = np.einsum("gij,gj->gi", np.abs(R), self._link_halves[every])[:, None]
+        low, high = centres[:, None] - halves, centres[:, None] + halves
+        gaps = np.maximum(np.maximum(low - boxes_m[:, 1], boxes_m[:, 0] - high), 0.0)
+        gaps = np.sqrt(np.einsum("gki,gki->gk", gaps, gaps))
+        gaps[gaps == 0.0] = -np.inf
+        return gaps
 
     def _box_gaps(self, g: int, pieces: NDArray[np.intp]) -> FloatArray:
         """Per piece in ``pieces``, the gap [m] between its box and the posed link's box.
@@ -642,29 +817,37 @@ class HandObjectClearance:
         gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=1)
         return np.where(gaps > 0.0, gaps, -np.inf)
 
-    def _placed_pieces(self, T: FloatArray) -> tuple[FloatArray, list[coal.Transform3s | None]]:
-        """The pieces' centres (N, 3) in the world and coal transforms (built on first use).
+    def _placed_pieces(
+        self, T: FloatArray
+    ) -> tuple[FloatArray, list[coal.Transform3s | None], FloatArray]:
+        """The pieces' centres (N, 3), coal transforms (built on first use), hulls' points (2K, 3).
 
-        Kept while the object stays at placement ``T``: every query of a solve reuses them.
+        The hulls' points: their balls' centres, then their anchors (:meth:`_coarse_bounds`).
+        All in the world, kept while the object stays at placement ``T``: every query of a
+        solve reuses them.
         """
         key = T.tobytes()
         if self._transforms_key != key:
             self._transforms_key = key
             self._centres_world = self._piece_centres @ T[:3, :3].T + T[:3, 3]
             self._transforms: list[coal.Transform3s | None] = [None] * len(self._shapes)
-        return self._centres_world, self._transforms
+            self._coarse_world = self._coarse_points @ T[:3, :3].T + T[:3, 3]
+        return self._centres_world, self._transforms, self._coarse_world
 
-    def _distance(
-        self,
-        g: int,
-        geometry: coal.ShapeBase,
-        at_link: coal.Transform3s,
-        piece: int,
-        at_piece: coal.Transform3s,
-    ) -> _Pair:
+    def _pair(self, T: FloatArray, g: int, piece: int) -> _Pair:
+        """Hand geometry ``g`` (placed) and ``piece`` (object at ``T``): distance and witnesses."""
+        transforms = self._placed_pieces(T)[1]
+        at_piece = transforms[piece]
+        if at_piece is None:
+            at_piece = transforms[piece] = self._shapes[piece].transform(T)
         result = coal.DistanceResult()
         distance = coal.distance(
-            self._shapes[piece].geometry, at_piece, geometry, at_link, self._request, result
+            self._shapes[piece].geometry,
+            at_piece,
+            self._geometries[g],
+            self._at_link(g),
+            self._request,
+            result,
         )
         normal = np.asarray(result.normal, dtype=np.float64)
         return _Pair(
@@ -674,3 +857,31 @@ class HandObjectClearance:
             np.asarray(result.getNearestPoint2(), dtype=np.float64),
             normal / max(float(np.linalg.norm(normal)), 1e-12),
         )
+
+
+def _placement_views(data: pin.GeometryData) -> tuple[FloatArray, FloatArray] | None:
+    """Read-only views (G, 3, 3) and (G, 3) of the rotations and translations in ``data.oMg``.
+
+    Pinocchio keeps ``oMg`` as one ``std::vector`` of SE3 (a column-major rotation, then the
+    translation: 12 doubles each), written in place by ``updateGeometryPlacements``: strided
+    views read every placement without a call per geometry (about 40 us for the SAH's 22).
+    Checked address by address; None if the layout differs (then
+    :meth:`HandObjectClearance._place` copies the placements every time).
+    """
+    placements = data.oMg
+    first = placements[0]
+    size = first.rotation.itemsize
+    step = 12 * size
+    start = first.rotation.__array_interface__["data"][0]
+    adjacent = all(
+        M.rotation.__array_interface__["data"][0] == start + k * step
+        and M.translation.__array_interface__["data"][0] == start + k * step + 9 * size
+        and M.rotation.flags.f_contiguous
+        for k, M in enumerate(placements)
+    )
+    if not adjacent:
+        return None
+    as_strided = np.lib.stride_tricks.as_strided
+    R = as_strided(first.rotation, (len(placements), 3, 3), (step, size, 3 * size), writeable=False)
+    t = as_strided(first.translation, (len(placements), 3), (step, size), writeable=False)
+    return R, t

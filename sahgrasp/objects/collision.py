@@ -125,6 +125,7 @@ class PieceTree:
         coarse_boxes_m: Each coarse hull's box in the object frame, (K, 2, 3) [m].
         cells: The coarse hull holding each piece, (N,).
         members: The pieces of each coarse hull, in hull order (K arrays of indices).
+        sizes: How many pieces each coarse hull holds, (K,).
     """
 
     def __init__(self, shapes: Sequence[CollisionShape], cell_m: float = COARSE_CELL_M) -> None:
@@ -132,6 +133,7 @@ class PieceTree:
         order = np.argsort(self.cells, kind="stable")
         splits = np.flatnonzero(np.diff(self.cells[order])) + 1
         self.members = tuple(np.split(order, splits)) if len(order) else ()
+        self.sizes = np.array([len(m) for m in self.members], dtype=np.intp)
         coarse = _coarse_pieces(shapes, self.cells)
         # The trees hold raw pointers to the collision objects: keep them (and their shapes).
         self._shapes = (tuple(shapes), tuple(coarse))
