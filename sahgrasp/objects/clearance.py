@@ -265,9 +265,7 @@ class HandObjectClearance:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
-        thresholds = self._thresholds(contacts, margin_m, allowance_m)
-        T = self._placement(T_world_object)
-        self._place(q, T)
+        thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs = [
             self._pair(T, g, piece)
             for g, bounds in self._near_links(T, thresholds, None)
@@ -302,9 +300,7 @@ class HandObjectClearance:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
-        thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        T = self._placement(T_world_object)
-        self._place(q, T)
+        thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
         near = self._near_links(T, thresholds, None)
         return any(self._link_pieces(T, g, bounds, thresholds[g], 1) for g, bounds in near)
 
@@ -334,9 +330,7 @@ class HandObjectClearance:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
-        thresholds = self._thresholds(contacts, 0.0, allowance_m)
-        T = self._placement(T_world_object)
-        self._place(q, T)
+        thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
         measured = self._every_link(T) if all_links else self._closest_links(T, thresholds)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
@@ -495,6 +489,20 @@ class HandObjectClearance:
         thresholds.setflags(write=False)
         self._thresholds_cache[key] = thresholds
         return thresholds
+
+    def _query(
+        self,
+        q: NDArray[np.float64],
+        contacts: Iterable[str],
+        margin_m: float,
+        allowance_m: float,
+        T_world_object: FloatArray | None,
+    ) -> tuple[NDArray[np.float64], FloatArray]:
+        """A query's thresholds and object placement, with the hand and object placed at them."""
+        thresholds = self._thresholds(contacts, margin_m, allowance_m)
+        T = self._placement(T_world_object)
+        self._place(q, T)
+        return thresholds, T
 
     def _placement(self, T_world_object: FloatArray | None) -> FloatArray:
         """The object placement a query uses: its own, or ``T_world_object`` validated."""
