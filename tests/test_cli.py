@@ -106,7 +106,11 @@ def test_every_option_has_help_and_shows_its_default() -> None:
         for action in parser._actions:
             assert action.help, f"{parser.prog} {action.dest} has no help"
             shown = formatter._get_help_string(action)  # type: ignore[attr-defined]
-            if action.default not in (None, False, argparse.SUPPRESS) and action.option_strings:
+            if not action.option_strings or action.default in (None, argparse.SUPPRESS):
+                continue
+            if action.nargs == 0 and not isinstance(action, argparse.BooleanOptionalAction):
+                assert "%(default)" not in shown, f"{parser.prog} {action.dest}: a flag's default"
+            else:
                 assert "%(default)s" in shown, f"{parser.prog} {action.dest} hides its default"
     sequence = next(p for p in parsers if p.prog.endswith(" sequence"))
     assert "about 30 minutes on 2 cores" in " ".join(sequence.format_help().split())

@@ -78,9 +78,14 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """Shows each option's default in ``--help``, except for flags and options without one."""
 
     def _get_help_string(self, action: argparse.Action) -> str | None:
-        if action.default is None or action.default is False or "%(default)" in (action.help or ""):
+        if _plain_flag(action) or action.default is None or "%(default)" in (action.help or ""):
             return action.help
         return super()._get_help_string(action)
+
+
+def _plain_flag(action: argparse.Action) -> bool:
+    """A flag that only switches its default off or on (``store_true``/``store_false``)."""
+    return action.nargs == 0 and not isinstance(action, argparse.BooleanOptionalAction)
 
 
 def add_command(sub: Any, name: str, summary: str, description: str | None = None) -> Any:
