@@ -559,7 +559,7 @@ def _damped_step(
 
 
 REPAIR_PATIENCE = 3
-"""With an obstacle: repair steps without a new smallest deepest penetration, then give up."""
+"""With an obstacle: repair steps without a new low of the summed or deepest penetration."""
 
 
 def _separate(
@@ -575,22 +575,24 @@ def _separate(
     colliding configuration can usually slide along it out of collision: each step solves the
     contact rows together with one row per penetrating pair asking the second body to move along
     the separating normal by the penetration depth plus a margin. A link in the obstacle is such a
-    pair whose first body is the object (fixed). With an obstacle, a repair whose deepest
-    penetration sets no new low for :data:`REPAIR_PATIENCE` steps is given up: such repairs
-    rarely end clear, and each step costs a hand-object query (docs/ik.md, "Collision repair").
+    pair whose first body is the object (fixed). With an obstacle, a repair whose summed and
+    deepest penetration set no new low for :data:`REPAIR_PATIENCE` steps is given up: such
+    repairs rarely end clear, and each step costs a hand-object query (docs/ik.md, item 5).
     """
     # Only with an obstacle: without one, giving up early saved no time and cost starts.
     patience = REPAIR_PATIENCE if problem.obstacle is not None else s.repair_iterations
-    best_m, stalled = np.inf, 0
+    lows_m, stalled = np.array([np.inf, np.inf]), 0
     for k in range(s.repair_iterations):
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
         rows, depths = hand.separation_rows(q, penetrations)
-        # A hopeless repair wanders: give it up once the deepest penetration has not set a
-        # new low for ``patience`` steps, so that Algorithm 1 moves on to its next start.
-        deepest_m = float(depths.max())
-        best_m, stalled = (deepest_m, 0) if deepest_m < best_m else (best_m, stalled + 1)
+        # A hopeless repair wanders: give it up once neither the summed nor the deepest
+        # penetration has set a new low for ``patience`` steps (the deepest alone cut the
+        # three-finger can's paper grasp, whose repair climbs for three steps and then clears).
+        depth_m = np.array([depths.sum(), depths.max()])
+        stalled = 0 if np.any(depth_m < lows_m) else stalled + 1
+        lows_m = np.minimum(lows_m, depth_m)
         if stalled >= patience:
             return q, k
         stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
