@@ -20,7 +20,13 @@ from sahgrasp.ik import (
     solve_many,
 )
 from sahgrasp.ik.initial import expansion_matrix
-from sahgrasp.ik.solver import Attempt, run_algorithm1
+from sahgrasp.ik.solver import (
+    REPAIR_PATIENCE,
+    Attempt,
+    ContactProblem,
+    _separate,
+    run_algorithm1,
+)
 from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object
 
 
@@ -330,6 +336,18 @@ def test_only_solutions_through_the_object_fail_with_object_collision(
     assert result.object_clearance_m is not None and result.object_clearance_m < 0.0
     distances = _object_distances(sah, result.to_dict(sah), pieces)
     assert distances[result.closest_link] == pytest.approx(result.object_clearance_m, abs=1e-6)
+
+
+def test_a_hopeless_object_repair_is_given_up_before_the_cap(sah: Hand) -> None:
+    """The pinch through the plate: no step can clear it, so the repair stops early."""
+    target = _pinch(0.03, 0.03)
+    plate, _ = _box((0.03, 0.4, 0.4))
+    settings = IKSettings()
+    plain = solve_ik(sah, target, method="auto")
+    problem = ContactProblem(sah, target, (), plate, settings.d_min_m)
+    q, used = _separate(sah, problem, plain.q, settings, None)
+    assert REPAIR_PATIENCE <= used < settings.repair_iterations
+    assert problem.collision(q) == "object_collision"
 
 
 def test_obstacle_must_be_a_grasp_object(sah: Hand) -> None:

@@ -558,6 +558,10 @@ def _damped_step(
     return None, None, None, damping
 
 
+REPAIR_PATIENCE = 3
+"""With an obstacle: repair steps without a new low of the summed or deepest penetration."""
+
+
 def _separate(
     hand: Hand,
     problem: ContactProblem,
@@ -571,13 +575,26 @@ def _separate(
     colliding configuration can usually slide along it out of collision: each step solves the
     contact rows together with one row per penetrating pair asking the second body to move along
     the separating normal by the penetration depth plus a margin. A link in the obstacle is such a
-    pair whose first body is the object (fixed).
+    pair whose first body is the object (fixed). With an obstacle, a repair whose summed and
+    deepest penetration set no new low for :data:`REPAIR_PATIENCE` steps is given up: such
+    repairs rarely end clear, and each step costs a hand-object query (docs/ik.md, item 5).
     """
+    # Only with an obstacle: without one, giving up early saved no time and cost starts.
+    patience = REPAIR_PATIENCE if problem.obstacle is not None else s.repair_iterations
+    lows_m, stalled = np.array([np.inf, np.inf]), 0
     for k in range(s.repair_iterations):
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
         rows, depths = hand.separation_rows(q, penetrations)
+        # A hopeless repair wanders: give it up once neither the summed nor the deepest
+        # penetration has set a new low for ``patience`` steps (the deepest alone cut the
+        # three-finger can's paper grasp, whose repair climbs for three steps and then clears).
+        depth_m = np.array([depths.sum(), depths.max()])
+        stalled = 0 if np.any(depth_m < lows_m) else stalled + 1
+        lows_m = np.minimum(lows_m, depth_m)
+        if stalled >= patience:
+            return q, k
         stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
         J = np.vstack([J_contacts, rows])
         e = np.concatenate([problem.target_stack - stack, depths])
