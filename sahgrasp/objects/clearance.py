@@ -68,7 +68,6 @@ _GRID_STEPS = 6
 _FEW_PIECES = 12
 """Up to this many candidate pieces, a link is measured against each (about 2 us per GJK call)
 rather than bounded in numpy or asked about in the piece tree (tens of microseconds each)."""
-"""Values per joint of a free finger tried by :meth:`HandObjectClearance.place_free_fingers`."""
 
 
 @dataclass(frozen=True)
@@ -636,28 +635,27 @@ class HandObjectClearance:
         if limit_m < math.inf and self._tree_says_clear(g, cell_bounds, limit_m):
             return math.inf, -1
         cells = np.flatnonzero(cell_bounds <= limit_m)
-        best, nearest = math.inf, -1
+        candidates: Iterable[tuple[int, float]]
         if self._tree.sizes[cells].sum() > _FEW_PIECES:  # numpy bounds beat that many GJK calls
             pieces = np.concatenate([members[c] for c in cells.tolist()])
             pieces, bounds = self._piece_bounds(T, g, pieces, limit_m)
-            for piece, bound in zip(pieces.tolist(), bounds.tolist(), strict=True):
-                if bound >= best:
-                    break
-                d = distance(piece)
-                if d < best:
-                    best, nearest = d, piece
-                    if d < stop_m:
-                        break
-            return best, nearest
-        for cell in cells[np.argsort(cell_bounds[cells])].tolist():
-            if cell_bounds[cell] >= best:
+            candidates = zip(pieces.tolist(), bounds.tolist(), strict=True)
+        else:  # each piece bounded by its hull's bound
+            hull_bounds = cell_bounds.tolist()
+            candidates = (
+                (piece, hull_bounds[cell])
+                for cell in cells[np.argsort(cell_bounds[cells])].tolist()
+                for piece in members[cell].tolist()
+            )
+        best, nearest = math.inf, -1
+        for piece, bound in candidates:
+            if bound >= best:  # no piece left can be nearer
                 break
-            for piece in members[cell].tolist():
-                d = distance(piece)
-                if d < best:
-                    best, nearest = d, piece
-                    if d < stop_m:
-                        return best, nearest
+            d = distance(piece)
+            if d < best:
+                best, nearest = d, piece
+                if d < stop_m:
+                    break
         return best, nearest
 
     def _link_pieces(
