@@ -35,6 +35,7 @@ __all__ = [
     "PoseBasis",
     "Sequence",
     "cross3",
+    "cross_floats",
     "default_sequence",
     "expansion_matrix",
     "hang_from_thumb",
@@ -262,8 +263,13 @@ def cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     In Python floats: ``np.cross``'s wrapper, and even the fancy-indexed products that replaced
     it, cost ten times the arithmetic on 3-vectors (docs/ik.md, "Where the time goes").
     """
-    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+    return np.array(cross_floats(a.tolist(), b.tolist()))
+
+
+def cross_floats(a: list[float], b: list[float]) -> list[float]:
+    """``a x b`` of two 3-vectors held as Python floats."""
+    (a0, a1, a2), (b0, b1, b2) = a, b
+    return [a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0]
 
 
 def rotation_aligning_x(direction: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -37,6 +37,7 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
+from sahgrasp.ik.initial import cross_floats
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -112,8 +113,7 @@ def _contact_frame(
     side = [a - b for a, b in zip(rows[-1], rows[1], strict=True)]
     along = sum(a * b for a, b in zip(side, x, strict=True))
     y = _unit([a - along * b for a, b in zip(side, x, strict=True)])
-    z = [x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]]
-    return np.array([x, y, z]), np.array(centroid)
+    return np.array([x, y, cross_floats(x, y)]), np.array(centroid)
 
 
 def _unit(v: list[float]) -> list[float]:
