@@ -101,17 +101,10 @@ class SelfCollision:
                     geometry_model.addCollisionPair(pin.CollisionPair(a, b))
         self.geometry_data = stateless_requests(pin.GeometryData(geometry_model))
         self.data = model.createData()
-        # The yes/no query goes through coal's sweep-and-prune broad phase: on a collision-free
-        # hand (the IK's converged starts) it skips the pairs whose bounding boxes are apart,
-        # about half the time of querying all pairs (docs/ik.md, "Where the time goes"). Its
-        # own GeometryData: the manager keeps the shapes' boxes there between queries.
-        self._broadphase = pin.BroadPhaseManager_SSaPCollisionManager(
-            model, geometry_model, stateless_requests(pin.GeometryData(geometry_model))
-        )
         # A second set of requests computes contact witnesses, needed only to resolve collisions.
         self._witness_data = stateless_requests(pin.GeometryData(geometry_model))
         self._witness_margin_m: float | None = None
-        # The "any pair within the margin?" gate of penetrations() through the broad phase too:
+        # The "any pair within the margin?" gate of penetrations() through coal's broad phase:
         # Pinocchio inflates each box by half the requests' security margin, so no pair within
         # the margin is pruned.
         self._witness_broadphase = pin.BroadPhaseManager_SSaPCollisionManager(
@@ -148,7 +141,13 @@ class SelfCollision:
 
     def in_collision(self, q: NDArray[np.float64]) -> bool:
         """Return True if any checked pair of shapes intersects at configuration ``q``."""
-        return bool(pin.computeCollisions(self.model, self.data, self._broadphase, q, True))
+        # Every pair, not coal's broad phase: that gave the same verdicts but made later solves
+        # in the same process differ in the last bits (tests/test_ik.py, any workers).
+        return bool(
+            pin.computeCollisions(
+                self.model, self.data, self.geometry_model, self.geometry_data, q, True
+            )
+        )
 
     def colliding_pairs(self, q: NDArray[np.float64]) -> tuple[CollisionPair, ...]:
         """Return every checked pair that intersects at ``q``."""

@@ -190,6 +190,9 @@ def test_settings_bounds_are_inclusive() -> None:
 
 
 def test_same_seed_same_result_any_workers(sah: Hand) -> None:
+    # A solve first, so that workers=1 runs in a process that has solved before, the workers in
+    # fresh ones: coal's broad phase once made these differ in the last bits of q.
+    solve_ik(load_hand("sah"), random_problems(sah, 1, seed=4)[0])
     problems = random_problems(sah, 4, seed=8)
     settings = IKSettings(init="random", max_inits=4, seed=3)
     one = solve_many(sah, problems, settings, workers=1)
