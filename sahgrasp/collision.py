@@ -10,7 +10,8 @@ behind. The witnesses and normals then depend (in the last bits, which the IK's 
 amplifies) on what was queried before, so the same problem could give different joints on a
 fresh hand and on a hand that had solved others. :func:`stateless_requests` turns the warm start
 off once per ``GeometryData``; for the primitive shapes of the hand URDFs (boxes, cylinders,
-spheres) nothing else is carried between queries.
+spheres) nothing else is carried between queries but one process-wide rule of coal's, which
+importing this module settles (:func:`settle_box_support`).
 """
 
 from __future__ import annotations
@@ -25,7 +26,13 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-__all__ = ["CollisionPair", "Penetration", "SelfCollision", "stateless_requests"]
+__all__ = [
+    "CollisionPair",
+    "Penetration",
+    "SelfCollision",
+    "settle_box_support",
+    "stateless_requests",
+]
 
 
 @dataclass(frozen=True)
@@ -75,6 +82,40 @@ def stateless_requests(geometry_data: pin.GeometryData) -> pin.GeometryData:
     return geometry_data
 
 
+def settle_box_support() -> bool:
+    """Settle coal's box support rule the same way in every process; True if it holds.
+
+    coal 3 decides once per process whether the negative side of every box is pushed out by a
+    relative 1e-10 (the tie-breaker of its box support function is a function-local ``static``,
+    set from the first direction that function is ever asked about: pushed out if that direction
+    has a zero component). Whichever box query came first would then change all later box
+    queries in the last bits, which the IK's collision repair amplifies: the same problem gave
+    different joints in a fresh process and in one that had already queried a box. A first query
+    along an axis fixes the pushed-out rule in every process that imports this module before
+    asking coal about a box; it costs one GJK call.
+
+    Returns:
+        True if the pushed-out rule holds; False if a box query ran before this module was
+        imported and settled the other rule (results then match only processes that did the same).
+    """
+    box = coal.Box(1.0, 1.0, 1.0)
+    beside = coal.Transform3s(np.eye(3), np.array([3.0, 0.0, 0.0]))
+    gap_m = coal.distance(
+        box, coal.Transform3s(), box, beside, coal.DistanceRequest(), coal.DistanceResult()
+    )
+    return bool(gap_m < 2.0)  # 2.0 exactly without the push; 2.0 - 5e-11 with it
+
+
+if not settle_box_support():
+    warnings.warn(
+        "coal answered a box query before sahgrasp.collision was imported, so its box support "
+        "rule differs from a fresh process's: results may differ from other processes in the "
+        "last bits (import sahgrasp before querying coal for bit-identical results)",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+
+
 class SelfCollision:
     """Self-collision queries on one Pinocchio model and its coal collision geometry.
 
@@ -101,10 +142,17 @@ class SelfCollision:
                     geometry_model.addCollisionPair(pin.CollisionPair(a, b))
         self.geometry_data = stateless_requests(pin.GeometryData(geometry_model))
         self.data = model.createData()
+        # The yes/no query goes through coal's sweep-and-prune broad phase: on a collision-free
+        # hand (the IK's converged starts) it skips the pairs whose bounding boxes are apart,
+        # about half the time of querying all pairs (docs/ik.md). Its own GeometryData: the
+        # manager keeps the shapes' boxes there between queries.
+        self._broadphase = pin.BroadPhaseManager_SSaPCollisionManager(
+            model, geometry_model, stateless_requests(pin.GeometryData(geometry_model))
+        )
         # A second set of requests computes contact witnesses, needed only to resolve collisions.
         self._witness_data = stateless_requests(pin.GeometryData(geometry_model))
         self._witness_margin_m: float | None = None
-        # The "any pair within the margin?" gate of penetrations() through coal's broad phase:
+        # The "any pair within the margin?" gate of penetrations() through the broad phase too:
         # Pinocchio inflates each box by half the requests' security margin, so no pair within
         # the margin is pruned.
         self._witness_broadphase = pin.BroadPhaseManager_SSaPCollisionManager(
@@ -141,13 +189,7 @@ class SelfCollision:
 
     def in_collision(self, q: NDArray[np.float64]) -> bool:
         """Return True if any checked pair of shapes intersects at configuration ``q``."""
-        # Every pair, not coal's broad phase: that gave the same verdicts but made later solves
-        # in the same process differ in the last bits (tests/test_ik.py, any workers).
-        return bool(
-            pin.computeCollisions(
-                self.model, self.data, self.geometry_model, self.geometry_data, q, True
-            )
-        )
+        return bool(pin.computeCollisions(self.model, self.data, self._broadphase, q, True))
 
     def colliding_pairs(self, q: NDArray[np.float64]) -> tuple[CollisionPair, ...]:
         """Return every checked pair that intersects at ``q``."""
