@@ -32,7 +32,7 @@ from sahgrasp.viz.planar_view import show_planar_grasp, upright
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    add_atlas_arguments(parser, ["planar"])  # --k, --r, --eps, --index, --max-charts
+    add_atlas_arguments(parser, ["planar"], workers=False)  # --k, --r, --eps, --index, --max-charts
     add_html_argument(parser)  # --html OUT
     args = parser.parse_args(argv)
 

@@ -31,7 +31,7 @@ EXPERIMENTS = ("can", "bottle")
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("experiment", choices=EXPERIMENTS, help="the object held")
-    add_atlas_arguments(parser, EXPERIMENTS)  # --k, --r, --eps, --index, --max-charts
+    add_atlas_arguments(parser, EXPERIMENTS)  # --k, --r, --eps, --index, --max-charts, --workers
     add_html_argument(parser)  # --html OUT
     args = parser.parse_args(argv)
     radius, epsilon = atlas_geometry(args.experiment, args)  # each object's own defaults
@@ -39,7 +39,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with StderrProgress() as progress:
         result = run_experiment(
             args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
-            max_charts=args.max_charts, progress=progress,
+            max_charts=args.max_charts, progress=progress, workers=args.workers,
         )  # fmt: skip
     problem = cast(SahGraspManifold, result.problem)  # the SAH experiments' manifold
     atlas, paper = result.atlas, PAPER_ATLAS_REPORT[args.experiment]

@@ -35,6 +35,7 @@ collision (any link inside the object, the contact fingertip spheres excepted up
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import Executor
 from dataclasses import dataclass
 from typing import Any
 
@@ -43,8 +44,10 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.errors import GraspSystemError, OptimizationError
-from sahgrasp.hand import Hand
+from sahgrasp.hand import Hand, HandDescription
 from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.ik.batch import object_key, worker_hand, worker_obstacle
+from sahgrasp.ik.obstacle import checker_of
 from sahgrasp.motions import PrincipalMotions, principal_motions
 from sahgrasp.objects import GraspObject
 from sahgrasp.objects.clearance import HandObjectClearance
@@ -488,23 +491,77 @@ class SahGraspManifold:
         motions = null_space(C, C.shape[-1] - C.shape[-2])
         return ellipsoid_indices(motions[..., :a, :], motions[..., a:, :])
 
-    def check_charts(self, centres: FloatArray) -> ChartChecks:
-        """Place the free fingers at every chart centre, then check self- and object collision."""
-        system, hand = self.system, self.system.hand
+    def check_charts(self, centres: FloatArray, executor: Executor | None = None) -> ChartChecks:
+        """Place the free fingers at every chart centre, then check self- and object collision.
+
+        With an ``executor``, runs of consecutive centres are checked in its worker processes
+        (each rebuilds the hand and the object once); the result is the same.
+        """
+        system = self.system
         centres = self.x_of(centres)
         configurations = np.array([system.configuration(x) for x in centres])
-        object_collision = np.zeros(len(centres), dtype=bool)
-        if self.obj is not None:
-            checker = HandObjectClearance(hand, self.obj)
-            free = free_fingers(hand, system.patches)
-            contacts = [c.finger for c in system.contacts]
-            for i, x in enumerate(centres):
-                T = system.object_pose(x).homogeneous  # palm at the origin: palm frame = world
-                if free:
-                    configurations[i] = checker.place_free_fingers(configurations[i], free,
+        configurations = configurations.reshape(len(centres), system.hand.nq)
+        poses = np.array([system.object_pose(x).homogeneous for x in centres])
+        check = _ChartCheck(
+            system.hand.description, system.hand.description.digest(), self.obj,
+            "" if self.obj is None else object_key(self.obj),
+            free_fingers(system.hand, system.patches), tuple(c.finger for c in system.contacts),
+        )  # fmt: skip
+        if executor is None:
+            return check.on(system.hand, self.obj, configurations, poses)
+        count = max(min(len(centres), _CHECK_RUNS), -(-len(centres) // _CHECK_RUN_CENTRES))
+        runs = np.array_split(np.arange(len(centres)), count)
+        parts = executor.map(check, [configurations[r] for r in runs], [poses[r] for r in runs])
+        return ChartChecks.joined(list(parts))
+
+
+_CHECK_RUNS = 16
+"""Runs of consecutive centres sent to the workers at least (one centre each, if fewer)."""
+_CHECK_RUN_CENTRES = 256
+"""Centres of a run at most (a run is a task of a few tenths of a second)."""
+
+
+@dataclass(frozen=True)
+class _ChartCheck:
+    """The collision checks of chart centres, as plain values a worker process can rebuild.
+
+    Attributes:
+        description: The hand.
+        digest: The hand description's digest (a worker refuses another hand).
+        obj: The object, or None.
+        obj_key: The object's content key (a worker keeps one copy per key).
+        free: Fingers without a contact region, placed clear of everything.
+        contacts: Fingers touching the object at their contacts.
+    """
+
+    description: HandDescription
+    digest: str
+    obj: GraspObject | None
+    obj_key: str
+    free: tuple[str, ...]
+    contacts: tuple[str, ...]
+
+    def __call__(self, configurations: FloatArray, poses: FloatArray) -> ChartChecks:
+        """:meth:`on` with this worker's copies of the hand and the object."""
+        hand = worker_hand(self.description, self.digest)
+        obj = None if self.obj is None else worker_obstacle(self.obj, self.obj_key)
+        assert not isinstance(obj, str)  # a GraspObject is kept as it came
+        return self.on(hand, obj, configurations, poses)
+
+    def on(
+        self, hand: Hand, obj: GraspObject | None, configurations: FloatArray, poses: FloatArray
+    ) -> ChartChecks:
+        """Checks of ``configurations`` (N, nq), the object at ``poses`` (N, 4, 4) in the palm."""
+        configurations = configurations.copy()
+        object_collision = np.zeros(len(configurations), dtype=bool)
+        if obj is not None:
+            checker = checker_of(hand, obj)
+            for i, T in enumerate(poses):  # palm at the origin: palm frame = world
+                if self.free:
+                    configurations[i] = checker.place_free_fingers(configurations[i], self.free,
                                                                    T_world_object=T).q  # fmt: skip
                 # The verdict only, not the clearance: the search ends at the first penetration.
-                object_collision[i] = checker.penetrated(configurations[i], contacts,
+                object_collision[i] = checker.penetrated(configurations[i], self.contacts,
                                                          T_world_object=T)  # fmt: skip
         self_collision = np.array([hand.in_collision(q) for q in configurations], dtype=bool)
         return ChartChecks(configurations, self_collision, object_collision)

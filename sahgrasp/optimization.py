@@ -15,15 +15,20 @@ either and returns one :class:`OptimizationResult`.
 Collisions (Section IV: "collisions could be considered as well ... returning the best collision
 free grasp"): the problem checks every chart centre (:meth:`GraspManifold.check_charts`; the SAH
 places its free fingers first). Colliding chart centres are no candidates: the optimum returned is
-the best collision-free grasp, and the best over all charts is kept beside it.
+the best collision-free grasp, and the best over all charts is kept beside it. With
+``OptimizationSettings.workers > 1`` the checks run on worker processes, started (and warmed up on
+the first grasp) while the atlas is built in this process.
 
 This module knows no hand: it imports neither Pinocchio nor the IK.
 """
 
 from __future__ import annotations
 
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -32,6 +37,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.errors import OptimizationError
+from sahgrasp.parallel import check_workers, process_pool
 from sahgrasp.progress import ProgressCallback
 from sahgrasp.quality import (
     INDICES,
@@ -81,6 +87,15 @@ class ChartChecks:
         clear = np.zeros(len(centres), dtype=bool)
         return cls(centres, clear, clear.copy())
 
+    @classmethod
+    def joined(cls, parts: Sequence[ChartChecks]) -> ChartChecks:
+        """The checks of consecutive runs of centres, in their order."""
+        return cls(
+            np.concatenate([p.configurations for p in parts]),
+            np.concatenate([p.self_collision for p in parts]),
+            np.concatenate([p.object_collision for p in parts]),
+        )
+
 
 class GraspManifold(Protocol):
     """What Algorithm 1 needs of a grasp problem: the relevant-grasp set ``R`` (Eq. (11)).
@@ -120,8 +135,8 @@ class GraspManifold(Protocol):
         """Manipulability ellipsoids at the grasps ``x`` (..., n)."""
         ...
 
-    def check_charts(self, centres: FloatArray) -> ChartChecks:
-        """Configurations and collisions at the chart centres (N, n)."""
+    def check_charts(self, centres: FloatArray, executor: Executor | None = None) -> ChartChecks:
+        """Configurations and collisions at the chart centres (N, n), on ``executor`` if given."""
         ...
 
 
@@ -137,9 +152,12 @@ class OptimizationSettings:
         index_fn: A user quality index instead of ``index`` (see :data:`IndexFunction`).
         max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
         progress: Hears of every new chart (:class:`~sahgrasp.progress.ProgressCallback`).
+        workers: Processes that check the chart centres for collisions (1: this process). The
+            result is the same for any number.
 
     Raises:
         OptimizationError: ``index`` is unknown and no ``index_fn`` is given.
+        InvalidSettingsError: ``workers`` is not an integer in 1 .. 4 per core.
     """
 
     radius: float
@@ -148,8 +166,10 @@ class OptimizationSettings:
     index_fn: IndexFunction | None = None
     max_charts: int = 20_000
     progress: ProgressCallback | None = None
+    workers: int = 1
 
     def __post_init__(self) -> None:
+        check_workers(self.workers)
         if self.index_fn is None and self.index not in INDICES:
             raise OptimizationError(
                 f"unknown index {self.index!r}; valid: {', '.join(INDICES)} or an index_fn"
@@ -257,19 +277,50 @@ def optimize(
     """
     lower, upper = problem.bounds()
     x0 = problem.start if start is None else np.asarray(start, dtype=np.float64)
-    atlas = build_atlas(
-        problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
-        lower, upper, settings.progress,
-    )  # fmt: skip
-    return _evaluate(problem, atlas, settings)
+    with _checking_pool(problem, x0, settings.workers) as pool:
+        atlas = build_atlas(
+            problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
+            lower, upper, settings.progress,
+        )  # fmt: skip
+        return _evaluate(problem, atlas, settings, pool)
+
+
+@contextmanager
+def _checking_pool(
+    problem: GraspManifold, x0: FloatArray, workers: int
+) -> Iterator[Executor | None]:
+    """Worker processes for the chart checks (None for one), warmed up while the atlas grows.
+
+    A worker's first check loads the hand and the object's collision pieces (about 2 s); a
+    thread asks every worker to check the first grasp meanwhile, so that this start-up overlaps
+    the atlas build instead of following it. The thread's outcome is not needed: a failing
+    check fails again, and is reported, in :func:`_evaluate`.
+    """
+    if workers == 1:
+        yield None
+        return
+    with process_pool(workers) as pool:
+        firsts = np.repeat(x0[None], workers, axis=0)
+        warm = threading.Thread(target=_warm_up, args=(problem, firsts, pool), daemon=True)
+        warm.start()
+        yield pool
+        warm.join()
+
+
+def _warm_up(problem: GraspManifold, centres: FloatArray, pool: Executor) -> None:
+    with suppress(Exception):  # reported by the real checks (_checking_pool)
+        problem.check_charts(centres, pool)
 
 
 def _evaluate(
-    problem: GraspManifold, atlas: Atlas, settings: OptimizationSettings
+    problem: GraspManifold, atlas: Atlas, settings: OptimizationSettings, pool: Executor | None
 ) -> OptimizationResult:
     """Lines 14-21 of Algorithm 1: checks, then the index at every centre, best and worst."""
     begin = time.perf_counter()
-    checks = problem.check_charts(atlas.centres)
+    checks = (
+        problem.check_charts(atlas.centres) if pool is None
+        else problem.check_charts(atlas.centres, pool)
+    )  # fmt: skip
     valid = ~(checks.self_collision | checks.object_collision)
     if not valid.any():
         raise OptimizationError(

@@ -41,6 +41,7 @@ with r = 0.125 and epsilon = 0.4.
 from __future__ import annotations
 
 import functools
+from concurrent.futures import Executor
 from dataclasses import dataclass
 
 import numpy as np
@@ -418,7 +419,7 @@ class PlanarGraspProblem:
         tangent = null_space(self.grasp_jacobian(x), T_DIM)
         return manipulability(tangent, self.joint_jacobian(x), self.object_jacobian(x))
 
-    def check_charts(self, centres: FloatArray) -> ChartChecks:
+    def check_charts(self, centres: FloatArray, executor: Executor | None = None) -> ChartChecks:
         """The planar hand has no collision model: every chart centre is a candidate."""
         return ChartChecks.none(centres)
 

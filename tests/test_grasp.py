@@ -8,18 +8,25 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.errors import GraspSystemError, OptimizationError, PrincipalMotionsError
+from sahgrasp.errors import (
+    GraspSystemError,
+    InvalidSettingsError,
+    OptimizationError,
+    PrincipalMotionsError,
+)
 from sahgrasp.grasp import (
     GraspSystem,
     coordinate_scales,
     first_grasp_system,
     hand_motions,
+    make_sah_manifold,
     reduced_system,
 )
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings
 from sahgrasp.motions import principal_motions
-from sahgrasp.objects import bottle_patches, can_patches
+from sahgrasp.objects import bottle_patches, can_patches, load_object
+from sahgrasp.optimization import OptimizationSettings, optimize
 
 EXPECTED_T = {"can": 11, "bottle": 12, "bottle-spinless": 11}  # 16 + params + pose - 15
 PATCHES = {"can": can_patches, "bottle": bottle_patches, "bottle-spinless": bottle_patches}
@@ -232,3 +239,28 @@ def test_coordinate_scales_make_every_direction_move_alike(sah: Hand) -> None:
         assert np.allclose(moved[moved > 0], 0.1)
     with pytest.raises(GraspSystemError, match="length_m"):
         coordinate_scales(system, 0.0)
+
+
+def test_chart_checks_on_worker_processes_are_those_of_this_process(sah: Hand) -> None:
+    """The can leaves the ring free: workers place it and check both collisions as here."""
+    problem = make_sah_manifold(sah, can_patches(), k=2, obj=load_object("can"))
+    here = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5))
+    spread = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5, workers=2))
+    assert here.atlas.n_charts > 16  # more centres than runs: several runs per worker
+    assert np.array_equal(spread.atlas.centres, here.atlas.centres)
+    for name in ("configurations", "self_collision", "object_collision"):
+        assert np.array_equal(getattr(spread.checks, name), getattr(here.checks, name))
+    free = problem.system.hand.finger_coordinates["ring"]
+    assert not np.array_equal(
+        here.configurations[:, free],
+        problem.system.configuration(problem.x_of(here.atlas.centres[0]))[None, free].repeat(
+            here.atlas.n_charts, 0
+        ),
+    )
+    assert (spread.best, spread.worst) == (here.best, here.worst)
+
+
+@pytest.mark.parametrize("workers", [0, 1.5, True])
+def test_optimization_workers_must_be_a_count(workers: object) -> None:
+    with pytest.raises(InvalidSettingsError, match="workers must be an integer"):
+        OptimizationSettings(radius=0.15, epsilon=0.5, workers=workers)  # type: ignore[arg-type]

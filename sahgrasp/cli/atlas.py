@@ -48,7 +48,7 @@ def _summary(args: argparse.Namespace, plot: str | None) -> tuple[dict[str, Any]
     with StderrProgress() as progress:
         result = run_experiment(
             args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
-            max_charts=args.max_charts, progress=progress,
+            max_charts=args.max_charts, progress=progress, workers=args.workers,
         )  # fmt: skip
     if plot is not None and args.experiment == "planar":
         plot_planar(result, plot)

@@ -117,14 +117,17 @@ def _per_experiment(names: Sequence[str], i: int) -> str:
     return ", ".join(f"{name} {ATLAS_DEFAULTS[name][i]:g}" for name in names)
 
 
-def add_atlas_arguments(parser: argparse.ArgumentParser, experiments: Sequence[str]) -> None:
-    """Add ``--k``, ``--r``, ``--eps``, ``--index`` and ``--max-charts`` (validated).
+def add_atlas_arguments(
+    parser: argparse.ArgumentParser, experiments: Sequence[str], workers: bool = True
+) -> None:
+    """Add ``--k``, ``--r``, ``--eps``, ``--index``, ``--max-charts``, ``--workers`` (validated).
 
     Args:
         parser: The parser.
         experiments: The experiments the parser runs (keys of :data:`ATLAS_DEFAULTS`). With one,
             ``--r`` and ``--eps`` default to its values; with several, to None, and the help lists
             each one's (:func:`atlas_geometry` resolves them).
+        workers: Add ``--workers`` (not for the planar hand alone: it has no collision checks).
     """
     one = len(experiments) == 1
     radius, epsilon = ATLAS_DEFAULTS[experiments[0]] if one else (None, None)
@@ -148,6 +151,13 @@ def add_atlas_arguments(parser: argparse.ArgumentParser, experiments: Sequence[s
     parser.add_argument(
         "--max-charts", type=positive_int, default=20_000, help="stop the atlas at this many charts"
     )
+    if workers:
+        parser.add_argument(
+            "--workers",
+            type=positive_int,
+            default=1,
+            help="processes checking the chart centres for collisions (the SAH; same result)",
+        )
 
 
 def atlas_geometry(experiment: str, args: argparse.Namespace) -> tuple[float, float]:

@@ -115,11 +115,13 @@ def experiment_settings(
     index: str = "volume",
     max_charts: int = 20_000,
     progress: ProgressCallback | None = None,
+    workers: int = 1,
 ) -> OptimizationSettings:
     """The optimization settings of experiment ``name``: its radius and epsilon where None.
 
     Raises:
         OptimizationError: ``name`` or ``index`` is unknown.
+        InvalidSettingsError: ``workers`` is not an integer in 1 .. 4 per core.
     """
     if name not in ATLAS_DEFAULTS:
         raise OptimizationError(f"unknown experiment {name!r}; valid: {', '.join(EXPERIMENTS)}")
@@ -130,6 +132,7 @@ def experiment_settings(
         index=index,
         max_charts=max_charts,
         progress=progress,
+        workers=workers,
     )
 
 
@@ -144,12 +147,13 @@ def run_experiment(
     hand: str = "sah",
     motions: str = "random",
     length_scale_m: float | None = None,
+    workers: int = 1,
 ) -> OptimizationResult:
     """Algorithm 1 on experiment ``name``.
 
     The arguments are those of :func:`make_experiment` and :func:`experiment_settings`.
     """
-    settings = experiment_settings(name, radius, epsilon, index, max_charts, progress)
+    settings = experiment_settings(name, radius, epsilon, index, max_charts, progress, workers)
     return optimize(make_experiment(name, k, hand, motions, length_scale_m), settings)
 
 

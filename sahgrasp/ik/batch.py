@@ -47,10 +47,12 @@ __all__ = [
     "Job",
     "invalid_entry",
     "invalid_result",
+    "object_key",
     "solve_chunks",
     "solve_many",
     "solve_stream",
     "worker_hand",
+    "worker_obstacle",
 ]
 
 CHUNK_SIZE = 32
@@ -111,7 +113,7 @@ _KEPT_OBSTACLES = 8
 """Objects a worker keeps (with their collision pieces) for the next problems."""
 
 
-def _worker_obstacle(obstacle: GraspObject | ObjectSpec, key: str) -> GraspObject | str:
+def worker_obstacle(obstacle: GraspObject | ObjectSpec, key: str) -> GraspObject | str:
     """The object of a problem: this worker's kept copy, or the reason it cannot be loaded.
 
     Every chunk carries its own unpickled copy; solving against one kept copy lets the solver
@@ -168,7 +170,7 @@ def _invalid(job: Job, hand: Hand, name: str, detail: str) -> IKResult | dict[st
 def _solve_item(job: Job, hand: Hand, item: Item) -> IKResult | dict[str, Any]:
     problem, obstacle, key = item
     assert isinstance(problem, GraspTarget)
-    obj = None if obstacle is None else _worker_obstacle(obstacle, key)
+    obj = None if obstacle is None else worker_obstacle(obstacle, key)
     if isinstance(obj, str):
         return _invalid(job, hand, problem.name, obj)
     try:
@@ -298,6 +300,11 @@ def solve_stream(
         yield from results
 
 
+def object_key(obj: object) -> str:
+    """The content key of an object: equal objects share a worker's kept copy."""
+    return hashlib.sha256(pickle.dumps(obj)).hexdigest()
+
+
 def _keyed(
     targets: Sequence[GraspTarget], obstacle: GraspObject | Sequence[GraspObject | None] | None
 ) -> Iterator[Item]:
@@ -319,7 +326,7 @@ def _keyed(
             continue
         if obj is not None and id(obj) not in keys:
             check_obstacle(obj)
-            keys[id(obj)] = hashlib.sha256(pickle.dumps(obj)).hexdigest()
+            keys[id(obj)] = object_key(obj)
         yield target, obj, keys.get(id(obj), "")
 
 

@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
     from sahgrasp.objects.clearance import Clearance, HandObjectClearance
 
-__all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle"]
+__all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of"]
 
 REPAIR_PAIRS_PER_LINK = 4
 """Most (link, piece) pairs one link adds to a collision-repair step (its first ones found).
@@ -41,7 +41,7 @@ link the can's three-finger paper grasp (ring free) needs 6 starts instead of 1.
 
 
 @functools.lru_cache(maxsize=8)
-def _checker(hand: Hand, obj: GraspObject) -> HandObjectClearance:
+def checker_of(hand: Hand, obj: GraspObject) -> HandObjectClearance:
     """One clearance checker per (hand, object) pair, by identity.
 
     Building one builds the piece tree (0.02-0.14 s for the catalog objects) and, on the
@@ -87,7 +87,7 @@ class Obstacle:
         self, hand: Hand, obj: GraspObject, contacts: tuple[str, ...], allowance_m: float
     ) -> None:
         check_obstacle(obj)
-        self.checker = _checker(hand, obj)
+        self.checker = checker_of(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
         self._last: tuple[bytes, Clearance | None] = (b"", None)
