@@ -16,14 +16,15 @@ Collisions (Section IV: "collisions could be considered as well ... returning th
 free grasp"): the problem checks every chart centre (:meth:`GraspManifold.check_charts`; the SAH
 places its free fingers first). Colliding chart centres are no candidates: the optimum returned is
 the best collision-free grasp, and the best over all charts is kept beside it. With
-``OptimizationSettings.workers > 1`` the checks run on worker processes, started (and warmed up on
-the first grasp) while the atlas is built in this process.
+``OptimizationSettings.workers`` the checks run on worker processes while this process builds the
+atlas, on the centres as they come.
 
 This module knows no hand: it imports neither Pinocchio nor the IK.
 """
 
 from __future__ import annotations
 
+import queue
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -152,12 +153,13 @@ class OptimizationSettings:
         index_fn: A user quality index instead of ``index`` (see :data:`IndexFunction`).
         max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
         progress: Hears of every new chart (:class:`~sahgrasp.progress.ProgressCallback`).
-        workers: Processes that check the chart centres for collisions (1: this process). The
-            result is the same for any number.
+        workers: Processes that check the chart centres for collisions while the atlas is
+            built (0: this process checks them after the build). The result is the same for any
+            number.
 
     Raises:
         OptimizationError: ``index`` is unknown and no ``index_fn`` is given.
-        InvalidSettingsError: ``workers`` is not an integer in 1 .. 4 per core.
+        InvalidSettingsError: ``workers`` is not an integer in 0 .. 4 per core.
     """
 
     radius: float
@@ -166,10 +168,11 @@ class OptimizationSettings:
     index_fn: IndexFunction | None = None
     max_charts: int = 20_000
     progress: ProgressCallback | None = None
-    workers: int = 1
+    workers: int = 0
 
     def __post_init__(self) -> None:
-        check_workers(self.workers)
+        if self.workers != 0 or isinstance(self.workers, bool):
+            check_workers(self.workers)
         if self.index_fn is None and self.index not in INDICES:
             raise OptimizationError(
                 f"unknown index {self.index!r}; valid: {', '.join(INDICES)} or an index_fn"
@@ -277,50 +280,103 @@ def optimize(
     """
     lower, upper = problem.bounds()
     x0 = problem.start if start is None else np.asarray(start, dtype=np.float64)
-    with _checking_pool(problem, x0, settings.workers) as pool:
+    with _background_checks(problem, x0, settings.workers) as background:
         atlas = build_atlas(
             problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
             lower, upper, settings.progress,
+            new_charts=None if background is None else background.add,
         )  # fmt: skip
-        return _evaluate(problem, atlas, settings, pool)
+        if background is None:
+            return _evaluate(problem, atlas, settings, lambda: problem.check_charts(atlas.centres))
+        return _evaluate(problem, atlas, settings, lambda: background.result(atlas))
+
+
+_CHECK_BATCH = 256
+"""New chart centres handed to the workers at a time while the atlas grows."""
+
+
+class _BackgroundChecks:
+    """The chart centres checked on worker processes while the atlas grows.
+
+    The atlas builder hands over every new centre (:meth:`add`); batches of :data:`_CHECK_BATCH`
+    go to a thread that has the workers check them, and waits for them with the GIL released,
+    so that the checks overlap the build. Before the first batch, each worker checks the first
+    grasp and keeps the hand and the object's collision pieces it built (about 2 s), also while
+    the atlas grows.
+    """
+
+    def __init__(self, problem: GraspManifold, pool: Executor, x0: FloatArray, workers: int):
+        self.problem, self.pool = problem, pool
+        self.centres: list[FloatArray] = []
+        self._batch: list[FloatArray] = []
+        self._queue: queue.SimpleQueue[FloatArray | None] = queue.SimpleQueue()
+        self._parts: list[ChartChecks] = []
+        self._error: BaseException | None = None
+        warm_up = np.repeat(x0[None], workers, axis=0)
+        self._thread = threading.Thread(target=self._check, args=(warm_up,), daemon=True)
+        self._thread.start()
+
+    def add(self, centres: FloatArray) -> None:
+        """Queue new chart centres (B, n) for checking."""
+        self.centres.append(centres)
+        self._batch.append(centres)
+        if sum(len(c) for c in self._batch) >= _CHECK_BATCH:
+            self._queue.put(np.concatenate(self._batch))
+            self._batch = []
+
+    def stop(self) -> None:
+        """Send what is left and let the thread end after it."""
+        if self._batch:
+            self._queue.put(np.concatenate(self._batch))
+            self._batch = []
+        self._queue.put(None)
+
+    def result(self, atlas: Atlas) -> ChartChecks:
+        """The checks of every centre of ``atlas``, in its order (waits for the last ones)."""
+        self.stop()
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        if not np.array_equal(np.concatenate(self.centres), atlas.centres):
+            return self.problem.check_charts(atlas.centres, self.pool)  # not the builder's order
+        return ChartChecks.joined(self._parts)
+
+    def _check(self, warm_up: FloatArray) -> None:
+        with suppress(Exception):  # a failing check fails again below, and is raised then
+            self.problem.check_charts(warm_up, self.pool)
+        while (centres := self._queue.get()) is not None:
+            if self._error is None:
+                try:
+                    self._parts.append(self.problem.check_charts(centres, self.pool))
+                except BaseException as exc:  # raised in result()
+                    self._error = exc
 
 
 @contextmanager
-def _checking_pool(
+def _background_checks(
     problem: GraspManifold, x0: FloatArray, workers: int
-) -> Iterator[Executor | None]:
-    """Worker processes for the chart checks (None for one), warmed up while the atlas grows.
-
-    A worker's first check loads the hand and the object's collision pieces (about 2 s); a
-    thread asks every worker to check the first grasp meanwhile, so that this start-up overlaps
-    the atlas build instead of following it. The thread's outcome is not needed: a failing
-    check fails again, and is reported, in :func:`_evaluate`.
-    """
-    if workers == 1:
+) -> Iterator[_BackgroundChecks | None]:
+    """Checks on ``workers`` processes during the build (None: none, checks after the build)."""
+    if workers == 0:
         yield None
         return
     with process_pool(workers) as pool:
-        firsts = np.repeat(x0[None], workers, axis=0)
-        warm = threading.Thread(target=_warm_up, args=(problem, firsts, pool), daemon=True)
-        warm.start()
-        yield pool
-        warm.join()
-
-
-def _warm_up(problem: GraspManifold, centres: FloatArray, pool: Executor) -> None:
-    with suppress(Exception):  # reported by the real checks (_checking_pool)
-        problem.check_charts(centres, pool)
+        background = _BackgroundChecks(problem, pool, x0, workers)
+        try:
+            yield background
+        finally:
+            background.stop()
 
 
 def _evaluate(
-    problem: GraspManifold, atlas: Atlas, settings: OptimizationSettings, pool: Executor | None
+    problem: GraspManifold,
+    atlas: Atlas,
+    settings: OptimizationSettings,
+    check: Callable[[], ChartChecks],
 ) -> OptimizationResult:
     """Lines 14-21 of Algorithm 1: checks, then the index at every centre, best and worst."""
     begin = time.perf_counter()
-    checks = (
-        problem.check_charts(atlas.centres) if pool is None
-        else problem.check_charts(atlas.centres, pool)
-    )  # fmt: skip
+    checks = check()
     valid = ~(checks.self_collision | checks.object_collision)
     if not valid.any():
         raise OptimizationError(

@@ -8,6 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sahgrasp import optimization
 from sahgrasp.errors import (
     GraspSystemError,
     InvalidSettingsError,
@@ -241,8 +242,11 @@ def test_coordinate_scales_make_every_direction_move_alike(sah: Hand) -> None:
         coordinate_scales(system, 0.0)
 
 
-def test_chart_checks_on_worker_processes_are_those_of_this_process(sah: Hand) -> None:
+def test_chart_checks_on_worker_processes_are_those_of_this_process(
+    sah: Hand, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """The can leaves the ring free: workers place it and check both collisions as here."""
+    monkeypatch.setattr(optimization, "_CHECK_BATCH", 8)  # several batches during the build
     problem = make_sah_manifold(sah, can_patches(), k=2, obj=load_object("can"))
     here = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5))
     spread = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5, workers=2))
@@ -260,7 +264,7 @@ def test_chart_checks_on_worker_processes_are_those_of_this_process(sah: Hand) -
     assert (spread.best, spread.worst) == (here.best, here.worst)
 
 
-@pytest.mark.parametrize("workers", [0, 1.5, True])
+@pytest.mark.parametrize("workers", [-1, 1.5, True])
 def test_optimization_workers_must_be_a_count(workers: object) -> None:
     with pytest.raises(InvalidSettingsError, match="workers must be an integer"):
         OptimizationSettings(radius=0.15, epsilon=0.5, workers=workers)  # type: ignore[arg-type]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import operator
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -132,6 +132,7 @@ class _Builder:
         self.PHI = np.empty((1024, n, k))
         self.closed = np.zeros(1024, dtype=bool)  # left the queue and not boundary: takes no cuts
         self.charts: list[_Chart] = []  # chart i: centre X[i], basis PHI[i], the rest here
+        self.new_charts: Callable[[FloatArray], None] | None = None
         self.singular: list[FloatArray] = []
         self.count = 0
         self.index = NeighbourIndex()
@@ -169,6 +170,8 @@ class _Builder:
             np.concatenate((f, j0 + np.flatnonzero(close[q, :q]))) for q, f in enumerate(found)
         ]
         self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
+        if self.new_charts is not None:
+            self.new_charts(new)
         sizes = [len(nbrs) for nbrs in lists]
         owner = np.repeat(np.arange(len(points)), sizes)
         nbrs = np.concatenate(lists).astype(np.int64)
@@ -576,6 +579,7 @@ def build_atlas(
     upper: ArrayLike | None = None,
     progress: ProgressCallback | None = None,
     stacked: bool = False,
+    new_charts: Callable[[FloatArray], None] | None = None,
 ) -> Atlas:
     """Cover the connected component of ``F(x) = 0`` through ``x0`` with charts (Section IV).
 
@@ -592,6 +596,8 @@ def build_atlas(
         stacked: ``F`` and ``J`` also take a stack of points, ``(B, n) -> (B, n - k)`` and
             ``(B, n - k, n)``; a wave (``settings.batch > 1``) then evaluates them once per
             Newton iteration for all its charts instead of point by point.
+        new_charts: Called with the centres of every chart added, (B, n) at a time, in the
+            order of ``atlas.centres`` (a chart's centre never changes once added).
 
     Returns:
         The atlas; when ``max_charts`` stopped the build, ``atlas.stop_reason`` is
@@ -610,6 +616,7 @@ def build_atlas(
         raise AtlasError("x0 lies outside the box [lower, upper]; the start must lie within it")
     scale = float(np.sqrt(np.einsum("ij,ij->i", J(point.x), J(point.x))).max())
     builder = _Builder(F, J, k, (lo, hi), scale, settings, stacked)
+    builder.new_charts = new_charts
     builder.add_chart(point, -1)
     if progress is None and settings.progress:
         with StderrProgress() as bar:

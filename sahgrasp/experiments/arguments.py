@@ -154,9 +154,10 @@ def add_atlas_arguments(
     if workers:
         parser.add_argument(
             "--workers",
-            type=positive_int,
-            default=1,
-            help="processes checking the chart centres for collisions (the SAH; same result)",
+            type=int_at_least(0),
+            default=0,
+            help="processes checking the chart centres for collisions while the atlas is built "
+            "(the SAH; 0: after the build, in this process; the same result)",
         )
 
 

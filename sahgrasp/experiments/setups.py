@@ -115,13 +115,13 @@ def experiment_settings(
     index: str = "volume",
     max_charts: int = 20_000,
     progress: ProgressCallback | None = None,
-    workers: int = 1,
+    workers: int = 0,
 ) -> OptimizationSettings:
     """The optimization settings of experiment ``name``: its radius and epsilon where None.
 
     Raises:
         OptimizationError: ``name`` or ``index`` is unknown.
-        InvalidSettingsError: ``workers`` is not an integer in 1 .. 4 per core.
+        InvalidSettingsError: ``workers`` is not an integer in 0 .. 4 per core.
     """
     if name not in ATLAS_DEFAULTS:
         raise OptimizationError(f"unknown experiment {name!r}; valid: {', '.join(EXPERIMENTS)}")
@@ -147,7 +147,7 @@ def run_experiment(
     hand: str = "sah",
     motions: str = "random",
     length_scale_m: float | None = None,
-    workers: int = 1,
+    workers: int = 0,
 ) -> OptimizationResult:
     """Algorithm 1 on experiment ``name``.
 
