@@ -302,7 +302,11 @@ class _Builder:
             progress(_PROGRESS_STAGE, self.count, cap)
         while self.queue and self.count < cap:
             if self.settings.batch > 1:
-                self._run_wave(progress)
+                before = self.count
+                self._run_wave()
+                if progress is not None:  # every new chart, as one-chart expansion reports
+                    for done in range(before + 1, self.count + 1):
+                        progress(_PROGRESS_STAGE, done, cap)
                 continue
             i = self.queue[0]
             v = self._polytope(i).expandable(r2)
@@ -464,7 +468,7 @@ class _Builder:
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.verts[v] == vertex else -1
 
-    def _run_wave(self, progress: ProgressCallback | None) -> None:
+    def _run_wave(self) -> None:
         """Expand a wave of up to ``batch`` charts: first tries and new charts stacked.
 
         The successful first tries that do not cut off each other's vertex are added at once,
@@ -487,8 +491,6 @@ class _Builder:
         if added:
             points = [Point(wave.x[p], wave.phi[p], float(wave.sign[p])) for p in added]
             self.add_charts(points, [picks[p][0] for p in added])
-            if progress is not None:
-                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
         c = self.counters
         for p in np.flatnonzero((wave.outcome != _OK) & (wave.outcome != _DEFERRED)).tolist():
             i = picks[p][0]
@@ -508,8 +510,7 @@ class _Builder:
                 if outcome == _SINGULAR:
                     self._add_singular(wave.x[p])
                 c.rejections += 1
-            if self.expand(i, v, self.r * _SHRINK) and progress is not None:
-                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
+            self.expand(i, v, self.r * _SHRINK)
 
     def _project(self, i: int, x_tilde: FloatArray) -> FloatArray | None:
         """Eq. (15) from ``x_tilde`` along chart ``i``; None if it fails or breaks Eq. (17)."""
