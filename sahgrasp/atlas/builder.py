@@ -52,6 +52,7 @@ class _Rowwise:
         self._jacobians: dict[bytes, FloatArray] = {}
 
     def F(self, X: FloatArray) -> FloatArray:
+        """``F`` at each row of ``X`` (B, n), keeping ``J`` there."""
         rows = []
         for x in X:
             rows.append(self._F(x))
@@ -59,6 +60,7 @@ class _Rowwise:
         return np.array(rows)
 
     def J(self, X: FloatArray) -> FloatArray:
+        """``J`` at each row of ``X`` (B, n): the kept one where :meth:`F` saw the row."""
         kept = [self._jacobians.get(x.tobytes()) for x in X]
         return np.array([self._J(x) if j is None else j for x, j in zip(X, kept, strict=True)])
 
@@ -475,7 +477,7 @@ class _Builder:
         so the atlas is the one-chart atlas of another expansion order: covering and
         deterministic. Then each chart whose first try failed goes on with smaller steps, one at
         a time, unless a new chart cut off (or renumbered into a different nearest vertex) its
-        picked vertex; then, as a chart whose try was left out, it stays queued.
+        picked vertex; then, as a chart whose try was left out or deferred, it stays queued.
         """
         picks = self._pick()
         if not picks:
