@@ -102,7 +102,9 @@ class GraspManifold(Protocol):
     """What Algorithm 1 needs of a grasp problem: the relevant-grasp set ``R`` (Eq. (11)).
 
     ``F``, ``J`` and :meth:`manipulability` take one point (n,) or, where the problem allows it,
-    a batch (..., n).
+    a batch (..., n). A problem whose ``F`` and ``J`` take a stack of points (B, n) says so with
+    an optional attribute ``stacked = True`` (the planar hand does): the atlas's waves then call
+    them once per Newton iteration for all their points (``build_atlas(..., stacked=True)``).
     """
 
     @property
@@ -283,7 +285,7 @@ def optimize(
     with _background_checks(problem, x0, settings.workers) as background:
         atlas = build_atlas(
             problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
-            lower, upper, settings.progress,
+            lower, upper, settings.progress, stacked=bool(getattr(problem, "stacked", False)),
             new_charts=None if background is None else background.add,
         )  # fmt: skip
         if background is None:

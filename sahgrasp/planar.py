@@ -312,6 +312,11 @@ class PlanarGraspProblem:
         """The initial grasp ``x_1``, where the atlas starts."""
         return self.x1
 
+    @property
+    def stacked(self) -> bool:
+        """True: :meth:`F` and :meth:`J` take a stack of points (the atlas's waves use that)."""
+        return True
+
     @functools.cached_property
     def _residual_map(self) -> tuple[FloatArray, FloatArray]:
         """``F(x) = features @ M.T + c``: M (16 + s, 56) and c (16 + s,) (see :meth:`F`)."""

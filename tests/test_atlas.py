@@ -62,9 +62,11 @@ def check_on_manifold(atlas: Atlas, F, J) -> None:  # type: ignore[no-untyped-de
         assert np.allclose(J(x) @ phi, 0.0, atol=1e-8)
 
 
+@pytest.mark.parametrize("batch", [1, 32])  # the one-chart engine and the wave (the default)
 @pytest.mark.parametrize(("n", "r"), [(2, 0.1), (3, 0.15), (4, 0.3)])
-def test_spheres_are_covered_with_vol_over_r_to_the_k_charts(n: int, r: float) -> None:
-    atlas = build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, AtlasSettings(radius=r))
+def test_spheres_are_covered_with_vol_over_r_to_the_k_charts(n: int, r: float, batch: int) -> None:
+    settings = AtlasSettings(radius=r, batch=batch)
+    atlas = build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, settings)
     assert atlas.complete
     expected = sphere_volume(n) / r ** (n - 1)
     assert abs(atlas.n_charts / expected - 1.0) <= 0.10
@@ -101,10 +103,12 @@ def test_edges_join_close_charts_and_parents_are_neighbours() -> None:
         assert atlas.parents[child] in atlas.neighbours(child)
 
 
-def test_box_bound_stops_the_atlas_at_the_bound() -> None:
+@pytest.mark.parametrize("batch", [1, 32])
+def test_box_bound_stops_the_atlas_at_the_bound(batch: int) -> None:
     r, z_min = 0.1, 0.5
     lower = [-np.inf, -np.inf, z_min]
-    atlas = build_atlas(sphere_f, sphere_j, [0, 0, 1], 2, AtlasSettings(radius=r), lower=lower)
+    settings = AtlasSettings(radius=r, batch=batch)
+    atlas = build_atlas(sphere_f, sphere_j, [0, 0, 1], 2, settings, lower=lower)
     assert atlas.complete
     assert (atlas.centres[:, 2] >= z_min).all()
     assert atlas.boundary.any()
@@ -118,9 +122,11 @@ def test_box_bound_stops_the_atlas_at_the_bound() -> None:
     assert abs(atlas.n_charts / (area / r**2) - 1.0) <= 0.15
 
 
-def test_crossing_of_a_lemniscate_is_reported_and_passed() -> None:
+@pytest.mark.parametrize("batch", [1, 32])
+def test_crossing_of_a_lemniscate_is_reported_and_passed(batch: int) -> None:
     start = [np.sqrt(2.0), 0.0]
-    atlas = build_atlas(lemniscate_f, lemniscate_j, start, 1, AtlasSettings(radius=0.1))
+    settings = AtlasSettings(radius=0.1, batch=batch)
+    atlas = build_atlas(lemniscate_f, lemniscate_j, start, 1, settings)
     assert atlas.complete
     assert len(atlas.singular_points) == 1
     assert np.linalg.norm(atlas.singular_points[0]) < 0.01
@@ -226,9 +232,11 @@ def assert_same_atlas(a: Atlas, b: Atlas) -> None:
             assert np.array_equal(getattr(a, field.name), getattr(b, field.name)), field.name
 
 
+@pytest.mark.parametrize("batch", [1, 32])
 @pytest.mark.parametrize(("n", "r"), [(3, 0.2), (4, 0.4)])
-def test_the_same_input_gives_the_same_atlas(n: int, r: float) -> None:
-    build = lambda: build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, AtlasSettings(radius=r))  # noqa: E731
+def test_the_same_input_gives_the_same_atlas(n: int, r: float, batch: int) -> None:
+    settings = AtlasSettings(radius=r, batch=batch)
+    build = lambda: build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, settings)  # noqa: E731
     assert_same_atlas(build(), build())
 
 

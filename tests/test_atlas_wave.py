@@ -1,4 +1,5 @@
-"""Tests of the wave-front expansion (``AtlasSettings.batch > 1``) against one-chart expansion."""
+"""Tests of the wave-front expansion (``AtlasSettings.batch > 1``, the default) against
+one-chart expansion (``batch = 1``)."""
 
 from __future__ import annotations
 
@@ -48,7 +49,7 @@ def assert_same_atlas(a: Atlas, b: Atlas) -> None:
 def test_a_wave_covers_the_sphere_with_the_charts_of_one_chart_expansion(
     n: int, r: float, batch: int
 ) -> None:
-    settings = AtlasSettings(radius=r)
+    settings = AtlasSettings(radius=r, batch=1)
     one = build_atlas(sphere_f, sphere_j, np.eye(n)[0], n - 1, settings)
     wave = build_atlas(
         sphere_f, sphere_j, np.eye(n)[0], n - 1, replace(settings, batch=batch), stacked=True
@@ -107,7 +108,7 @@ def test_a_wave_stops_at_max_charts() -> None:
 
 def test_a_wave_atlas_of_the_planar_hand_is_complete_and_as_large() -> None:
     problem = make_planar_problem()
-    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000)
+    settings = AtlasSettings(radius=0.125, epsilon=0.4, max_charts=20_000, batch=1)
     build = lambda s, stacked: build_atlas(  # noqa: E731
         problem.F, problem.J, problem.start, problem.dimension, s, *problem.bounds(),
         stacked=stacked,
@@ -124,3 +125,40 @@ def test_a_wave_atlas_of_the_planar_hand_is_complete_and_as_large() -> None:
 def test_batch_below_one_raises_atlas_error() -> None:
     with pytest.raises(AtlasError, match="batch"):
         AtlasSettings(batch=0)
+
+
+class _OnePointCache:
+    """``F`` and ``J`` of the unit sphere sharing the work of the last point, as the SAH's do."""
+
+    def __init__(self) -> None:
+        self.last = b""
+        self.misses = 0  # points whose shared work was done
+
+    def _work(self, x: np.ndarray) -> None:
+        if x.tobytes() != self.last:
+            self.last = x.tobytes()
+            self.misses += 1
+
+    def F(self, x: np.ndarray) -> np.ndarray:
+        self._work(x)
+        return np.array([x @ x - 1.0])
+
+    def J(self, x: np.ndarray) -> np.ndarray:
+        self._work(x)
+        return 2.0 * x[None]
+
+
+@pytest.mark.parametrize("r", [0.1, 0.2])
+def test_a_wave_does_a_point_by_point_f_and_j_work_about_as_often_as_one_chart_expansion(
+    r: float,
+) -> None:
+    # J right after F at each point keeps the shared work, and a try that would be left out is
+    # deferred before its projection: no work is done twice (it was 2.8-3.6x before).
+    misses = {}
+    for batch in (1, 32):
+        cache = _OnePointCache()
+        settings = AtlasSettings(radius=r, batch=batch)
+        atlas = build_atlas(cache.F, cache.J, [0, 0, 1.0], 2, settings, lower=[-2, -2, -0.5])
+        assert atlas.complete
+        misses[batch] = cache.misses
+    assert misses[32] <= 1.05 * misses[1]

@@ -152,3 +152,33 @@ def test_a_tiny_radius_stops_at_max_charts_and_says_so() -> None:
 def test_bad_settings_are_refused(options: dict[str, Any], error: type, match: str) -> None:
     with pytest.raises(error, match=match):
         run_experiment("planar", **options)
+
+
+class _Watched:
+    """The planar problem, recording the shapes ``F`` is called with; ``stacked`` as given."""
+
+    def __init__(self, stacked: bool | None) -> None:
+        self.problem = make_planar_problem()
+        self.shapes: set[int] = set()
+        if stacked is not None:
+            self.stacked = stacked
+
+    def __getattr__(self, name: str) -> Any:
+        if name == "stacked":  # only what __init__ set
+            raise AttributeError(name)
+        return getattr(self.problem, name)
+
+    def F(self, x: np.ndarray) -> np.ndarray:
+        self.shapes.add(np.ndim(x))
+        return self.problem.F(x)
+
+
+@pytest.mark.parametrize(("stacked", "dims"), [(None, {1}), (False, {1}), (True, {1, 2})])
+def test_optimize_gives_stacks_to_a_problem_that_takes_them(
+    result: OptimizationResult, stacked: bool | None, dims: set[int]
+) -> None:
+    watched = _Watched(stacked)
+    atlas = optimize(watched, PAPER).atlas  # type: ignore[arg-type]
+    assert watched.shapes == dims
+    assert atlas.n_charts == result.atlas.n_charts
+    assert np.allclose(atlas.centres, result.atlas.centres, atol=1e-9)

@@ -36,9 +36,37 @@ _BISECTIONS = 40  # steps to locate a branch crossing along a chart's parameter 
 _PROGRESS_STAGE = "atlas charts"
 
 
-def _rowwise(f: Function) -> Function:
-    """``f`` of one point applied to each row of a stack of points."""
-    return lambda X: np.array([f(x) for x in X])
+class _Rowwise:
+    """``F`` and ``J`` of one point applied to each row of a stack of points.
+
+    ``J`` is evaluated right after ``F`` at every point and kept until asked for: a user's
+    ``F`` and ``J`` often share the work of the last point they saw (the SAH's kinematics and
+    surface jets), which row-by-row ``F`` then row-by-row ``J`` would lose. Nearly every point
+    needs ``J`` after ``F`` (a Newton step or, once converged, its tangent space).
+    """
+
+    __slots__ = ("_F", "_J", "_jacobians")
+
+    def __init__(self, F: Function, J: Function) -> None:
+        self._F, self._J = F, J
+        self._jacobians: dict[bytes, FloatArray] = {}
+
+    def F(self, X: FloatArray) -> FloatArray:
+        """``F`` at each row of ``X`` (B, n), keeping ``J`` there."""
+        rows = []
+        for x in X:
+            rows.append(self._F(x))
+            self._jacobians[x.tobytes()] = self._J(x)
+        return np.array(rows)
+
+    def J(self, X: FloatArray) -> FloatArray:
+        """``J`` at each row of ``X`` (B, n): the kept one where :meth:`F` saw the row."""
+        kept = [self._jacobians.get(x.tobytes()) for x in X]
+        return np.array([self._J(x) if j is None else j for x, j in zip(X, kept, strict=True)])
+
+    def clear(self) -> None:
+        """Forget the kept Jacobians (after a wave's first tries)."""
+        self._jacobians.clear()
 
 
 @dataclass(frozen=True)
@@ -66,7 +94,8 @@ class _Wave:
     crossed: NDArray[np.bool_]
 
 
-_OK, _NEWTON, _FAR, _OUTSIDE, _SINGULAR, _TURNED = range(6)  # outcomes of a wave's first try
+# Outcomes of a wave's first try; a deferred pick was not tried (see _Builder._first_try).
+_OK, _NEWTON, _FAR, _OUTSIDE, _SINGULAR, _TURNED, _DEFERRED = range(7)
 
 
 @dataclass
@@ -120,8 +149,9 @@ class _Builder:
         stacked: bool = False,
     ) -> None:
         self.F, self.J, self.k, self.settings = F, J, k, settings
-        self.F_many = F if stacked else _rowwise(F)
-        self.J_many = J if stacked else _rowwise(J)
+        self.rowwise = None if stacked else _Rowwise(F, J)
+        self.F_many = F if self.rowwise is None else self.rowwise.F
+        self.J_many = J if self.rowwise is None else self.rowwise.J
         self.lower, self.upper = bounds
         self.scale = scale  # size of J at the start, for the rank test of single equations
         self.bounded = bool((np.isfinite(self.lower) | np.isfinite(self.upper)).any())
@@ -277,7 +307,11 @@ class _Builder:
             progress(_PROGRESS_STAGE, self.count, cap)
         while self.queue and self.count < cap:
             if self.settings.batch > 1:
-                self._run_wave(progress)
+                before = self.count
+                self._run_wave()
+                if progress is not None:  # every new chart, as one-chart expansion reports
+                    for done in range(before + 1, self.count + 1):
+                        progress(_PROGRESS_STAGE, done, cap)
                 continue
             i = self.queue[0]
             v = self._polytope(i).expandable(r2)
@@ -339,74 +373,88 @@ class _Builder:
         return picks
 
     def _first_try(self, picks: list[tuple[int, int]]) -> _Wave:
-        """Eqs. (14)-(18) at step ``r`` for every pick at once: stacked Newton, QR and SVD."""
+        """Eqs. (14)-(18) at step ``r`` for the picks at once: stacked Newton, QR and SVD.
+
+        A pick whose try is bound to be left out by :meth:`_compatible` is deferred without a
+        projection (it stays queued): the test runs first on the unprojected candidates
+        ``x_tilde``, with the parents' tangent spaces. Where ``F`` and ``J`` are costly (the SAH,
+        whose wave front is narrow) this saves most of the projections that would be discarded.
+        """
         s = self.settings
         rows = np.array([i for i, _ in picks])
         polys = [self._polytope(i) for i in rows.tolist()]
         vertices = [p.verts[v] for p, (_, v) in zip(polys, picks, strict=True)]
         norms = np.sqrt([p.norm2[v] for p, (_, v) in zip(polys, picks, strict=True)])
         directions = np.array(vertices) / norms[:, None]
-        phi_i = self.PHI[rows]
-        x_tilde = self.X[rows] + np.matmul(phi_i, self.r * directions[:, :, None])[:, :, 0]
-        x, converged = project_many(
+        phi_all = self.PHI[rows]
+        x = self.X[rows] + np.matmul(phi_all, self.r * directions[:, :, None])[:, :, 0]
+        outcome = np.full(len(picks), _DEFERRED)
+        tried = np.array(self._compatible(rows, vertices, x, phi_all), dtype=np.int64)
+        phi_i, x_tilde = phi_all[tried], x[tried]
+        x_t, converged = project_many(
             self.F_many, self.J_many, x_tilde, phi_i, s.newton_tol, s.newton_max_iter
         )
-        outcome = np.where(converged, _OK, _NEWTON)
-        dx = x - x_tilde
-        outcome[(outcome == _OK) & ((dx * dx).sum(axis=1) > s.epsilon**2)] = _FAR  # Eq. (17)
+        result = np.where(converged, _OK, _NEWTON)
+        dx = x_t - x_tilde
+        result[(result == _OK) & ((dx * dx).sum(axis=1) > s.epsilon**2)] = _FAR  # Eq. (17)
         if self.bounded:
-            outside = ((x < self.lower) | (x > self.upper)).any(axis=1)
-            outcome[(outcome == _OK) & outside] = _OUTSIDE
-        phi = np.zeros_like(phi_i)
+            outside = ((x_t < self.lower) | (x_t > self.upper)).any(axis=1)
+            result[(result == _OK) & outside] = _OUTSIDE
+        phi = np.zeros_like(phi_all)
         sign = np.ones(len(picks))
         crossed = np.zeros(len(picks), dtype=bool)
-        good = np.flatnonzero(outcome == _OK)
+        good = np.flatnonzero(result == _OK)
         if good.size:
-            phi_g, sign_g, regular = tangent_many(self.J_many(x[good]), self.k, self.scale)
+            phi_g, sign_g, regular = tangent_many(self.J_many(x_t[good]), self.k, self.scale)
             turned = min_cosines(phi_i[good], phi_g) < 1.0 - s.epsilon  # Eq. (18)
-            outcome[good[turned]] = _TURNED
-            outcome[good[~regular]] = _SINGULAR
-            phi[good], sign[good] = phi_g, sign_g
-            parent_sign = np.array([self.charts[i].sign for i in rows[good].tolist()])
-            crossed[good] = crossing_signs(phi_i[good], phi_g, sign_g) != parent_sign
+            result[good[turned]] = _TURNED
+            result[good[~regular]] = _SINGULAR
+            at = tried[good]
+            phi[at], sign[at] = phi_g, sign_g
+            parent_sign = np.array([self.charts[i].sign for i in rows[at].tolist()])
+            crossed[at] = crossing_signs(phi_i[good], phi_g, sign_g) != parent_sign
+        x[tried], outcome[tried] = x_t, result
+        if self.rowwise is not None:
+            self.rowwise.clear()
         return _Wave(picks, vertices, directions, x, outcome, phi, sign, crossed)
 
-    def _compatible(self, wave: _Wave, ok: IndexArray) -> list[int]:
-        """The successful first tries ``ok`` that can all be added, in order.
+    def _compatible(
+        self, parents: IndexArray, vertices: list[tuple[float, ...]], x: FloatArray, phi: FloatArray
+    ) -> list[int]:
+        """Which of the new centres ``x`` (tangent bases ``phi``) can all be added, in order.
 
-        Each must be the try one-chart expansion would make after the earlier accepted ones:
-        their planes (as :meth:`add_charts` would cut its chart's polytope) must neither cut off
-        its picked vertex nor create a nearer exterior vertex. One that fails is left out; its
-        chart stays queued.
+        Centre q comes from the picked vertex ``vertices[q]`` of chart ``parents[q]``. Each must
+        be the try one-chart expansion would make after the earlier accepted ones: their planes
+        (as :meth:`add_charts` would cut its chart's polytope) must neither cut off its picked
+        vertex nor create a nearer exterior vertex. One that fails is left out; its chart stays
+        queued.
         """
-        if ok.size == 0:
+        if parents.size == 0:
             return []
-        parents = np.array([wave.picks[p][0] for p in ok.tolist()], dtype=np.int64)
-        phi = self.PHI[parents]
-        diff = wave.x[ok][:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
-        Uc = np.einsum("pqn,qnk->pqk", diff, phi)
+        parent_phi = self.PHI[parents]
+        diff = x[:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
+        Uc = np.einsum("pqn,qnk->pqk", diff, parent_phi)
         Bc = 0.5 * (Uc * Uc).sum(axis=2)
-        vertices = np.array([wave.vertices[p] for p in ok.tolist()])
+        verts = np.array(vertices)
         near = (diff * diff).sum(axis=2) < 4 * self.r**2
         near &= self.tol * self.r < Bc
         np.fill_diagonal(near, False)
         p_idx, q_idx = np.nonzero(near)
         if p_idx.size:  # the branch test of add_charts: only alike charts cut each other
-            alike = self._similar(phi[q_idx], wave.phi[ok][p_idx])
+            alike = self._similar(parent_phi[q_idx], phi[p_idx])
             near[p_idx[~alike], q_idx[~alike]] = False
-        off = near & ((Uc * vertices[None]).sum(axis=2) - Bc > self.tol)
+        off = near & ((Uc * verts[None]).sum(axis=2) - Bc > self.tol)
         # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
         # nearer than the picked vertex can create a nearer one.
-        closer = (near & ~off & (0.5 * Bc < (vertices * vertices).sum(axis=1)[None])).T.tolist()
+        closer = (near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])).T.tolist()
         accepted: list[int] = []
         for q, column in enumerate(off.T.tolist()):
             if any(column[p] for p in accepted):
                 continue
             planes = [(Uc[p, q].tolist(), float(Bc[p, q])) for p in accepted if closer[q][p]]
-            i, vertex = wave.picks[ok[q]][0], wave.vertices[ok[q]]
-            if not planes or self._still_picked(i, vertex, planes) >= 0:
+            if not planes or self._still_picked(int(parents[q]), vertices[q], planes) >= 0:
                 accepted.append(q)
-        return ok[accepted].tolist()
+        return accepted
 
     def _still_picked(
         self, i: int, vertex: tuple[float, ...], planes: Sequence[tuple[list[float], float]] = ()
@@ -425,30 +473,31 @@ class _Builder:
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.verts[v] == vertex else -1
 
-    def _run_wave(self, progress: ProgressCallback | None) -> None:
+    def _run_wave(self) -> None:
         """Expand a wave of up to ``batch`` charts: first tries and new charts stacked.
 
         The successful first tries that do not cut off each other's vertex are added at once,
         so the atlas is the one-chart atlas of another expansion order: covering and
         deterministic. Then each chart whose first try failed goes on with smaller steps, one at
         a time, unless a new chart cut off (or renumbered into a different nearest vertex) its
-        picked vertex; then, as a chart whose try was left out, it stays queued.
+        picked vertex; then, as a chart whose try was left out or deferred, it stays queued.
         """
         picks = self._pick()
         if not picks:
             return
         wave = self._first_try(picks)
-        added = self._compatible(wave, np.flatnonzero(wave.outcome == _OK))
+        ok = np.flatnonzero(wave.outcome == _OK)
+        parents = np.array([picks[p][0] for p in ok.tolist()], dtype=np.int64)
+        vertices = [wave.vertices[p] for p in ok.tolist()]
+        added = ok[self._compatible(parents, vertices, wave.x[ok], wave.phi[ok])].tolist()
         for p in added:
             if wave.crossed[p]:
                 self._locate_crossing(picks[p][0], wave.directions[p], self.r)
         if added:
             points = [Point(wave.x[p], wave.phi[p], float(wave.sign[p])) for p in added]
             self.add_charts(points, [picks[p][0] for p in added])
-            if progress is not None:
-                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
         c = self.counters
-        for p in np.flatnonzero(wave.outcome != _OK).tolist():
+        for p in np.flatnonzero((wave.outcome != _OK) & (wave.outcome != _DEFERRED)).tolist():
             i = picks[p][0]
             v = self._still_picked(i, wave.vertices[p])
             if v < 0:
@@ -466,8 +515,7 @@ class _Builder:
                 if outcome == _SINGULAR:
                     self._add_singular(wave.x[p])
                 c.rejections += 1
-            if self.expand(i, v, self.r * _SHRINK) and progress is not None:
-                progress(_PROGRESS_STAGE, self.count, self.settings.max_charts)
+            self.expand(i, v, self.r * _SHRINK)
 
     def _project(self, i: int, x_tilde: FloatArray) -> FloatArray | None:
         """Eq. (15) from ``x_tilde`` along chart ``i``; None if it fails or breaks Eq. (17)."""

@@ -34,8 +34,9 @@ class AtlasSettings:
             every step down to it is blocked (Algorithm 1, lines 9-12, with a floor).
         start_tol: Largest ``|F(x0)|`` accepted for the start point (it is projected first).
         batch: Charts expanded together in one wave (their first Newton projections, tangent
-            spaces and Eq. (18) tests as stacked numpy calls); 1 expands one chart at a time.
-            Waves change the order of expansion, hence the atlas slightly, not its coverage.
+            spaces and Eq. (18) tests as stacked numpy calls); 1 expands one chart at a time
+            (the one-chart engine). Waves change the order of expansion, hence the atlas
+            slightly (chart counts within a few percent), not its coverage.
         progress: Draw a progress bar on stderr when :func:`build_atlas` gets no ``progress``
             callback (a front-end switch; the builder itself only calls the callback).
     """
@@ -47,7 +48,7 @@ class AtlasSettings:
     newton_max_iter: int = 20
     min_step: float = 0.1
     start_tol: float = 1e-6
-    batch: int = 1
+    batch: int = 32
     progress: bool = False
 
     def __post_init__(self) -> None:

@@ -41,6 +41,7 @@ __all__ = [
     "SAH_PAPER",
     "STAGES",
     "WAVE_BATCH",
+    "WAVE_STAGES",
     "run",
     "stage_profile",
 ]
@@ -146,10 +147,27 @@ STAGES: dict[str, tuple[str, str]] = {
     "tangent space, Eq. (18) (with J)": ("builder.py", "_accept"),
     "branch-crossing sign": ("projection.py", "crossing_sign"),
 }
-"""Stages of a build: (file, function) whose cumulative time :func:`stage_profile` reports."""
+"""Stages of a one-chart build: (file, function) whose cumulative time :func:`stage_profile`
+reports."""
+
+WAVE_STAGES: dict[str, tuple[str, str]] = {
+    "picks (nearest exterior vertices)": ("builder.py", "_pick"),
+    "polytope built": ("builder.py", "_polytope"),
+    "first tries (the next two, the first compatibility test)": ("builder.py", "_first_try"),
+    "Newton projection, stacked (with F, J)": ("projection.py", "project_many"),
+    "tangent spaces, stacked QR (with J)": ("projection.py", "tangent_many"),
+    "compatibility of the tries (before and after Newton)": ("builder.py", "_compatible"),
+    "adding the charts (the next three)": ("builder.py", "add_charts"),
+    "neighbour search": ("neighbours.py", "query"),
+    "branch test of the neighbours": ("builder.py", "_similar"),
+    "planes given to neighbours (cuts)": ("builder.py", "_give_plane"),
+    "smaller steps after a failed first try": ("builder.py", "expand"),
+}
+"""Stages of a wave build (``batch > 1``), as :data:`STAGES`; the branch test also runs inside
+the compatibility test."""
 
 
-def stage_profile(case: str) -> dict[str, float]:
+def stage_profile(case: str, batch: int = 1) -> dict[str, float]:
     """Share of one build's time in each stage of :data:`STAGES`, under ``cProfile``.
 
     The profiler slows every Python call alike, so shares are reported rather than seconds; the
@@ -157,17 +175,24 @@ def stage_profile(case: str) -> dict[str, float]:
 
     Args:
         case: ``"S2"``, ``"S3"`` (r = 0.1) or ``"planar"``.
+        batch: Charts per wave; 1 (the one-chart engine) reports :data:`STAGES`, more the wave
+            engine's :data:`WAVE_STAGES`.
 
     Returns:
         Stage name -> fraction of the build's profiled time, plus ``"charts"``.
 
     Raises:
-        InvalidSettingsError: Another case name.
+        InvalidSettingsError: Another case name, or ``batch`` < 1.
     """
-    builds = {"S2": lambda: _sphere_build(3, 0.1), "S3": lambda: _sphere_build(4, 0.1)}
-    builds["planar"] = _planar_build
+    builds = {
+        "S2": functools.partial(_sphere_build, 3, 0.1, batch),
+        "S3": functools.partial(_sphere_build, 4, 0.1, batch),
+        "planar": functools.partial(_planar_build, batch),
+    }
     if case not in builds:
         raise InvalidSettingsError(f"stage_profile knows {sorted(builds)}, got {case!r}")
+    if batch < 1:
+        raise InvalidSettingsError(f"batch must be >= 1, got {batch}")
     build = builds[case]()
     profiler = cProfile.Profile()
     atlas = profiler.runcall(build)
@@ -179,7 +204,8 @@ def stage_profile(case: str) -> dict[str, float]:
         cumulative[key] = cumulative.get(key, 0.0) + seconds
         if function == "build_atlas":
             total = seconds
-    shares = {stage: cumulative.get(key, 0.0) / total for stage, key in STAGES.items()}
+    stages = STAGES if batch == 1 else WAVE_STAGES
+    shares = {stage: cumulative.get(key, 0.0) / total for stage, key in stages.items()}
     return {"charts": float(atlas.n_charts), **shares}
 
 
