@@ -144,6 +144,20 @@ def test_bench_atlas_reports_each_case_and_tables_them() -> None:
         bench_atlas.run(cases=["S4"])
 
 
+def test_bench_atlas_times_a_whole_run_with_checking_workers(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The paper-scale row, on a small bottle atlas: one run end to end, checks beside it."""
+    monkeypatch.setattr(bench_atlas, "PAPER_SCALE_CASES", (("bottle", 2, 0.05, 0.1, 1, 300.0),))
+    label = "sah_bottle_k2_r0.05_L0.1_whole"
+    row = bench_atlas.run(repeats=1, cases=[label], quiet=True)["cases"][label]
+    assert row["complete"] and 0 < row["valid"] <= row["charts"]
+    assert row["workers"] == 1 and row["atlas_seconds"] < row["seconds"]
+    assert row["whole_time_ok"] == (row["seconds"] <= 300.0)
+    table = summary_table(bench_atlas.run(repeats=1, cases=[label], quiet=True))
+    assert "whole run, 1 checking process(es): target 300 s (paper 1400 charts, 45 s)" in table
+
+
 def test_stage_profile_gives_nested_shares_of_one_build() -> None:
     shares = bench_atlas.stage_profile("S2")
     assert shares.pop("charts") == 1255  # the same atlas as the timed build
