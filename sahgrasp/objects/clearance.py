@@ -310,6 +310,7 @@ class HandObjectClearance:
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
         all_links: bool = True,
+        until_inside: bool = False,
     ) -> Clearance:
         """Signed distance of every link to the object and the smallest one at ``q``.
 
@@ -324,13 +325,21 @@ class HandObjectClearance:
             all_links: False: find the smallest distance and its link only, measuring just the
                 links whose lower bound is below it (``links_m`` holds those); a far link then
                 costs one coarse query instead of an exact distance.
+            until_inside: With ``all_links`` False, stop at the first link found inside the
+                object (a contact tip: deeper than ``allowance_m``). A clear configuration
+                gets its exact clearance; one inside gets a negative distance of a link inside,
+                not necessarily the deepest one: the verdict at the cost of
+                :meth:`penetrated`, and the clearance when there is no penetration.
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
-        measured = self._every_link(T) if all_links else self._closest_links(T, thresholds)
+        if all_links:
+            measured = self._every_link(T)
+        else:
+            measured = self._closest_links(T, thresholds, 0.0 if until_inside else -math.inf)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
         for g in sorted(measured):  # in geometry order: a tie goes to the first link
@@ -588,13 +597,16 @@ class HandObjectClearance:
             g: self._link_nearest(T, g, cell_bounds[g], math.inf)[0] for g in self._every.tolist()
         }
 
-    def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
+    def _closest_links(
+        self, T: FloatArray, thresholds: NDArray[np.float64], stop_m: float = -math.inf
+    ) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
         Geometries are taken by increasing lower bound (:meth:`_coarse_bounds`) until the bound
         exceeds the smallest distance found. A contact tip with no piece deeper than its
         allowance is excepted; the others are measured against the pieces whose bounds are
-        below that distance, so a far link costs no GJK call.
+        below that distance, so a far link costs no GJK call. The search ends at the first
+        counted distance below ``stop_m`` (a contact tip's: below its threshold as well).
         """
         if not self._shapes:
             return {}
@@ -611,9 +623,12 @@ class HandObjectClearance:
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
             if tip and not self._link_pieces(T, g, cell_bounds[g], float(thresholds[g]), 1):
                 continue
-            distance = self._link_nearest(T, g, cell_bounds[g], limit)[0]
+            stop = min(stop_m, float(thresholds[g]))
+            distance = self._link_nearest(T, g, cell_bounds[g], limit, stop)[0]
             if distance < smallest:  # exact up to the limit
                 measured[g] = smallest = distance
+                if distance < stop:
+                    break
         return measured
 
     def _link_nearest(
