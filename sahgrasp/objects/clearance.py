@@ -265,11 +265,9 @@ class HandObjectClearance:
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
-        pairs = [
-            self._pair(T, g, piece)
-            for g, bounds in self._near_links(T, thresholds, None)
-            for piece in self._link_pieces(T, g, bounds, thresholds[g], per_link)
-        ]
+        pairs: list[_Pair] = []
+        for g, bounds in self._near_links(T, thresholds, None):
+            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs)
         return [
             Penetration(
                 0,
@@ -680,11 +678,13 @@ class HandObjectClearance:
         cell_bounds: FloatArray,
         threshold_m: float,
         per_link: int | None,
+        pairs: list[_Pair] | None = None,
     ) -> list[int]:
         """The pieces closer than ``threshold_m`` [m] to geometry ``g``.
 
         The first ``per_link`` (None: all) of them by increasing lower bound: the ones a search
-        in that order finds first.
+        in that order finds first. ``pairs``: each one's witnesses are appended to it, read
+        from the GJK/EPA call that found it (no second call).
         """
         if self._tree_says_clear(g, cell_bounds, threshold_m):
             return []
@@ -694,18 +694,21 @@ class HandObjectClearance:
         pieces = np.concatenate([self._tree.members[c] for c in cells])
         distance = self._gjk(T, g)
         if len(pieces) <= _FEW_PIECES:  # measure them all, then order the few found
-            found = np.array([p for p in pieces.tolist() if distance(p) < threshold_m])
-            if len(found) <= 1:
-                return found.tolist()
+            found = [p for p in pieces.tolist() if distance(p) < threshold_m]
+            if len(found) <= 1 and pairs is None:
+                return found
             # In the order of a search by bound: the repair's rows come in the same order.
-            pieces = self._piece_bounds(T, g, found, math.inf)[0]
+            pieces = self._piece_bounds(T, g, np.array(found, dtype=np.intp), math.inf)[0]
         else:
             pieces, bounds = self._piece_bounds(T, g, pieces, threshold_m)
             pieces = pieces[bounds < threshold_m]
         out: list[int] = []
         for piece in pieces.tolist():
-            if distance(piece) < threshold_m:
+            d = distance(piece)
+            if d < threshold_m:
                 out.append(piece)
+                if pairs is not None:
+                    pairs.append(self._witnesses(g, d))
                 if per_link is not None and len(out) >= per_link:
                     break
         return out
@@ -854,28 +857,17 @@ class HandObjectClearance:
             self._coarse_world = self._coarse_points @ T[:3, :3].T + T[:3, 3]
         return self._centres_world, self._transforms, self._coarse_world
 
-    def _pair(self, T: FloatArray, g: int, piece: int) -> _Pair:
-        """Hand geometry ``g`` (placed) and ``piece`` (object at ``T``): distance and witnesses."""
-        transforms = self._placed_pieces(T)[1]
-        at_piece = transforms[piece]
-        if at_piece is None:
-            at_piece = transforms[piece] = self._shapes[piece].transform(T)
-        result = coal.DistanceResult()
-        distance = coal.distance(
-            self._shapes[piece].geometry,
-            at_piece,
-            self._geometries[g],
-            self._at_link(g),
-            self._request,
-            result,
-        )
-        normal = np.asarray(result.normal, dtype=np.float64)
+    def _witnesses(self, g: int, distance_m: float) -> _Pair:
+        """Geometry ``g``'s pair at ``distance_m`` [m], witnesses from the last GJK/EPA call."""
+        result = self._result
+        normal = np.array(result.normal, dtype=np.float64)
+        length = math.sqrt(float(normal.dot(normal)))
         return _Pair(
             g,
-            float(distance),
-            np.asarray(result.getNearestPoint1(), dtype=np.float64),
-            np.asarray(result.getNearestPoint2(), dtype=np.float64),
-            normal / max(float(np.linalg.norm(normal)), 1e-12),
+            distance_m,
+            np.array(result.getNearestPoint1(), dtype=np.float64),
+            np.array(result.getNearestPoint2(), dtype=np.float64),
+            normal / max(length, 1e-12),
         )
 
 
