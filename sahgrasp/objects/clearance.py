@@ -203,6 +203,7 @@ class HandObjectClearance:
         self._thresholds_cache: dict[tuple[frozenset[str], float, float], FloatArray] = {}
         self._placement_key = b""
         self._object_world = pin.SE3.Identity()  # T^-1 of the last _place
+        self._object_at_origin = True  # whether that T is the identity
 
     def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
         """Per hand geometry, the rounded box :meth:`_shape_gaps` measures it as.
@@ -266,8 +267,8 @@ class HandObjectClearance:
         """
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs: list[_Pair] = []
-        for g, bounds in self._near_links(T, thresholds, None):
-            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs)
+        for g, bounds, upper in self._near_links(T, thresholds, None):
+            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
         return [
             Penetration(
                 0,
@@ -299,7 +300,10 @@ class HandObjectClearance:
         """
         thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
         near = self._near_links(T, thresholds, None)
-        return any(self._link_pieces(T, g, bounds, thresholds[g], 1) for g, bounds in near)
+        return any(
+            self._link_pieces(T, g, bounds, thresholds[g], 1, None, upper)
+            for g, bounds, upper in near
+        )
 
     def clearance(
         self,
@@ -416,7 +420,7 @@ class HandObjectClearance:
         limits = np.full(len(self._links), limit_m)
         self._place(q, T)
         distance = math.inf
-        for g, bounds in self._near_links(T, limits, finger.geometries):
+        for g, bounds, _ in self._near_links(T, limits, finger.geometries):
             distance = min(distance, self._link_nearest(T, g, bounds, limit_m, stop)[0])
             if distance < stop:
                 return distance
@@ -534,6 +538,7 @@ class HandObjectClearance:
         if key != self._placement_key:
             self._placement_key = key
             self._object_world = pin.SE3(T).inverse()
+            self._object_at_origin = bool(np.array_equal(T, np.eye(4)))
 
     def _pose_links(self, geometries: Iterable[int]) -> None:
         """Place the coal objects of hand ``geometries`` in the frame of the object (at _place).
@@ -545,26 +550,31 @@ class HandObjectClearance:
         for g in geometries:
             if self._posed[g]:
                 continue
-            M = T_object_world * self._geometry_data.oMg[g]
+            if self._object_at_origin:  # the object frame is the world's: reuse that transform
+                at_link = self._at_link(g)
+            else:
+                M = T_object_world * self._geometry_data.oMg[g]
+                at_link = coal.Transform3s(M.rotation, M.translation)
             link = self._link_objects[g]
-            link.setTransform(coal.Transform3s(M.rotation, M.translation))
+            link.setTransform(at_link)
             link.computeAABB()
             self._posed[g] = True
 
     def _near_links(
         self, T: FloatArray, thresholds: NDArray[np.float64], geometries: NDArray[np.intp] | None
-    ) -> list[tuple[int, FloatArray]]:
+    ) -> list[tuple[int, FloatArray, float]]:
         """The ``geometries`` (None: all) whose coarse bounds come below their thresholds [m].
 
         Every geometry left out has no piece closer than its threshold (numpy only, no coal
-        call); each one returned comes with its bounds to the coarse hulls, (K,).
+        call); each one returned comes with its bounds to the coarse hulls, (K,), and an upper
+        bound [m] of its distance to some piece (:meth:`_coarse_bounds`).
         """
         if not self._shapes:
             return []
-        cell_bounds = self._coarse_bounds(T, geometries)[0]
+        cell_bounds, upper = self._coarse_bounds(T, geometries)
         chosen = self._every if geometries is None else geometries
         near = np.flatnonzero(cell_bounds.min(axis=1) < thresholds[chosen]).tolist()
-        return [(int(chosen[i]), cell_bounds[i]) for i in near]
+        return [(int(chosen[i]), cell_bounds[i], float(upper[i])) for i in near]
 
     def _coarse_bounds(
         self, T: FloatArray, geometries: NDArray[np.intp] | None
@@ -679,14 +689,19 @@ class HandObjectClearance:
         threshold_m: float,
         per_link: int | None,
         pairs: list[_Pair] | None = None,
+        upper_m: float = math.inf,
     ) -> list[int]:
         """The pieces closer than ``threshold_m`` [m] to geometry ``g``.
 
         The first ``per_link`` (None: all) of them by increasing lower bound: the ones a search
         in that order finds first. ``pairs``: each one's witnesses are appended to it, read
-        from the GJK/EPA call that found it (no second call).
+        from the GJK/EPA call that found it (no second call). ``upper_m``: an upper bound of
+        the distance to some piece (through a point inside it); below a threshold >= 0 it
+        proves a piece closer, and the piece tree is not asked. (Not below 0: a link deep
+        around a point of a thin piece may still penetrate that piece only a little.)
         """
-        if self._tree_says_clear(g, cell_bounds, threshold_m):
+        proven = threshold_m >= 0.0 and upper_m < threshold_m
+        if not proven and self._tree_says_clear(g, cell_bounds, threshold_m):
             return []
         cells = np.flatnonzero(cell_bounds < threshold_m).tolist()
         if not cells:
