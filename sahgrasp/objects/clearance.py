@@ -184,6 +184,9 @@ class HandObjectClearance:
         self._centred = not self._link_centres.any()  # boxes about the link origins
         self._describe_shapes([g.geometry for g in geometries])
         self._tree = PieceTree(self._shapes)
+        # The pieces' boxes as two contiguous (N, 3) arrays: one gather each per bound.
+        self._piece_lows_m = np.ascontiguousarray(self._tree.boxes_m[:, 0])
+        self._piece_highs_m = np.ascontiguousarray(self._tree.boxes_m[:, 1])
         # Per coarse hull, the centre of its piece nearest its ball's centre: inside the object.
         self._anchors = np.array(
             [
@@ -632,7 +635,7 @@ class HandObjectClearance:
             if tip and not self._link_pieces(T, g, cell_bounds[g], float(thresholds[g]), 1):
                 continue
             stop = min(stop_m, float(thresholds[g]))
-            distance = self._link_nearest(T, g, cell_bounds[g], limit, stop)[0]
+            distance = self._link_nearest(T, g, cell_bounds[g], limit, stop, float(upper[g]))[0]
             if distance < smallest:  # exact up to the limit
                 measured[g] = smallest = distance
                 if distance < stop:
@@ -646,16 +649,18 @@ class HandObjectClearance:
         cell_bounds: FloatArray,
         limit_m: float,
         stop_m: float = -math.inf,
+        upper_m: float = math.inf,
     ) -> tuple[float, int]:
         """The signed distance [m] of geometry ``g`` to its nearest piece, and that piece.
 
         Exact up to ``limit_m``; else some distance above it (infinite, piece -1, if none was
         measured). Branch and bound: pieces by increasing lower bound (for a few pieces, by
         their hulls' bounds), until the bound reaches the nearest distance found. The search
-        ends at the first distance below ``stop_m``.
+        ends at the first distance below ``stop_m``. ``upper_m`` as in :meth:`_link_pieces`.
         """
         members, distance = self._tree.members, self._gjk(T, g)
-        if limit_m < math.inf and self._tree_says_clear(g, cell_bounds, limit_m):
+        proven = limit_m >= 0.0 and upper_m < limit_m
+        if limit_m < math.inf and not proven and self._tree_says_clear(g, cell_bounds, limit_m):
             return math.inf, -1
         cells = np.flatnonzero(cell_bounds <= limit_m)
         candidates: Iterable[tuple[int, float]]
@@ -849,10 +854,8 @@ class HandObjectClearance:
         overlapping ones bound nothing (-inf).
         """
         box = self._link_objects[g].getAABB()
-        boxes = self._tree.boxes_m[pieces]
-        gaps = _gap_lengths(
-            np.maximum(np.asarray(box.min_) - boxes[:, 1], boxes[:, 0] - np.asarray(box.max_))
-        )
+        low, high = self._piece_lows_m[pieces], self._piece_highs_m[pieces]
+        gaps = _gap_lengths(np.maximum(np.asarray(box.min_) - high, low - np.asarray(box.max_)))
         return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _placed_pieces(
