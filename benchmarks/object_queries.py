@@ -1,0 +1,208 @@
+"""Where the IK's time with an object goes, query by query (docs/objects.md, "Where a solve's ...").
+
+Draws the first ``--sets`` contact sets of the grasp benchmark per object (``sample_object_grasps``
+with the benchmark's per-object seed), solves each without and then with the object, and
+
+* ``profile``: wraps every method of ``HandObjectClearance`` with a CPU timer and prints, per
+  object, the CPU with and without the object and the calls, total and mean CPU per method (the
+  timers add their own cost: per-call times are upper bounds);
+* ``compare OLD_CLEARANCE_PY``: records every hand-object query the IK made and times it with
+  the ``HandObjectClearance`` of another version of ``sahgrasp/objects/clearance.py`` (e.g.
+  ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
+  alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
+  (pairs, clearance, link) is the same;
+* ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
+  that stops at the first link inside (``until_inside=True``), split by verdict.
+
+    python benchmarks/object_queries.py profile --sets 20
+    python benchmarks/object_queries.py compare old.py --sets 20
+    python benchmarks/object_queries.py verdicts --sets 20
+
+Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
+the mug and the bottle meshes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sahgrasp.bench.grasps import BENCH_SEED, _object_seed, _prepare
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.ik.obstacle import Obstacle
+from sahgrasp.objects import GraspObject, load_object
+from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.mesh_file import load_mesh
+
+MESHES = Path(__file__).resolve().parent.parent / "examples" / "meshes"
+ALLOWANCE_M = IKSettings().d_min_m
+
+
+def _object(name: str) -> GraspObject:
+    if name.startswith("mesh:"):
+        return load_mesh(MESHES / name[5:], name=name)
+    return load_object(name)
+
+
+def _sets(obj: GraspObject, count: int) -> list[GraspTarget]:
+    return sample_object_grasps(obj, count, _object_seed(BENCH_SEED, obj.name), SAH_REACH)
+
+
+def _cpu(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:
+    start = time.process_time()
+    out = fn(*args, **kwargs)
+    return time.process_time() - start, out
+
+
+def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    stats: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
+    originals = {}
+    for name, method in vars(HandObjectClearance).items():
+        if callable(method) and name not in ("__init__", "links"):
+            originals[name] = method
+
+            def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
+                spent, out = _cpu(_m, *args, **kw)
+                stats[_n][0] += 1
+                stats[_n][1] += spent
+                return out
+
+            setattr(HandObjectClearance, name, timed)
+    try:
+        without = with_object = 0.0
+        for t in targets:
+            without += _cpu(solve_ik, hand, t, IKSettings())[0]
+            with_object += _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)[0]
+    finally:
+        for name, method in originals.items():
+            setattr(HandObjectClearance, name, method)
+    pieces = len(obj.collision_shapes())
+    print(f"== {obj.name} ({pieces} pieces): CPU without {without:.2f} s, with {with_object:.2f} s")
+    for name, (calls, spent) in sorted(stats.items(), key=lambda kv: -kv[1][1])[:14]:
+        print(
+            f"  {name:22s} {int(calls):7d} calls {spent:8.3f} s {spent / calls * 1e6:8.1f} us/call"
+        )
+
+
+def _queries(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget]
+) -> list[tuple[str, np.ndarray, tuple[str, ...], Any]]:
+    """Every query the IK's obstacle made while solving ``targets`` (kind, q, contacts, arg)."""
+    log: list[tuple[str, np.ndarray, tuple[str, ...], Any]] = []
+    penetrations, query = Obstacle.penetrations, Obstacle._query
+
+    def logged_penetrations(self: Obstacle, q: np.ndarray, margin_m: float) -> Any:
+        log.append(("penetrations", q.copy(), self.contacts, margin_m))
+        return penetrations(self, q, margin_m)
+
+    def logged_query(self: Obstacle, q: np.ndarray, until_inside: bool) -> Any:
+        log.append(("clearance", q.copy(), self.contacts, until_inside))
+        return query(self, q, until_inside)
+
+    Obstacle.penetrations, Obstacle._query = logged_penetrations, logged_query  # type: ignore[method-assign]
+    try:
+        for t in targets:
+            solve_ik(hand, t, IKSettings(), obstacle=obj)
+    finally:
+        Obstacle.penetrations, Obstacle._query = penetrations, query  # type: ignore[method-assign]
+    return log
+
+
+def _answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...], arg: Any) -> Any:
+    if kind == "clearance":  # the exact clearance: both versions have it
+        found = checker.clearance(q, contacts, ALLOWANCE_M, all_links=False)
+        return round(found.distance_m, 12), found.link
+    pairs = checker.penetrations(q, arg, contacts, ALLOWANCE_M, per_link=4)
+    return [(p.joint_b, round(p.depth_m, 12), tuple(np.round(p.normal, 9))) for p in pairs]
+
+
+def compare(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+) -> None:
+    spec = importlib.util.spec_from_file_location("old_clearance", old_path)
+    assert spec is not None and spec.loader is not None
+    old = importlib.util.module_from_spec(spec)
+    sys.modules["old_clearance"] = old
+    spec.loader.exec_module(old)
+    log = _queries(hand, obj, targets)
+    checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+    for kind in ("penetrations", "clearance"):
+        queries = [entry for entry in log if entry[0] == kind]
+        best = np.full((len(queries), 2), np.inf)
+        same = True
+        for _ in range(repeats):
+            for i, (_, q, contacts, arg) in enumerate(queries):
+                answers = []
+                for j, checker in enumerate(checkers):
+                    spent, out = _cpu(_answer, checker, kind, q, contacts, arg)
+                    best[i, j] = min(best[i, j], spent)
+                    answers.append(out)
+                same &= answers[0] == answers[1]
+        old_us, new_us = best.mean(axis=0) * 1e6
+        print(
+            f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: old {old_us:6.0f} us, "
+            f"new {new_us:6.0f} us ({new_us / old_us - 1:+.0%}), same answers: {same}"
+        )
+
+
+def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
+    tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
+    checker = HandObjectClearance(hand, obj)
+    rows: dict[bool, list[list[float]]] = {True: [], False: []}
+    for _, q, contacts, _ in tests:
+        best = [np.inf, np.inf]
+        for _ in range(repeats):
+            for j, until in enumerate((False, True)):
+                spent, found = _cpu(
+                    checker.clearance, q, contacts, ALLOWANCE_M, all_links=False, until_inside=until
+                )
+                best[j] = min(best[j], spent)
+        rows[not found.clear()].append(best)
+    for inside, times in rows.items():
+        if times:
+            exact, early = np.mean(times, axis=0) * 1e6
+            label = "inside" if inside else "clear"
+            print(
+                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact:6.0f} "
+                f"us, stopping at the first link inside {early:6.0f} us"
+            )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("mode", choices=("profile", "compare", "verdicts"))
+    parser.add_argument("old", nargs="?", help="compare: another version's clearance.py")
+    parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
+    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
+    parser.add_argument(
+        "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
+    )
+    args = parser.parse_args()
+    if args.mode == "compare" and not args.old:
+        parser.error("compare needs the other version's clearance.py")
+    hand = load_hand("sah")
+    for name in args.objects:
+        obj = _object(name)
+        targets = _sets(obj, args.sets)
+        _prepare(hand, obj)
+        if args.mode == "profile":
+            profile(hand, obj, targets)
+        elif args.mode == "compare":
+            compare(hand, obj, targets, args.old, args.repeats)
+        else:
+            verdicts(hand, obj, targets, args.repeats)
+
+
+if __name__ == "__main__":
+    main()
