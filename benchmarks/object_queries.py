@@ -11,11 +11,16 @@ with the benchmark's per-object seed), solves each without and then with the obj
   ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
   alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
   (pairs, clearance, link) is the same;
+* ``solves OLD_CLEARANCE_PY``: the solves themselves, per set alternating the old checker with
+  the old acceptance test (the exact clearance, as before ``until_inside``) and this code, best
+  of ``--repeats``; prints the CPU without the object, with old and with new, and whether every
+  result (success, starts, reason, clearance, closest link, ``q``) is identical;
 * ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
   that stops at the first link inside (``until_inside=True``), split by verdict.
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
+    python benchmarks/object_queries.py solves old.py --sets 20 --repeats 2
     python benchmarks/object_queries.py verdicts --sets 20
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
@@ -127,14 +132,19 @@ def _answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...], a
     return [(p.joint_b, round(p.depth_m, 12), tuple(np.round(p.normal, 9))) for p in pairs]
 
 
-def compare(
-    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
-) -> None:
+def _old_module(old_path: str) -> Any:
     spec = importlib.util.spec_from_file_location("old_clearance", old_path)
     assert spec is not None and spec.loader is not None
     old = importlib.util.module_from_spec(spec)
     sys.modules["old_clearance"] = old
     spec.loader.exec_module(old)
+    return old
+
+
+def compare(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+) -> None:
+    old = _old_module(old_path)
     log = _queries(hand, obj, targets)
     checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
     for kind in ("penetrations", "clearance"):
@@ -154,6 +164,56 @@ def compare(
             f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: old {old_us:6.0f} us, "
             f"new {new_us:6.0f} us ({new_us / old_us - 1:+.0%}), same answers: {same}"
         )
+
+
+def _exact_clearance(self: Obstacle, q: np.ndarray) -> Any:
+    """The acceptance test before ``until_inside``: the exact clearance, kept for ``q``."""
+    key, last = q.tobytes(), self._last[1]
+    if self._last[0] != key or last is None:
+        last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
+        self._last = (key, last)
+    return last
+
+
+def solves(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+) -> None:
+    old = _old_module(old_path)
+    import sahgrasp.ik.obstacle as obstacle_module
+
+    versions = {
+        "old": (
+            old.HandObjectClearance(hand, obj),
+            lambda self, q: not _exact_clearance(self, q).clear(),
+            _exact_clearance,
+        ),
+        "new": (HandObjectClearance(hand, obj), Obstacle.penetrated, Obstacle.clearance),
+    }
+    saved = obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance
+    best = np.full((len(targets), 3), np.inf)
+    same = True
+    try:
+        for _ in range(repeats):
+            for i, t in enumerate(targets):
+                best[i, 0] = min(best[i, 0], _cpu(solve_ik, hand, t, IKSettings())[0])
+                results = []
+                for j, (checker, penetrated, clearance) in enumerate(versions.values(), 1):
+                    obstacle_module._checker = lambda h, o, c=checker: c  # type: ignore[assignment,misc]
+                    Obstacle.penetrated, Obstacle.clearance = penetrated, clearance  # type: ignore[method-assign]
+                    spent, r = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
+                    best[i, j] = min(best[i, j], spent)
+                    q = r.q.tobytes()
+                    results.append((r.success, r.inits_used, r.reason, r.closest_link, q))
+                    results[-1] += (r.object_clearance_m,)
+                same &= results[0] == results[1]
+    finally:
+        obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance = saved  # type: ignore[method-assign]
+    without, with_old, with_new = best.sum(axis=0)
+    print(
+        f"{obj.name:16s} {len(targets)} sets, best of {repeats}: CPU without {without:.2f} s, "
+        f"with old {with_old:.2f} s, with new {with_new:.2f} s ({with_new / with_old - 1:+.0%}); "
+        f"identical results: {same}"
+    )
 
 
 def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
@@ -181,16 +241,16 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", choices=("profile", "compare", "verdicts"))
-    parser.add_argument("old", nargs="?", help="compare: another version's clearance.py")
+    parser.add_argument("mode", choices=("profile", "compare", "solves", "verdicts"))
+    parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
     parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
     parser.add_argument(
         "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
     )
     args = parser.parse_args()
-    if args.mode == "compare" and not args.old:
-        parser.error("compare needs the other version's clearance.py")
+    if args.mode in ("compare", "solves") and not args.old:
+        parser.error(f"{args.mode} needs the other version's clearance.py")
     hand = load_hand("sah")
     for name in args.objects:
         obj = _object(name)
@@ -200,6 +260,8 @@ def main() -> None:
             profile(hand, obj, targets)
         elif args.mode == "compare":
             compare(hand, obj, targets, args.old, args.repeats)
+        elif args.mode == "solves":
+            solves(hand, obj, targets, args.old, args.repeats)
         else:
             verdicts(hand, obj, targets, args.repeats)
 
