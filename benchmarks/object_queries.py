@@ -15,12 +15,16 @@ with the benchmark's per-object seed), solves each without and then with the obj
   the old acceptance test (the exact clearance, as before ``until_inside``) and this code, best
   of ``--repeats``; prints the CPU without the object, with old and with new, and whether every
   result (success, starts, reason, clearance, closest link, ``q``) is identical;
+* ``sets``: per set solved alike without and with the object (success, same starts), the CPU
+  of each solve, the repair queries and exact-clearance queries of the solve with the object
+  and their CPU, and the iterations of each solve: what the same-start ratio is made of;
 * ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
   that stops at the first link inside (``until_inside=True``), split by verdict.
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
     python benchmarks/object_queries.py solves old.py --sets 20 --repeats 2
+    python benchmarks/object_queries.py sets --sets 30
     python benchmarks/object_queries.py verdicts --sets 20
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
@@ -216,6 +220,42 @@ def solves(
     )
 
 
+def sets(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    counts: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
+    originals = {n: getattr(HandObjectClearance, n) for n in ("penetrations", "clearance")}
+    for name, method in originals.items():
+
+        def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
+            spent, out = _cpu(_m, *args, **kw)
+            counts[_n][0] += 1
+            counts[_n][1] += spent
+            return out
+
+        setattr(HandObjectClearance, name, timed)
+    rows = []
+    try:
+        for t in targets:
+            plain_s, plain = _cpu(solve_ik, hand, t, IKSettings())
+            counts.clear()
+            checked_s, checked = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
+            alike = plain.success and checked.success and plain.inits_used == checked.inits_used
+            if alike:
+                pen, clr = counts["penetrations"], counts["clearance"]
+                rows.append((plain_s, checked_s, *pen, *clr, checked.inits_used))
+                rows[-1] += (checked.iterations, plain.iterations)
+    finally:
+        for name, method in originals.items():
+            setattr(HandObjectClearance, name, method)
+    ratios = [r[1] / r[0] for r in rows]
+    print(f"== {obj.name}: {len(rows)} sets solved alike, median ratio {np.median(ratios):.2f}")
+    print("  without ms | with ms | repair queries, ms | clearances, ms | starts | iterations")
+    for r in sorted(rows, key=lambda r: r[1] / r[0]):
+        print(
+            f"  {r[0] * 1e3:7.2f} | {r[1] * 1e3:7.2f} | {int(r[2]):3d}, {r[3] * 1e3:6.2f} | "
+            f"{int(r[4]):2d}, {r[5] * 1e3:5.2f} | {r[6]} | {r[7]} with, {r[8]} without"
+        )
+
+
 def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
     tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
     checker = HandObjectClearance(hand, obj)
@@ -241,7 +281,7 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", choices=("profile", "compare", "solves", "verdicts"))
+    parser.add_argument("mode", choices=("profile", "compare", "solves", "sets", "verdicts"))
     parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
     parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
@@ -262,6 +302,8 @@ def main() -> None:
             compare(hand, obj, targets, args.old, args.repeats)
         elif args.mode == "solves":
             solves(hand, obj, targets, args.old, args.repeats)
+        elif args.mode == "sets":
+            sets(hand, obj, targets)
         else:
             verdicts(hand, obj, targets, args.repeats)
 
