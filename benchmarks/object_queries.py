@@ -4,8 +4,9 @@ Draws the first ``--sets`` contact sets of the grasp benchmark per object (``sam
 with the benchmark's per-object seed), solves each without and then with the object, and
 
 * ``profile``: wraps every method of ``HandObjectClearance`` with a CPU timer and prints, per
-  object, the CPU with and without the object and the calls, total and mean CPU per method (the
-  timers add their own cost: per-call times are upper bounds);
+  object, the CPU with and without the object and the calls, total and mean CPU per method, and
+  the GJK/EPA calls per hand link (the timers add their own cost: per-call times are upper
+  bounds);
 * ``compare OLD_CLEARANCE_PY``: records every hand-object query the IK made and times it with
   the ``HandObjectClearance`` of another version of ``sahgrasp/objects/clearance.py`` (e.g.
   ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
@@ -88,6 +89,20 @@ def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
                 return out
 
             setattr(HandObjectClearance, name, timed)
+    gjk = originals["_gjk"]
+
+    def per_link(self: Any, T: Any, g: int) -> Any:  # GJK/EPA calls and CPU by hand link
+        distance = gjk(self, T, g)
+
+        def timed(piece: int) -> float:
+            spent, out = _cpu(distance, piece)
+            stats["GJK/EPA " + self.links[g]][0] += 1
+            stats["GJK/EPA " + self.links[g]][1] += spent
+            return float(out)
+
+        return timed
+
+    HandObjectClearance._gjk = per_link  # type: ignore[method-assign]
     try:
         without = with_object = 0.0
         for t in targets:
@@ -98,7 +113,7 @@ def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
             setattr(HandObjectClearance, name, method)
     pieces = len(obj.collision_shapes())
     print(f"== {obj.name} ({pieces} pieces): CPU without {without:.2f} s, with {with_object:.2f} s")
-    for name, (calls, spent) in sorted(stats.items(), key=lambda kv: -kv[1][1])[:14]:
+    for name, (calls, spent) in sorted(stats.items(), key=lambda kv: -kv[1][1])[:20]:
         print(
             f"  {name:22s} {int(calls):7d} calls {spent:8.3f} s {spent / calls * 1e6:8.1f} us/call"
         )
