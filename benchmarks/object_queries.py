@@ -14,7 +14,8 @@ with the benchmark's per-object seed), solves each without and then with the obj
   (pairs, clearance, link) is the same;
 * ``solves OLD_CLEARANCE_PY``: the solves themselves, per set alternating the old checker with
   the old acceptance test (the exact clearance, as before ``until_inside``) and this code, best
-  of ``--repeats``; prints the CPU without the object, with old and with new, and whether every
+  of ``--repeats`` (``--new-first``: this code before the old in each pair); prints the CPU
+  without the object, with old and with new, and whether every
   result (success, starts, reason, clearance, closest link, ``q``) is identical;
 * ``sets``: per set solved alike without and with the object (success, same starts), the CPU
   of each solve, the repair queries and exact-clearance queries of the solve with the object
@@ -195,7 +196,12 @@ def _exact_clearance(self: Obstacle, q: np.ndarray) -> Any:
 
 
 def solves(
-    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+    hand: Hand,
+    obj: GraspObject,
+    targets: list[GraspTarget],
+    old_path: str,
+    repeats: int,
+    new_first: bool = False,
 ) -> None:
     old = _old_module(old_path)
     import sahgrasp.ik.obstacle as obstacle_module
@@ -216,7 +222,8 @@ def solves(
             for i, t in enumerate(targets):
                 best[i, 0] = min(best[i, 0], _cpu(solve_ik, hand, t, IKSettings())[0])
                 results = []
-                for j, (checker, penetrated, clearance) in enumerate(versions.values(), 1):
+                order = list(enumerate(versions.values(), 1))
+                for j, (checker, penetrated, clearance) in order[::-1] if new_first else order:
                     obstacle_module._checker = lambda h, o, c=checker: c  # type: ignore[assignment,misc]
                     Obstacle.penetrated, Obstacle.clearance = penetrated, clearance  # type: ignore[method-assign]
                     spent, r = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
@@ -300,6 +307,7 @@ def main() -> None:
     parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
     parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
+    parser.add_argument("--new-first", action="store_true", help="solves: this code first")
     parser.add_argument(
         "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
     )
@@ -316,7 +324,7 @@ def main() -> None:
         elif args.mode == "compare":
             compare(hand, obj, targets, args.old, args.repeats)
         elif args.mode == "solves":
-            solves(hand, obj, targets, args.old, args.repeats)
+            solves(hand, obj, targets, args.old, args.repeats, args.new_first)
         elif args.mode == "sets":
             sets(hand, obj, targets)
         else:
