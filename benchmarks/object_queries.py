@@ -20,6 +20,8 @@ with the benchmark's per-object seed), solves each without and then with the obj
 * ``sets``: per set solved alike without and with the object (success, same starts), the CPU
   of each solve, the repair queries and exact-clearance queries of the solve with the object
   and their CPU, and the iterations of each solve: what the same-start ratio is made of;
+* ``alone``: the sets solved with the object only, one after the other: the CPU and the solved
+  count, for comparing versions in separate processes (``PYTHONPATH`` selecting the code);
 * ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
   that stops at the first link inside (``until_inside=True``), split by verdict.
 
@@ -27,6 +29,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
     python benchmarks/object_queries.py compare old.py --sets 20
     python benchmarks/object_queries.py solves old.py --sets 20 --repeats 2
     python benchmarks/object_queries.py sets --sets 30
+    python benchmarks/object_queries.py alone --sets 100 --objects coffee_cup
     python benchmarks/object_queries.py verdicts --sets 20
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
@@ -278,6 +281,13 @@ def sets(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
         )
 
 
+def alone(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    spent, solved = _cpu(
+        lambda: sum(solve_ik(hand, t, IKSettings(), obstacle=obj).success for t in targets)
+    )
+    print(f"{obj.name:16s} {len(targets)} sets with the object: {spent:.2f} s CPU, {solved} solved")
+
+
 def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
     tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
     checker = HandObjectClearance(hand, obj)
@@ -303,7 +313,9 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("mode", choices=("profile", "compare", "solves", "sets", "verdicts"))
+    parser.add_argument(
+        "mode", choices=("profile", "compare", "solves", "sets", "alone", "verdicts")
+    )
     parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
     parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
@@ -327,6 +339,8 @@ def main() -> None:
             solves(hand, obj, targets, args.old, args.repeats, args.new_first)
         elif args.mode == "sets":
             sets(hand, obj, targets)
+        elif args.mode == "alone":
+            alone(hand, obj, targets)
         else:
             verdicts(hand, obj, targets, args.repeats)
 
