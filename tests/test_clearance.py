@@ -325,10 +325,23 @@ def test_solver_and_clearance_share_one_definition(
     verdicts = []
     for obj, q, contacts in cases:
         checker = HandObjectClearance(sah, obj)
-        inside = not checker.clearance(q, contacts, all_links=False).clear()
+        closest = checker.clearance(q, contacts, all_links=False)
+        inside = not closest.clear()
         assert bool(checker.penetrations(q, 0.0, contacts)) == inside
         assert checker.penetrated(q, contacts) == inside
-        assert Obstacle(sah, obj, contacts, 1.5e-3).penetrated(q) == inside
+        # Stopping at the first link inside keeps the verdict, and a clear clearance exactly.
+        early = checker.clearance(q, contacts, all_links=False, until_inside=True)
+        assert early.clear() != inside
+        if not inside:
+            assert (early.distance_m, early.link) == (closest.distance_m, closest.link)
+        obstacle = Obstacle(sah, obj, contacts, 1.5e-3)
+        assert obstacle.penetrated(q) == inside
+        # The reported clearance is exact whether or not the verdict stopped early.
+        assert (obstacle.clearance(q).distance_m, obstacle.clearance(q).link) == (
+            closest.distance_m,
+            closest.link,
+        )
+        assert obstacle.penetrated(q) == inside  # kept, and unchanged by the exact query
         verdicts.append(inside)
     assert True in verdicts and False in verdicts  # both sides of the boundary were tried
 

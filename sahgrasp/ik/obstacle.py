@@ -70,8 +70,9 @@ class Obstacle:
     One definition decides whether a configuration is inside the object, for the solver's
     acceptance test and for the clearance it reports: :meth:`HandObjectClearance.clearance`
     with the contact fingers and the allowance. :meth:`penetrated` is that clearance below zero,
-    and the clearance of the last configuration asked about is kept, so the result's clearance
-    of an accepted start costs no second query.
+    asked to stop at the first link found inside; a clear configuration's clearance is then
+    exact and kept, so the result's clearance of an accepted start costs no second query, and
+    a rejected start's is measured only if the result reports it.
 
     Args:
         hand: The hand.
@@ -90,6 +91,7 @@ class Obstacle:
         self.checker = checker_of(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
+        # The last q asked about and its exact clearance (None: only known to be inside).
         self._last: tuple[bytes, Clearance | None] = (b"", None)
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
@@ -103,14 +105,25 @@ class Obstacle:
 
     def penetrated(self, q: NDArray[np.float64]) -> bool:
         """True if a link is inside the object (contact tips: deeper than the allowance)."""
-        return not self.clearance(q).clear()
+        # The inner solver, Algorithm 1's Step 8 and the result all ask about the accepted q.
+        key = q.tobytes()
+        if self._last[0] == key:
+            return self._last[1] is None or not self._last[1].clear()
+        found = self._query(q, until_inside=True)
+        # Inside: the distance found is not the smallest; only the verdict is kept.
+        self._last = (key, found if found.clear() else None)
+        return not found.clear()
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link (kept for ``q``)."""
-        # The inner solver, Algorithm 1's Step 8 and the result all ask about the accepted q.
         key = q.tobytes()
         last = self._last[1]
         if self._last[0] != key or last is None:
-            last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
+            last = self._query(q, until_inside=False)
             self._last = (key, last)
         return last
+
+    def _query(self, q: NDArray[np.float64], until_inside: bool) -> Clearance:
+        return self.checker.clearance(
+            q, self.contacts, self.allowance_m, all_links=False, until_inside=until_inside
+        )

@@ -184,6 +184,9 @@ class HandObjectClearance:
         self._centred = not self._link_centres.any()  # boxes about the link origins
         self._describe_shapes([g.geometry for g in geometries])
         self._tree = PieceTree(self._shapes)
+        # The pieces' boxes as two contiguous (N, 3) arrays: one gather each per bound.
+        self._piece_lows_m = np.ascontiguousarray(self._tree.boxes_m[:, 0])
+        self._piece_highs_m = np.ascontiguousarray(self._tree.boxes_m[:, 1])
         # Per coarse hull, the centre of its piece nearest its ball's centre: inside the object.
         self._anchors = np.array(
             [
@@ -203,6 +206,7 @@ class HandObjectClearance:
         self._thresholds_cache: dict[tuple[frozenset[str], float, float], FloatArray] = {}
         self._placement_key = b""
         self._object_world = pin.SE3.Identity()  # T^-1 of the last _place
+        self._object_at_origin = True  # whether that T is the identity
 
     def _describe_shapes(self, shapes: Sequence[coal.ShapeBase]) -> None:
         """Per hand geometry, the rounded box :meth:`_shape_gaps` measures it as.
@@ -265,11 +269,9 @@ class HandObjectClearance:
             InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
         """
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
-        pairs = [
-            self._pair(T, g, piece)
-            for g, bounds in self._near_links(T, thresholds, None)
-            for piece in self._link_pieces(T, g, bounds, thresholds[g], per_link)
-        ]
+        pairs: list[_Pair] = []
+        for g, bounds, upper in self._near_links(T, thresholds, None):
+            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
         return [
             Penetration(
                 0,
@@ -301,7 +303,10 @@ class HandObjectClearance:
         """
         thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
         near = self._near_links(T, thresholds, None)
-        return any(self._link_pieces(T, g, bounds, thresholds[g], 1) for g, bounds in near)
+        return any(
+            self._link_pieces(T, g, bounds, thresholds[g], 1, None, upper)
+            for g, bounds, upper in near
+        )
 
     def clearance(
         self,
@@ -310,6 +315,7 @@ class HandObjectClearance:
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
         all_links: bool = True,
+        until_inside: bool = False,
     ) -> Clearance:
         """Signed distance of every link to the object and the smallest one at ``q``.
 
@@ -324,13 +330,21 @@ class HandObjectClearance:
             all_links: False: find the smallest distance and its link only, measuring just the
                 links whose lower bound is below it (``links_m`` holds those); a far link then
                 costs one coarse query instead of an exact distance.
+            until_inside: With ``all_links`` False, stop at the first link found inside the
+                object (a contact tip: deeper than ``allowance_m``). A clear configuration
+                gets its exact clearance; one inside gets a negative distance of a link inside,
+                not necessarily the deepest one: the verdict at the cost of
+                :meth:`penetrated`, and the clearance when there is no penetration.
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
-        measured = self._every_link(T) if all_links else self._closest_links(T, thresholds)
+        if all_links:
+            measured = self._every_link(T)
+        else:
+            measured = self._closest_links(T, thresholds, 0.0 if until_inside else -math.inf)
         links: dict[str, float] = {}
         distance, closest = math.inf, ""
         for g in sorted(measured):  # in geometry order: a tie goes to the first link
@@ -409,7 +423,7 @@ class HandObjectClearance:
         limits = np.full(len(self._links), limit_m)
         self._place(q, T)
         distance = math.inf
-        for g, bounds in self._near_links(T, limits, finger.geometries):
+        for g, bounds, _ in self._near_links(T, limits, finger.geometries):
             distance = min(distance, self._link_nearest(T, g, bounds, limit_m, stop)[0])
             if distance < stop:
                 return distance
@@ -527,6 +541,7 @@ class HandObjectClearance:
         if key != self._placement_key:
             self._placement_key = key
             self._object_world = pin.SE3(T).inverse()
+            self._object_at_origin = bool(np.array_equal(T, np.eye(4)))
 
     def _pose_links(self, geometries: Iterable[int]) -> None:
         """Place the coal objects of hand ``geometries`` in the frame of the object (at _place).
@@ -538,26 +553,31 @@ class HandObjectClearance:
         for g in geometries:
             if self._posed[g]:
                 continue
-            M = T_object_world * self._geometry_data.oMg[g]
+            if self._object_at_origin:  # the object frame is the world's: reuse that transform
+                at_link = self._at_link(g)
+            else:
+                M = T_object_world * self._geometry_data.oMg[g]
+                at_link = coal.Transform3s(M.rotation, M.translation)
             link = self._link_objects[g]
-            link.setTransform(coal.Transform3s(M.rotation, M.translation))
+            link.setTransform(at_link)
             link.computeAABB()
             self._posed[g] = True
 
     def _near_links(
         self, T: FloatArray, thresholds: NDArray[np.float64], geometries: NDArray[np.intp] | None
-    ) -> list[tuple[int, FloatArray]]:
+    ) -> list[tuple[int, FloatArray, float]]:
         """The ``geometries`` (None: all) whose coarse bounds come below their thresholds [m].
 
         Every geometry left out has no piece closer than its threshold (numpy only, no coal
-        call); each one returned comes with its bounds to the coarse hulls, (K,).
+        call); each one returned comes with its bounds to the coarse hulls, (K,), and an upper
+        bound [m] of its distance to some piece (:meth:`_coarse_bounds`).
         """
         if not self._shapes:
             return []
-        cell_bounds = self._coarse_bounds(T, geometries)[0]
+        cell_bounds, upper = self._coarse_bounds(T, geometries)
         chosen = self._every if geometries is None else geometries
         near = np.flatnonzero(cell_bounds.min(axis=1) < thresholds[chosen]).tolist()
-        return [(int(chosen[i]), cell_bounds[i]) for i in near]
+        return [(int(chosen[i]), cell_bounds[i], float(upper[i])) for i in near]
 
     def _coarse_bounds(
         self, T: FloatArray, geometries: NDArray[np.intp] | None
@@ -588,13 +608,16 @@ class HandObjectClearance:
             g: self._link_nearest(T, g, cell_bounds[g], math.inf)[0] for g in self._every.tolist()
         }
 
-    def _closest_links(self, T: FloatArray, thresholds: NDArray[np.float64]) -> dict[int, float]:
+    def _closest_links(
+        self, T: FloatArray, thresholds: NDArray[np.float64], stop_m: float = -math.inf
+    ) -> dict[int, float]:
         """Signed distances [m] of the hand geometries that may hold the smallest one.
 
         Geometries are taken by increasing lower bound (:meth:`_coarse_bounds`) until the bound
         exceeds the smallest distance found. A contact tip with no piece deeper than its
         allowance is excepted; the others are measured against the pieces whose bounds are
-        below that distance, so a far link costs no GJK call.
+        below that distance, so a far link costs no GJK call. The search ends at the first
+        counted distance below ``stop_m`` (a contact tip's: below its threshold as well).
         """
         if not self._shapes:
             return {}
@@ -611,9 +634,12 @@ class HandObjectClearance:
             tip = thresholds[g] < 0.0  # counts only deeper than its allowance
             if tip and not self._link_pieces(T, g, cell_bounds[g], float(thresholds[g]), 1):
                 continue
-            distance = self._link_nearest(T, g, cell_bounds[g], limit)[0]
+            stop = min(stop_m, float(thresholds[g]))
+            distance = self._link_nearest(T, g, cell_bounds[g], limit, stop, float(upper[g]))[0]
             if distance < smallest:  # exact up to the limit
                 measured[g] = smallest = distance
+                if distance < stop:
+                    break
         return measured
 
     def _link_nearest(
@@ -623,16 +649,18 @@ class HandObjectClearance:
         cell_bounds: FloatArray,
         limit_m: float,
         stop_m: float = -math.inf,
+        upper_m: float = math.inf,
     ) -> tuple[float, int]:
         """The signed distance [m] of geometry ``g`` to its nearest piece, and that piece.
 
         Exact up to ``limit_m``; else some distance above it (infinite, piece -1, if none was
         measured). Branch and bound: pieces by increasing lower bound (for a few pieces, by
         their hulls' bounds), until the bound reaches the nearest distance found. The search
-        ends at the first distance below ``stop_m``.
+        ends at the first distance below ``stop_m``. ``upper_m`` as in :meth:`_link_pieces`.
         """
         members, distance = self._tree.members, self._gjk(T, g)
-        if limit_m < math.inf and self._tree_says_clear(g, cell_bounds, limit_m):
+        proven = limit_m >= 0.0 and upper_m < limit_m
+        if limit_m < math.inf and not proven and self._tree_says_clear(g, cell_bounds, limit_m):
             return math.inf, -1
         cells = np.flatnonzero(cell_bounds <= limit_m)
         candidates: Iterable[tuple[int, float]]
@@ -665,13 +693,20 @@ class HandObjectClearance:
         cell_bounds: FloatArray,
         threshold_m: float,
         per_link: int | None,
+        pairs: list[_Pair] | None = None,
+        upper_m: float = math.inf,
     ) -> list[int]:
         """The pieces closer than ``threshold_m`` [m] to geometry ``g``.
 
         The first ``per_link`` (None: all) of them by increasing lower bound: the ones a search
-        in that order finds first.
+        in that order finds first. ``pairs``: each one's witnesses are appended to it, read
+        from the GJK/EPA call that found it (no second call). ``upper_m``: an upper bound of
+        the distance to some piece (through a point inside it); below a threshold >= 0 it
+        proves a piece closer, and the piece tree is not asked. (Not below 0: a link deep
+        around a point of a thin piece may still penetrate that piece only a little.)
         """
-        if self._tree_says_clear(g, cell_bounds, threshold_m):
+        proven = threshold_m >= 0.0 and upper_m < threshold_m
+        if not proven and self._tree_says_clear(g, cell_bounds, threshold_m):
             return []
         cells = np.flatnonzero(cell_bounds < threshold_m).tolist()
         if not cells:
@@ -679,18 +714,21 @@ class HandObjectClearance:
         pieces = np.concatenate([self._tree.members[c] for c in cells])
         distance = self._gjk(T, g)
         if len(pieces) <= _FEW_PIECES:  # measure them all, then order the few found
-            found = np.array([p for p in pieces.tolist() if distance(p) < threshold_m])
-            if len(found) <= 1:
-                return found.tolist()
+            found = [p for p in pieces.tolist() if distance(p) < threshold_m]
+            if len(found) <= 1 and pairs is None:
+                return found
             # In the order of a search by bound: the repair's rows come in the same order.
-            pieces = self._piece_bounds(T, g, found, math.inf)[0]
+            pieces = self._piece_bounds(T, g, np.array(found, dtype=np.intp), math.inf)[0]
         else:
             pieces, bounds = self._piece_bounds(T, g, pieces, threshold_m)
             pieces = pieces[bounds < threshold_m]
         out: list[int] = []
         for piece in pieces.tolist():
-            if distance(piece) < threshold_m:
+            d = distance(piece)
+            if d < threshold_m:
                 out.append(piece)
+                if pairs is not None:
+                    pairs.append(self._witnesses(g, d))
                 if per_link is not None and len(out) >= per_link:
                     break
         return out
@@ -744,17 +782,16 @@ class HandObjectClearance:
         """
         self._pose_links((g,))
         centres = self._placed_pieces(T)[0][pieces]
-        if self._cylinder_m[g, 0, 2] == np.inf:  # measured as (radial, axial, none)
-            local = np.matmul(centres - self._link_t[g], self._link_R[g])
-            coords = np.abs(local)
-            coords[:, 0] = np.hypot(local[:, 0], local[:, 1])
-            coords[:, 1] = coords[:, 2]
-            excess = coords - self._cylinder_m[g]
-            outside = np.maximum(excess, 0.0)
-            gaps = np.sqrt(np.einsum("ni,ni->n", outside, outside))
-            gaps += np.minimum(excess.max(axis=1), 0.0)
+        local = (centres - self._link_t[g]) @ self._link_R[g]  # R^T (p - t)
+        if self._cylinder_m[g, 0, 2] == np.inf:  # measured as (radial, axial)
+            radius, half_length = self._cylinder_m[g, 0, :2]
+            radial = np.hypot(local[:, 0], local[:, 1]) - radius
+            gaps = _box_distances(radial, np.abs(local[:, 2]) - half_length)
         else:
-            gaps = self._shape_gaps(np.array([g]), centres)[0]
+            local -= self._offset_m[g, 0]
+            half = self._half_m[g, 0]
+            x, y, z = (np.abs(local[:, j]) - half[j] for j in range(3))
+            gaps = _box_distances(x, y, z) - self._rounding_m[g, 0]
         bounds = gaps - self._piece_radii[pieces]
         bounds = np.maximum(bounds, self._box_gaps(g, pieces))
         kept = bounds <= limit_m
@@ -780,14 +817,14 @@ class HandObjectClearance:
         else:
             R, t = self._link_R[geometries], self._link_t[geometries]
             half, rounding = self._half_m[geometries], self._rounding_m[geometries]
-        local = np.matmul(points_m[None] - t[:, None], R)  # R^T (p - t), per geometry
+        # R^T (p - t) per geometry as one (N, 3) x (3, 3G) product, then coordinate by
+        # coordinate on (N, G) arrays: numpy reduces a length-3 axis several times slower.
+        shift = (t[:, :, None] * R).sum(axis=1)  # t^T R, (G, 3)
         if self._offset:
-            local -= self._offset_m if geometries is None else self._offset_m[geometries]
-        excess = np.abs(local) - half
-        outside = np.maximum(excess, 0.0)
-        gaps = np.sqrt(np.einsum("gni,gni->gn", outside, outside))
-        gaps += np.minimum(excess.max(axis=2), 0.0) - rounding
-        return gaps
+            shift += (self._offset_m if geometries is None else self._offset_m[geometries])[:, 0]
+        local = (points_m @ R.transpose(1, 0, 2).reshape(3, -1)).reshape(len(points_m), -1, 3)
+        x, y, z = (np.abs(local[:, :, j] - shift[:, j]) - half[:, 0, j] for j in range(3))
+        return (_box_distances(x, y, z) - rounding[:, 0]).T
 
     def _link_box_gaps(
         self, T: FloatArray, geometries: NDArray[np.intp] | None, boxes_m: FloatArray
@@ -806,8 +843,7 @@ class HandObjectClearance:
             centres += np.einsum("gij,gj->gi", R, self._link_centres[every])
         halves = np.einsum("gij,gj->gi", np.abs(R), self._link_halves[every])[:, None]
         low, high = centres[:, None] - halves, centres[:, None] + halves
-        gaps = np.maximum(np.maximum(low - boxes_m[:, 1], boxes_m[:, 0] - high), 0.0)
-        gaps = np.sqrt(np.einsum("gki,gki->gk", gaps, gaps))
+        gaps = _gap_lengths(np.maximum(low - boxes_m[:, 1], boxes_m[:, 0] - high))
         gaps[gaps == 0.0] = -np.inf
         return gaps
 
@@ -818,9 +854,8 @@ class HandObjectClearance:
         overlapping ones bound nothing (-inf).
         """
         box = self._link_objects[g].getAABB()
-        boxes = self._tree.boxes_m[pieces]
-        gaps = np.maximum(np.asarray(box.min_) - boxes[:, 1], boxes[:, 0] - np.asarray(box.max_))
-        gaps = np.linalg.norm(np.maximum(gaps, 0.0), axis=1)
+        low, high = self._piece_lows_m[pieces], self._piece_highs_m[pieces]
+        gaps = _gap_lengths(np.maximum(np.asarray(box.min_) - high, low - np.asarray(box.max_)))
         return np.where(gaps > 0.0, gaps, -np.inf)
 
     def _placed_pieces(
@@ -840,29 +875,45 @@ class HandObjectClearance:
             self._coarse_world = self._coarse_points @ T[:3, :3].T + T[:3, 3]
         return self._centres_world, self._transforms, self._coarse_world
 
-    def _pair(self, T: FloatArray, g: int, piece: int) -> _Pair:
-        """Hand geometry ``g`` (placed) and ``piece`` (object at ``T``): distance and witnesses."""
-        transforms = self._placed_pieces(T)[1]
-        at_piece = transforms[piece]
-        if at_piece is None:
-            at_piece = transforms[piece] = self._shapes[piece].transform(T)
-        result = coal.DistanceResult()
-        distance = coal.distance(
-            self._shapes[piece].geometry,
-            at_piece,
-            self._geometries[g],
-            self._at_link(g),
-            self._request,
-            result,
-        )
-        normal = np.asarray(result.normal, dtype=np.float64)
+    def _witnesses(self, g: int, distance_m: float) -> _Pair:
+        """Geometry ``g``'s pair at ``distance_m`` [m], witnesses from the last GJK/EPA call."""
+        result = self._result
+        normal = np.array(result.normal, dtype=np.float64)
+        length = math.sqrt(float(normal.dot(normal)))
         return _Pair(
             g,
-            float(distance),
-            np.asarray(result.getNearestPoint1(), dtype=np.float64),
-            np.asarray(result.getNearestPoint2(), dtype=np.float64),
-            normal / max(float(np.linalg.norm(normal)), 1e-12),
+            distance_m,
+            np.array(result.getNearestPoint1(), dtype=np.float64),
+            np.array(result.getNearestPoint2(), dtype=np.float64),
+            normal / max(length, 1e-12),
         )
+
+
+_ONES = np.ones(3)
+
+
+def _gap_lengths(gaps_m: FloatArray) -> FloatArray:
+    """Lengths [m] of the positive parts of per-axis gaps (..., 3) between boxes: (...).
+
+    A product with ones sums the last axis: numpy's reductions over a length-3 axis cost
+    several times more (they dominated the bounds of a query).
+    """
+    positive = np.maximum(gaps_m, 0.0)
+    return np.sqrt(np.square(positive) @ _ONES)
+
+
+def _box_distances(*excess_m: FloatArray) -> FloatArray:
+    """Signed distances [m] to a box from per-axis excesses ``|p_i| - h_i`` (same shapes).
+
+    Outside, the length of the positive excesses; inside, the largest excess (negative).
+    Elementwise on whole arrays, one per axis: no reduction over a short axis.
+    """
+    outside = np.square(np.maximum(excess_m[0], 0.0))
+    largest = excess_m[0]
+    for excess in excess_m[1:]:
+        outside += np.square(np.maximum(excess, 0.0))
+        largest = np.maximum(largest, excess)
+    return np.sqrt(outside) + np.minimum(largest, 0.0)
 
 
 def _placement_views(data: pin.GeometryData) -> tuple[FloatArray, FloatArray] | None:

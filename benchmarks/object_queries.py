@@ -1,0 +1,349 @@
+"""Where the IK's time with an object goes, query by query (docs/objects.md, "Where a solve's ...").
+
+Draws the first ``--sets`` contact sets of the grasp benchmark per object (``sample_object_grasps``
+with the benchmark's per-object seed), solves each without and then with the object, and
+
+* ``profile``: wraps every method of ``HandObjectClearance`` with a CPU timer and prints, per
+  object, the CPU with and without the object and the calls, total and mean CPU per method, and
+  the GJK/EPA calls per hand link (the timers add their own cost: per-call times are upper
+  bounds);
+* ``compare OLD_CLEARANCE_PY``: records every hand-object query the IK made and times it with
+  the ``HandObjectClearance`` of another version of ``sahgrasp/objects/clearance.py`` (e.g.
+  ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
+  alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
+  (pairs, clearance, link) is the same;
+* ``solves OLD_CLEARANCE_PY``: the solves themselves, per set alternating the old checker with
+  the old acceptance test (the exact clearance, as before ``until_inside``) and this code, best
+  of ``--repeats`` (``--new-first``: this code before the old in each pair); prints the CPU
+  without the object, with old and with new, and whether every
+  result (success, starts, reason, clearance, closest link, ``q``) is identical;
+* ``sets``: per set solved alike without and with the object (success, same starts), the CPU
+  of each solve, the repair queries and exact-clearance queries of the solve with the object
+  and their CPU, and the iterations of each solve: what the same-start ratio is made of;
+* ``alone``: the sets solved with the object only, one after the other: the CPU and the solved
+  count, for comparing versions in separate processes (``PYTHONPATH`` selecting the code);
+* ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
+  that stops at the first link inside (``until_inside=True``), split by verdict.
+
+    python benchmarks/object_queries.py profile --sets 20
+    python benchmarks/object_queries.py compare old.py --sets 20
+    python benchmarks/object_queries.py solves old.py --sets 20 --repeats 2
+    python benchmarks/object_queries.py sets --sets 30
+    python benchmarks/object_queries.py alone --sets 100 --objects coffee_cup
+    python benchmarks/object_queries.py verdicts --sets 20
+
+Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
+the mug and the bottle meshes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import sys
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sahgrasp.bench.grasps import BENCH_SEED, _object_seed, _prepare
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.ik.obstacle import Obstacle
+from sahgrasp.objects import GraspObject, load_object
+from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.mesh_file import load_mesh
+
+MESHES = Path(__file__).resolve().parent.parent / "examples" / "meshes"
+ALLOWANCE_M = IKSettings().d_min_m
+
+
+def _object(name: str) -> GraspObject:
+    if name.startswith("mesh:"):
+        return load_mesh(MESHES / name[5:], name=name)
+    return load_object(name)
+
+
+def _sets(obj: GraspObject, count: int) -> list[GraspTarget]:
+    return sample_object_grasps(obj, count, _object_seed(BENCH_SEED, obj.name), SAH_REACH)
+
+
+def _cpu(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:
+    start = time.process_time()
+    out = fn(*args, **kwargs)
+    return time.process_time() - start, out
+
+
+def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    stats: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
+    originals = {}
+    for name, method in vars(HandObjectClearance).items():
+        if callable(method) and name not in ("__init__", "links"):
+            originals[name] = method
+
+            def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
+                spent, out = _cpu(_m, *args, **kw)
+                stats[_n][0] += 1
+                stats[_n][1] += spent
+                return out
+
+            setattr(HandObjectClearance, name, timed)
+    gjk = originals["_gjk"]
+
+    def per_link(self: Any, T: Any, g: int) -> Any:  # GJK/EPA calls and CPU by hand link
+        distance = gjk(self, T, g)
+
+        def timed(piece: int) -> float:
+            spent, out = _cpu(distance, piece)
+            stats["GJK/EPA " + self.links[g]][0] += 1
+            stats["GJK/EPA " + self.links[g]][1] += spent
+            return float(out)
+
+        return timed
+
+    HandObjectClearance._gjk = per_link  # type: ignore[method-assign]
+    try:
+        without = with_object = 0.0
+        for t in targets:
+            without += _cpu(solve_ik, hand, t, IKSettings())[0]
+            with_object += _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)[0]
+    finally:
+        for name, method in originals.items():
+            setattr(HandObjectClearance, name, method)
+    pieces = len(obj.collision_shapes())
+    print(f"== {obj.name} ({pieces} pieces): CPU without {without:.2f} s, with {with_object:.2f} s")
+    for name, (calls, spent) in sorted(stats.items(), key=lambda kv: -kv[1][1])[:20]:
+        print(
+            f"  {name:22s} {int(calls):7d} calls {spent:8.3f} s {spent / calls * 1e6:8.1f} us/call"
+        )
+
+
+def _queries(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget]
+) -> list[tuple[str, np.ndarray, tuple[str, ...], Any]]:
+    """Every query the IK's obstacle made while solving ``targets`` (kind, q, contacts, arg)."""
+    log: list[tuple[str, np.ndarray, tuple[str, ...], Any]] = []
+    penetrations, query = Obstacle.penetrations, Obstacle._query
+
+    def logged_penetrations(self: Obstacle, q: np.ndarray, margin_m: float) -> Any:
+        log.append(("penetrations", q.copy(), self.contacts, margin_m))
+        return penetrations(self, q, margin_m)
+
+    def logged_query(self: Obstacle, q: np.ndarray, until_inside: bool) -> Any:
+        log.append(("clearance", q.copy(), self.contacts, until_inside))
+        return query(self, q, until_inside)
+
+    Obstacle.penetrations, Obstacle._query = logged_penetrations, logged_query  # type: ignore[method-assign]
+    try:
+        for t in targets:
+            solve_ik(hand, t, IKSettings(), obstacle=obj)
+    finally:
+        Obstacle.penetrations, Obstacle._query = penetrations, query  # type: ignore[method-assign]
+    return log
+
+
+def _answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...], arg: Any) -> Any:
+    if kind == "clearance":  # the exact clearance: both versions have it
+        found = checker.clearance(q, contacts, ALLOWANCE_M, all_links=False)
+        return round(found.distance_m, 12), found.link
+    pairs = checker.penetrations(q, arg, contacts, ALLOWANCE_M, per_link=4)
+    return [(p.joint_b, round(p.depth_m, 12), tuple(np.round(p.normal, 9))) for p in pairs]
+
+
+def _old_module(old_path: str) -> Any:
+    spec = importlib.util.spec_from_file_location("old_clearance", old_path)
+    assert spec is not None and spec.loader is not None
+    old = importlib.util.module_from_spec(spec)
+    sys.modules["old_clearance"] = old
+    spec.loader.exec_module(old)
+    return old
+
+
+def compare(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+) -> None:
+    old = _old_module(old_path)
+    log = _queries(hand, obj, targets)
+    checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+    for kind in ("penetrations", "clearance"):
+        queries = [entry for entry in log if entry[0] == kind]
+        best = np.full((len(queries), 2), np.inf)
+        same = True
+        for _ in range(repeats):
+            for i, (_, q, contacts, arg) in enumerate(queries):
+                answers = []
+                for j, checker in enumerate(checkers):
+                    spent, out = _cpu(_answer, checker, kind, q, contacts, arg)
+                    best[i, j] = min(best[i, j], spent)
+                    answers.append(out)
+                same &= answers[0] == answers[1]
+        old_us, new_us = best.mean(axis=0) * 1e6
+        print(
+            f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: old {old_us:6.0f} us, "
+            f"new {new_us:6.0f} us ({new_us / old_us - 1:+.0%}), same answers: {same}"
+        )
+
+
+def _exact_clearance(self: Obstacle, q: np.ndarray) -> Any:
+    """The acceptance test before ``until_inside``: the exact clearance, kept for ``q``."""
+    key, last = q.tobytes(), self._last[1]
+    if self._last[0] != key or last is None:
+        last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
+        self._last = (key, last)
+    return last
+
+
+def solves(
+    hand: Hand,
+    obj: GraspObject,
+    targets: list[GraspTarget],
+    old_path: str,
+    repeats: int,
+    new_first: bool = False,
+) -> None:
+    old = _old_module(old_path)
+    import sahgrasp.ik.obstacle as obstacle_module
+
+    versions = {
+        "old": (
+            old.HandObjectClearance(hand, obj),
+            lambda self, q: not _exact_clearance(self, q).clear(),
+            _exact_clearance,
+        ),
+        "new": (HandObjectClearance(hand, obj), Obstacle.penetrated, Obstacle.clearance),
+    }
+    saved = obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance
+    best = np.full((len(targets), 3), np.inf)
+    same = True
+    try:
+        for _ in range(repeats):
+            for i, t in enumerate(targets):
+                best[i, 0] = min(best[i, 0], _cpu(solve_ik, hand, t, IKSettings())[0])
+                results = []
+                order = list(enumerate(versions.values(), 1))
+                for j, (checker, penetrated, clearance) in order[::-1] if new_first else order:
+                    obstacle_module._checker = lambda h, o, c=checker: c  # type: ignore[assignment,misc]
+                    Obstacle.penetrated, Obstacle.clearance = penetrated, clearance  # type: ignore[method-assign]
+                    spent, r = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
+                    best[i, j] = min(best[i, j], spent)
+                    q = r.q.tobytes()
+                    results.append((r.success, r.inits_used, r.reason, r.closest_link, q))
+                    results[-1] += (r.object_clearance_m,)
+                same &= results[0] == results[1]
+    finally:
+        obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance = saved  # type: ignore[method-assign]
+    without, with_old, with_new = best.sum(axis=0)
+    print(
+        f"{obj.name:16s} {len(targets)} sets, best of {repeats}: CPU without {without:.2f} s, "
+        f"with old {with_old:.2f} s, with new {with_new:.2f} s ({with_new / with_old - 1:+.0%}); "
+        f"identical results: {same}"
+    )
+
+
+def sets(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    counts: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
+    originals = {n: getattr(HandObjectClearance, n) for n in ("penetrations", "clearance")}
+    for name, method in originals.items():
+
+        def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
+            spent, out = _cpu(_m, *args, **kw)
+            counts[_n][0] += 1
+            counts[_n][1] += spent
+            return out
+
+        setattr(HandObjectClearance, name, timed)
+    rows = []
+    try:
+        for t in targets:
+            plain_s, plain = _cpu(solve_ik, hand, t, IKSettings())
+            counts.clear()
+            checked_s, checked = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
+            alike = plain.success and checked.success and plain.inits_used == checked.inits_used
+            if alike:
+                pen, clr = counts["penetrations"], counts["clearance"]
+                rows.append((plain_s, checked_s, *pen, *clr, checked.inits_used))
+                rows[-1] += (checked.iterations, plain.iterations)
+    finally:
+        for name, method in originals.items():
+            setattr(HandObjectClearance, name, method)
+    ratios = [r[1] / r[0] for r in rows]
+    print(f"== {obj.name}: {len(rows)} sets solved alike, median ratio {np.median(ratios):.2f}")
+    print("  without ms | with ms | repair queries, ms | clearances, ms | starts | iterations")
+    for r in sorted(rows, key=lambda r: r[1] / r[0]):
+        print(
+            f"  {r[0] * 1e3:7.2f} | {r[1] * 1e3:7.2f} | {int(r[2]):3d}, {r[3] * 1e3:6.2f} | "
+            f"{int(r[4]):2d}, {r[5] * 1e3:5.2f} | {r[6]} | {r[7]} with, {r[8]} without"
+        )
+
+
+def alone(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    spent, solved = _cpu(
+        lambda: sum(solve_ik(hand, t, IKSettings(), obstacle=obj).success for t in targets)
+    )
+    print(f"{obj.name:16s} {len(targets)} sets with the object: {spent:.2f} s CPU, {solved} solved")
+
+
+def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
+    tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
+    checker = HandObjectClearance(hand, obj)
+    rows: dict[bool, list[list[float]]] = {True: [], False: []}
+    for _, q, contacts, _ in tests:
+        best = [np.inf, np.inf]
+        for _ in range(repeats):
+            for j, until in enumerate((False, True)):
+                spent, found = _cpu(
+                    checker.clearance, q, contacts, ALLOWANCE_M, all_links=False, until_inside=until
+                )
+                best[j] = min(best[j], spent)
+        rows[not found.clear()].append(best)
+    for inside, times in rows.items():
+        if times:
+            exact, early = np.mean(times, axis=0) * 1e6
+            label = "inside" if inside else "clear"
+            print(
+                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact:6.0f} "
+                f"us, stopping at the first link inside {early:6.0f} us"
+            )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "mode", choices=("profile", "compare", "solves", "sets", "alone", "verdicts")
+    )
+    parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
+    parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
+    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
+    parser.add_argument("--new-first", action="store_true", help="solves: this code first")
+    parser.add_argument(
+        "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
+    )
+    args = parser.parse_args()
+    if args.mode in ("compare", "solves") and not args.old:
+        parser.error(f"{args.mode} needs the other version's clearance.py")
+    hand = load_hand("sah")
+    for name in args.objects:
+        obj = _object(name)
+        targets = _sets(obj, args.sets)
+        _prepare(hand, obj)
+        if args.mode == "profile":
+            profile(hand, obj, targets)
+        elif args.mode == "compare":
+            compare(hand, obj, targets, args.old, args.repeats)
+        elif args.mode == "solves":
+            solves(hand, obj, targets, args.old, args.repeats, args.new_first)
+        elif args.mode == "sets":
+            sets(hand, obj, targets)
+        elif args.mode == "alone":
+            alone(hand, obj, targets)
+        else:
+            verdicts(hand, obj, targets, args.repeats)
+
+
+if __name__ == "__main__":
+    main()
