@@ -217,7 +217,7 @@ def solves(
         ),
         "new": (HandObjectClearance(hand, obj), Obstacle.penetrated, Obstacle.clearance),
     }
-    saved = obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance
+    saved = obstacle_module.checker_of, Obstacle.penetrated, Obstacle.clearance
     best = np.full((len(targets), 3), np.inf)
     same = True
     try:
@@ -227,7 +227,7 @@ def solves(
                 results = []
                 order = list(enumerate(versions.values(), 1))
                 for j, (checker, penetrated, clearance) in order[::-1] if new_first else order:
-                    obstacle_module._checker = lambda h, o, c=checker: c  # type: ignore[assignment,misc]
+                    obstacle_module.checker_of = lambda h, o, c=checker: c  # type: ignore[assignment,misc]
                     Obstacle.penetrated, Obstacle.clearance = penetrated, clearance  # type: ignore[method-assign]
                     spent, r = _cpu(solve_ik, hand, t, IKSettings(), obstacle=obj)
                     best[i, j] = min(best[i, j], spent)
@@ -236,7 +236,7 @@ def solves(
                     results[-1] += (r.object_clearance_m,)
                 same &= results[0] == results[1]
     finally:
-        obstacle_module._checker, Obstacle.penetrated, Obstacle.clearance = saved  # type: ignore[method-assign]
+        obstacle_module.checker_of, Obstacle.penetrated, Obstacle.clearance = saved  # type: ignore[method-assign]
     without, with_old, with_new = best.sum(axis=0)
     print(
         f"{obj.name:16s} {len(targets)} sets, best of {repeats}: CPU without {without:.2f} s, "

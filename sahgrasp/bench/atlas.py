@@ -10,10 +10,10 @@ k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are
 sizes in scaled coordinates. Each case reports its best wall time over ``repeats`` builds and the
 CPU time of that build (steadier on a shared machine). The paper's largest atlas, the bottle with
 k = 3 (:data:`PAPER_SCALE_CASES`), is timed once as a whole optimization with the collision checks
-on a worker process beside the build, against the target of 300 s on 2 cores. The S2, S3 and planar cases time the
-wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside it in the same run, the
-one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile` tells where one
-one-chart build's time goes.
+on a worker process beside the build, against the target of 300 s on 2 cores. The S2, S3 and
+planar cases time the wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside it in
+the same run, the one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile`
+tells where one build's time goes.
 """
 
 from __future__ import annotations
