@@ -79,20 +79,25 @@ def _cpu(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]
     return time.process_time() - start, out
 
 
+def _tallied(method: Any, name: str, tally: dict[str, list[float]]) -> Any:
+    """``method`` counting its calls and CPU seconds in ``tally[name]``."""
+
+    def timed(*args: Any, **kw: Any) -> Any:
+        spent, out = _cpu(method, *args, **kw)
+        tally[name][0] += 1
+        tally[name][1] += spent
+        return out
+
+    return timed
+
+
 def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
     stats: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
     originals = {}
     for name, method in vars(HandObjectClearance).items():
         if callable(method) and name not in ("__init__", "links"):
             originals[name] = method
-
-            def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
-                spent, out = _cpu(_m, *args, **kw)
-                stats[_n][0] += 1
-                stats[_n][1] += spent
-                return out
-
-            setattr(HandObjectClearance, name, timed)
+            setattr(HandObjectClearance, name, _tallied(method, name, stats))
     gjk = originals["_gjk"]
 
     def per_link(self: Any, T: Any, g: int) -> Any:  # GJK/EPA calls and CPU by hand link
@@ -249,14 +254,7 @@ def sets(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
     counts: dict[str, list[float]] = defaultdict(lambda: [0, 0.0])
     originals = {n: getattr(HandObjectClearance, n) for n in ("penetrations", "clearance")}
     for name, method in originals.items():
-
-        def timed(*args: Any, _m: Any = method, _n: str = name, **kw: Any) -> Any:
-            spent, out = _cpu(_m, *args, **kw)
-            counts[_n][0] += 1
-            counts[_n][1] += spent
-            return out
-
-        setattr(HandObjectClearance, name, timed)
+        setattr(HandObjectClearance, name, _tallied(method, name, counts))
     rows = []
     try:
         for t in targets:
