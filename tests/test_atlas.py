@@ -258,7 +258,7 @@ def test_polytope_from_all_planes_equals_one_cut_per_plane(seed: int, k: int) ->
     u = rng.normal(size=(20, k))
     u *= (rng.uniform(0.5, 2.0, 20) * r / np.linalg.norm(u, axis=1))[:, None]
     planes, offsets = u.tolist(), (0.5 * np.einsum("ij,ij->i", u, u)).tolist()
-    at_once = Polytope.from_planes(k, r, planes, offsets)
+    at_once = Polytope.from_planes(k, r, planes, offsets, 1e-9 * r)
     one_by_one = Polytope.cube(k, r)
     for a, b in zip(planes, offsets, strict=True):
         one_by_one.cut(a, b, 1e-9 * r)
@@ -281,3 +281,29 @@ def test_import_loads_neither_pinocchio_nor_tqdm() -> None:
         [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True
     )
     assert done.stdout.strip() == "[]"
+
+
+def test_polytope_rejects_bad_input_with_a_clear_error() -> None:
+    with pytest.raises(ValueError, match="k must be"):
+        Polytope.cube(0, 0.1)
+    poly = Polytope.cube(3, 0.1)
+    with pytest.raises(ValueError, match="a must have 3 entries"):
+        poly.cut([1.0, 0.0], 0.05, 1e-10)
+    with pytest.raises(ValueError, match="not one of the polytope's"):
+        poly.index((0.0, 0.0, 0.0))
+    with pytest.raises(IndexError):
+        poly.vertex(8)
+    with pytest.raises(ValueError, match="same length"):
+        Polytope.from_planes(2, 0.1, [[0.1, 0.0]], [], 1e-10)
+
+
+def test_polytope_copy_block_and_index() -> None:
+    poly = Polytope.cube(2, 0.1)
+    assert poly.verts == [(-0.1, -0.1), (0.1, -0.1), (0.1, 0.1), (-0.1, 0.1)]
+    assert poly.masks == [0b1010, 0b1001, 0b0101, 0b0110]  # face 2d+s is x_d = -+r
+    copy = poly.copy()
+    assert copy.cut([1.0, 0.0], 0.05, 1e-10) and not poly.cut([1.0, 0.0], 0.2, 1e-10)
+    assert len(poly) == 4 and max(x for x, _ in copy.verts) == pytest.approx(0.05)
+    poly.block(poly.expandable(0.0))
+    assert poly.blocked == [True, False, False, False] and poly.expandable(0.0) == 1
+    assert poly.index(poly.vertex(2)) == 2 and poly.vertex_norm2(2) == pytest.approx(0.02)

@@ -193,18 +193,16 @@ class _Builder:
         j0 = self.count
         new = np.array([p.x for p in points])
         phis = np.array([p.phi for p in points])
-        found = self.index.query(self.X, j0, new, 2 * self.r)
+        rows, cols = self.index.query(self.X, j0, new, 2 * self.r)
         gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
-        close = (gap * gap).sum(axis=2) < 4 * self.r**2
-        lists = [
-            np.concatenate((f, j0 + np.flatnonzero(close[q, :q]))) for q, f in enumerate(found)
-        ]
+        later, earlier = np.nonzero(np.tril((gap * gap).sum(axis=2) < 4 * self.r**2, -1))
+        # Grouped by new chart: earlier charts (index tree, then its tail), then the same wave.
+        order = np.argsort(np.concatenate((rows, later)), kind="stable")
+        owner = np.concatenate((rows, later))[order]
+        nbrs = np.concatenate((cols, j0 + earlier)).astype(np.int64)[order]
         self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
         if self.new_charts is not None:
             self.new_charts(new)
-        sizes = [len(nbrs) for nbrs in lists]
-        owner = np.repeat(np.arange(len(points)), sizes)
-        nbrs = np.concatenate(lists).astype(np.int64)
         bases, own = self.PHI[nbrs], phis[owner]
         similar = self._similar(bases, own)
         diff = new[owner] - self.X[nbrs]
@@ -273,7 +271,7 @@ class _Builder:
         chart = self.charts[i]
         poly = chart.poly
         if poly is None:
-            poly = Polytope.from_planes(self.k, self.r, chart.planes, chart.offsets)
+            poly = Polytope.from_planes(self.k, self.r, chart.planes, chart.offsets, self.tol)
             chart.poly, chart.planes, chart.offsets = poly, [], []
         return poly
 
@@ -331,8 +329,8 @@ class _Builder:
         ``min_step * r`` failed.
         """
         poly = self._polytope(i)
-        vertex = poly.verts[v]
-        direction = np.array(vertex) / np.sqrt(poly.norm2[v])
+        vertex = poly.vertex(v)
+        direction = np.array(vertex) / np.sqrt(poly.vertex_norm2(v))
         alpha = self.r if alpha is None else alpha
         while alpha >= self.settings.min_step * self.r:
             x_tilde = self.X[i] + self.PHI[i] @ (alpha * direction)  # Eqs. (14), (16)
@@ -348,7 +346,7 @@ class _Builder:
                     self.add_chart(point, i)
                     return True
             alpha *= _SHRINK  # Algorithm 1, line 11
-        poly.blocked[v] = True
+        poly.block(v)
         self.charts[i].boundary = True
         return False
 
@@ -383,8 +381,8 @@ class _Builder:
         s = self.settings
         rows = np.array([i for i, _ in picks])
         polys = [self._polytope(i) for i in rows.tolist()]
-        vertices = [p.verts[v] for p, (_, v) in zip(polys, picks, strict=True)]
-        norms = np.sqrt([p.norm2[v] for p, (_, v) in zip(polys, picks, strict=True)])
+        vertices = [p.vertex(v) for p, (_, v) in zip(polys, picks, strict=True)]
+        norms = np.sqrt([p.vertex_norm2(v) for p, (_, v) in zip(polys, picks, strict=True)])
         directions = np.array(vertices) / norms[:, None]
         phi_all = self.PHI[rows]
         x = self.X[rows] + np.matmul(phi_all, self.r * directions[:, :, None])[:, :, 0]
@@ -447,13 +445,18 @@ class _Builder:
         # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
         # nearer than the picked vertex can create a nearer one.
         closer = (near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])).T.tolist()
+        # Plain lists for the sequential loop: one conversion each instead of one per element.
+        cuts_off, Uc_rows, Bc_rows = off.tolist(), Uc.tolist(), Bc.tolist()
+        parent_list = parents.tolist()
+        gone = [False] * len(parent_list)  # cut off by an accepted centre's plane
         accepted: list[int] = []
-        for q, column in enumerate(off.T.tolist()):
-            if any(column[p] for p in accepted):
+        for q, parent in enumerate(parent_list):
+            if gone[q]:
                 continue
-            planes = [(Uc[p, q].tolist(), float(Bc[p, q])) for p in accepted if closer[q][p]]
-            if not planes or self._still_picked(int(parents[q]), vertices[q], planes) >= 0:
+            planes = [(Uc_rows[p][q], Bc_rows[p][q]) for p in accepted if closer[q][p]]
+            if not planes or self._still_picked(parent, vertices[q], planes) >= 0:
                 accepted.append(q)
+                gone = [g or c for g, c in zip(gone, cuts_off[q], strict=True)]
         return accepted
 
     def _still_picked(
@@ -471,7 +474,7 @@ class _Builder:
                 if 0.5 * b < poly.reach2:
                     poly.cut(a, b, self.tol)
         v = poly.expandable(self.r**2)
-        return v if v >= 0 and poly.verts[v] == vertex else -1
+        return v if v >= 0 and poly.vertex(v) == vertex else -1
 
     def _run_wave(self) -> None:
         """Expand a wave of up to ``batch`` charts: first tries and new charts stacked.
@@ -503,14 +506,14 @@ class _Builder:
             if v < 0:
                 continue
             poly = self._polytope(i)
-            vertex = poly.verts[v]
+            vertex = poly.vertex(v)
             outcome = int(wave.outcome[p])
             if outcome == _NEWTON:
                 c.newton_failures += 1
             elif outcome == _OUTSIDE:
                 if self._cut_by_bounds(i, wave.x[p], vertex):
                     continue
-                v = poly.verts.index(vertex)  # the cut may have renumbered the vertices
+                v = poly.index(vertex)  # the cut may have renumbered the vertices
             else:
                 if outcome == _SINGULAR:
                     self._add_singular(wave.x[p])

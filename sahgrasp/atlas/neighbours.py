@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -21,20 +23,23 @@ class NeighbourIndex:
 
     def query(
         self, points: FloatArray, count: int, xs: FloatArray, radius: float
-    ) -> list[IndexArray]:
-        """Per row of ``xs`` (A, n): indices ``< count`` of ``points`` closer than ``radius``.
+    ) -> tuple[IndexArray, IndexArray]:
+        """Pairs (row of ``xs`` (A, n), index ``< count`` of ``points``) closer than ``radius``.
 
         The k-d tree answers for all rows in one call; the unindexed tail is scanned directly.
+        The tree's pairs come first, then the tail's, each group in row order: a stable sort by
+        row (as :meth:`_Builder.add_charts` makes) lists every row's tree hits, then its tail.
         """
         pending = points[self._n_tree : count][None] - xs[:, None]
-        close = (pending * pending).sum(axis=2) < radius**2
-        tails = [self._n_tree + np.flatnonzero(row) for row in close]
+        rows, cols = np.nonzero((pending * pending).sum(axis=2) < radius**2)
+        cols += self._n_tree
         if self._tree is None:
-            return tails
+            return rows, cols
         found = self._tree.query_ball_point(xs, radius, return_sorted=False)
-        return [
-            np.concatenate((np.asarray(f, np.int64), t)) for f, t in zip(found, tails, strict=True)
-        ]
+        sizes = [len(f) for f in found]
+        hits = np.fromiter(itertools.chain.from_iterable(found), np.int64, sum(sizes))
+        owners = np.repeat(np.arange(len(xs)), sizes)
+        return np.concatenate((owners, rows)), np.concatenate((hits, cols))
 
     def added(self, points: FloatArray, count: int) -> None:
         """Note that ``count`` points exist; rebuild the tree when the unindexed tail is long."""

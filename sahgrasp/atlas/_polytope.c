@@ -1,0 +1,751 @@
+/* Chart domains of the atlas: convex polytopes cut by half-spaces (see polytope.py).
+ *
+ * A chart's polytope has a handful of vertices, and an atlas build cuts polytopes hundreds of
+ * thousands of times, one plane at a time: per-call interpreter overhead, not arithmetic, was
+ * the cost in Python. The arithmetic here is written in the same order as the Python it replaces
+ * (no fused multiply-add: setup.py passes -ffp-contract=off), so that for k = 2 the vertices
+ * are the same doubles.
+ *
+ * Vertex/face incidence is kept as bit masks (one bit per face, WORDS 64-bit words). A cut gives
+ * its new face the lowest bit no kept vertex uses, so bits are reused as faces disappear.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define WORDS 2
+#define MAX_FACES (64 * WORDS)
+
+typedef struct {
+    uint64_t w[WORDS];
+} Mask;
+
+typedef struct {
+    PyObject_HEAD
+    int k;            /* dimension of the parameter space */
+    Py_ssize_t n;     /* vertices */
+    Py_ssize_t cap;   /* allocated vertices */
+    double *verts;    /* n * k coordinates */
+    double *norm2;    /* squared norm of each vertex */
+    Mask *masks;      /* faces through each vertex */
+    char *blocked;    /* a failed expansion marked the vertex */
+    double reach2;    /* largest norm2 */
+} Polytope;
+
+static PyTypeObject PolytopeType;
+
+/* -- masks ----------------------------------------------------------------------------------- */
+
+static int mask_popcount(Mask m) {
+    int count = 0;
+    for (int i = 0; i < WORDS; i++) {
+        uint64_t x = m.w[i];
+        x = x - ((x >> 1) & 0x5555555555555555ULL);
+        x = (x & 0x3333333333333333ULL) + ((x >> 2) & 0x3333333333333333ULL);
+        x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0FULL;
+        count += (int)((x * 0x0101010101010101ULL) >> 56);
+    }
+    return count;
+}
+
+static Mask mask_and(Mask a, Mask b) {
+    Mask m;
+    for (int i = 0; i < WORDS; i++) m.w[i] = a.w[i] & b.w[i];
+    return m;
+}
+
+static Mask mask_or(Mask a, Mask b) {
+    Mask m;
+    for (int i = 0; i < WORDS; i++) m.w[i] = a.w[i] | b.w[i];
+    return m;
+}
+
+static Mask mask_bit(int bit) {
+    Mask m = {{0}};
+    m.w[bit / 64] = (uint64_t)1 << (bit % 64);
+    return m;
+}
+
+/* The lowest bit that ``used`` does not hold; -1 (with an exception set) if all are held. */
+static int lowest_free_bit(Mask used, Mask *bit) {
+    for (int i = 0; i < WORDS; i++) {
+        if (~used.w[i]) {
+            Mask m = {{0}};
+            m.w[i] = ~used.w[i] & (used.w[i] + 1);
+            *bit = m;
+            return 0;
+        }
+    }
+    PyErr_Format(PyExc_ValueError, "a polytope may have at most %d faces", MAX_FACES);
+    return -1;
+}
+
+/* -- storage --------------------------------------------------------------------------------- */
+
+static Polytope *poly_new(int k, Py_ssize_t cap) {
+    Polytope *p = PyObject_New(Polytope, &PolytopeType);
+    if (p == NULL) return NULL;
+    if (cap < 1) cap = 1;
+    p->k = k;
+    p->n = 0;
+    p->cap = cap;
+    p->verts = PyMem_Malloc(sizeof(double) * (size_t)(cap * k));
+    p->norm2 = PyMem_Malloc(sizeof(double) * (size_t)cap);
+    p->masks = PyMem_Malloc(sizeof(Mask) * (size_t)cap);
+    p->blocked = PyMem_Malloc((size_t)cap);
+    p->reach2 = 0.0;
+    if (!p->verts || !p->norm2 || !p->masks || !p->blocked) {
+        Py_DECREF(p);
+        PyErr_NoMemory();
+        return NULL;
+    }
+    return p;
+}
+
+static void poly_dealloc(Polytope *p) {
+    PyMem_Free(p->verts);
+    PyMem_Free(p->norm2);
+    PyMem_Free(p->masks);
+    PyMem_Free(p->blocked);
+    PyObject_Free(p);
+}
+
+static int poly_reserve(Polytope *p, Py_ssize_t cap) {
+    if (cap <= p->cap) return 0;
+    if (cap < 2 * p->cap) cap = 2 * p->cap;
+    double *verts = PyMem_Realloc(p->verts, sizeof(double) * (size_t)(cap * p->k));
+    if (verts) p->verts = verts;
+    double *norm2 = PyMem_Realloc(p->norm2, sizeof(double) * (size_t)cap);
+    if (norm2) p->norm2 = norm2;
+    Mask *masks = PyMem_Realloc(p->masks, sizeof(Mask) * (size_t)cap);
+    if (masks) p->masks = masks;
+    char *blocked = PyMem_Realloc(p->blocked, (size_t)cap);
+    if (blocked) p->blocked = blocked;
+    if (!verts || !norm2 || !masks || !blocked) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    p->cap = cap;
+    return 0;
+}
+
+/* Append a vertex (norm2 computed left to right, as Python's sum of products). */
+static int poly_push(Polytope *p, const double *v, Mask mask, char blocked) {
+    if (poly_reserve(p, p->n + 1) < 0) return -1;
+    double *dst = p->verts + p->n * p->k, norm2 = 0.0;
+    for (int d = 0; d < p->k; d++) {
+        dst[d] = v[d];
+        norm2 += v[d] * v[d];
+    }
+    p->norm2[p->n] = norm2;
+    p->masks[p->n] = mask;
+    p->blocked[p->n] = blocked;
+    p->n++;
+    return 0;
+}
+
+/* Copy vertex i of src, with its norm2, onto the end of dst. */
+static int poly_push_from(Polytope *dst, const Polytope *src, Py_ssize_t i, Mask mask) {
+    if (poly_reserve(dst, dst->n + 1) < 0) return -1;
+    memcpy(dst->verts + dst->n * dst->k, src->verts + i * src->k, sizeof(double) * src->k);
+    dst->norm2[dst->n] = src->norm2[i];
+    dst->masks[dst->n] = mask;
+    dst->blocked[dst->n] = src->blocked[i];
+    dst->n++;
+    return 0;
+}
+
+static int poly_finish(Polytope *p) {
+    if (p->n == 0) {
+        PyErr_SetString(PyExc_ValueError, "a cut removed every vertex of the polytope");
+        return -1;
+    }
+    double reach2 = p->norm2[0];
+    for (Py_ssize_t i = 1; i < p->n; i++)
+        if (p->norm2[i] > reach2) reach2 = p->norm2[i];
+    p->reach2 = reach2;
+    return 0;
+}
+
+/* Move the vertices of src into p (src is emptied and freed). */
+static void poly_take(Polytope *p, Polytope *src) {
+    double *verts = p->verts, *norm2 = p->norm2;
+    Mask *masks = p->masks;
+    char *blocked = p->blocked;
+    p->verts = src->verts;
+    p->norm2 = src->norm2;
+    p->masks = src->masks;
+    p->blocked = src->blocked;
+    p->n = src->n;
+    p->cap = src->cap;
+    p->reach2 = src->reach2;
+    src->verts = verts;
+    src->norm2 = norm2;
+    src->masks = masks;
+    src->blocked = blocked;
+    Py_DECREF(src);
+}
+
+/* -- arguments ------------------------------------------------------------------------------- */
+
+/* Read ``k`` floats of a sequence into out; -1 with an exception if it is not that. */
+static int read_vector(PyObject *seq, int k, double *out, const char *what) {
+    PyObject *fast = PySequence_Fast(seq, what);
+    if (fast == NULL) return -1;
+    if (PySequence_Fast_GET_SIZE(fast) != k) {
+        PyErr_Format(PyExc_ValueError, "%s must have %d entries, got %zd", what, k,
+                     PySequence_Fast_GET_SIZE(fast));
+        Py_DECREF(fast);
+        return -1;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(fast);
+    for (int d = 0; d < k; d++) {
+        out[d] = PyFloat_AsDouble(items[d]);
+        if (out[d] == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fast);
+            return -1;
+        }
+    }
+    Py_DECREF(fast);
+    return 0;
+}
+
+/* -- cuts ------------------------------------------------------------------------------------ */
+
+/* Signed distances a . v - b of every vertex into d; returns the largest. */
+static double distances(const Polytope *p, const double *a, double b, double *d) {
+    double largest = -INFINITY;
+    for (Py_ssize_t i = 0; i < p->n; i++) {
+        const double *v = p->verts + i * p->k;
+        double s = 0.0;
+        for (int c = 0; c < p->k; c++) s += a[c] * v[c];
+        d[i] = s - b;
+        if (d[i] > largest) largest = d[i];
+    }
+    return largest;
+}
+
+static int face_bit(const Polytope *p, const double *d, double tol, Mask *bit) {
+    Mask used = {{0}};
+    for (Py_ssize_t i = 0; i < p->n; i++)
+        if (d[i] <= tol) used = mask_or(used, p->masks[i]);
+    return lowest_free_bit(used, bit);
+}
+
+/* General cut: every edge (two vertices sharing k - 1 faces) from a vertex strictly inside to a
+ * removed one gives a new vertex on the plane. Returns 1 if something was removed, 0 if not, -1
+ * on error. */
+static int cut_general(Polytope *p, const double *a, double b, double tol, double *d) {
+    if (distances(p, a, b, d) <= tol) return 0;
+    Mask bit;
+    if (face_bit(p, d, tol, &bit) < 0) return -1;
+    Polytope *out = poly_new(p->k, p->n + 4);
+    if (out == NULL) return -1;
+    for (Py_ssize_t i = 0; i < p->n; i++) {
+        if (d[i] > tol) continue;
+        Mask m = d[i] >= -tol ? mask_or(p->masks[i], bit) : p->masks[i];
+        if (poly_push_from(out, p, i, m) < 0) goto fail;
+    }
+    int k1 = p->k - 1;
+    double *v = PyMem_Malloc(sizeof(double) * p->k);
+    if (v == NULL) {
+        PyErr_NoMemory();
+        goto fail;
+    }
+    for (Py_ssize_t i = 0; i < p->n; i++) {
+        if (d[i] > tol || d[i] >= -tol) continue;
+        const double *vi = p->verts + i * p->k;
+        for (Py_ssize_t o = 0; o < p->n; o++) {
+            if (d[o] <= tol) continue;
+            Mask shared = mask_and(p->masks[i], p->masks[o]);
+            if (mask_popcount(shared) < k1) continue;
+            double t = d[i] / (d[i] - d[o]);
+            const double *vo = p->verts + o * p->k;
+            for (int c = 0; c < p->k; c++) v[c] = vi[c] + t * (vo[c] - vi[c]);
+            if (poly_push(out, v, mask_or(shared, bit), 0) < 0) {
+                PyMem_Free(v);
+                goto fail;
+            }
+        }
+    }
+    PyMem_Free(v);
+    if (poly_finish(out) < 0) goto fail;
+    poly_take(p, out);
+    return 1;
+fail:
+    Py_DECREF(out);
+    return -1;
+}
+
+/* Cut of a polygon whose vertices go round counter-clockwise: one pass round its edges keeps
+ * the order. An edge from a vertex strictly inside to one strictly outside (or back) gives a new
+ * vertex, computed from the inner end as cut_general does. */
+static int clip(Polytope *p, const double *a, double b, double tol, double *d) {
+    double largest = -INFINITY;
+    for (Py_ssize_t i = 0; i < p->n; i++) {
+        d[i] = a[0] * p->verts[2 * i] + a[1] * p->verts[2 * i + 1] - b;
+        if (d[i] > largest) largest = d[i];
+    }
+    if (largest <= tol) return 0;
+    Mask bit;
+    if (face_bit(p, d, tol, &bit) < 0) return -1;
+    Polytope *out = poly_new(2, p->n + 2);
+    if (out == NULL) return -1;
+    for (Py_ssize_t i = 0; i < p->n; i++) {
+        Py_ssize_t j = i + 1 < p->n ? i + 1 : 0;
+        double di = d[i], dj = d[j];
+        if (di <= tol) {
+            Mask m = di >= -tol ? mask_or(p->masks[i], bit) : p->masks[i];
+            if (poly_push_from(out, p, i, m) < 0) goto fail;
+        }
+        if ((di < -tol && dj > tol) || (di > tol && dj < -tol)) {
+            Py_ssize_t inner = di < 0 ? i : j, outer = di < 0 ? j : i;
+            double t = di < 0 ? di / (di - dj) : dj / (dj - di);
+            const double *q0 = p->verts + 2 * inner, *q1 = p->verts + 2 * outer;
+            double v[2] = {q0[0] + t * (q1[0] - q0[0]), q0[1] + t * (q1[1] - q0[1])};
+            Mask m = mask_or(mask_and(p->masks[i], p->masks[j]), bit);
+            if (poly_push(out, v, m, 0) < 0) goto fail;
+        }
+    }
+    if (poly_finish(out) < 0) goto fail;
+    poly_take(p, out);
+    return 1;
+fail:
+    Py_DECREF(out);
+    return -1;
+}
+
+static int poly_cut(Polytope *p, const double *a, double b, double tol) {
+    double small[64];
+    double *d = p->n <= 64 ? small : PyMem_Malloc(sizeof(double) * p->n);
+    if (d == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    int removed = p->k == 2 ? clip(p, a, b, tol, d) : cut_general(p, a, b, tol, d);
+    if (d != small) PyMem_Free(d);
+    return removed;
+}
+
+/* -- construction ---------------------------------------------------------------------------- */
+
+static Polytope *cube(int k, double r) {
+    if (k < 1 || 2 * k > MAX_FACES) {
+        PyErr_Format(PyExc_ValueError, "k must be in [1, %d], got %d", MAX_FACES / 2, k);
+        return NULL;
+    }
+    Py_ssize_t count = (Py_ssize_t)1 << k;
+    Polytope *p = poly_new(k, count);
+    if (p == NULL) return NULL;
+    /* itertools.product((-r, r), repeat=k) order; k = 2 goes counter-clockwise instead. */
+    static const Py_ssize_t square[4] = {0, 2, 3, 1};
+    double *v = PyMem_Malloc(sizeof(double) * k);
+    if (v == NULL) {
+        Py_DECREF(p);
+        PyErr_NoMemory();
+        return NULL;
+    }
+    for (Py_ssize_t n = 0; n < count; n++) {
+        Py_ssize_t code = k == 2 ? square[n] : n;
+        Mask mask = {{0}};
+        for (int d = 0; d < k; d++) {
+            int negative = !((code >> (k - 1 - d)) & 1);
+            v[d] = negative ? -r : r;
+            mask = mask_or(mask, mask_bit(2 * d + negative));
+        }
+        if (poly_push(p, v, mask, 0) < 0) {
+            PyMem_Free(v);
+            Py_DECREF(p);
+            return NULL;
+        }
+    }
+    PyMem_Free(v);
+    poly_finish(p);
+    return p;
+}
+
+typedef struct {
+    double x, y;
+    Py_ssize_t index;
+} DualPoint;
+
+static int dual_order(const void *pa, const void *pb) {
+    const DualPoint *a = pa, *b = pb;
+    if (a->x != b->x) return a->x < b->x ? -1 : 1;
+    if (a->y != b->y) return a->y < b->y ? -1 : 1;
+    return a->index < b->index ? -1 : (a->index > b->index);
+}
+
+/* One half of Andrew's monotone chain over pts[from], pts[from + step], ...: hull points turning
+ * strictly left, written into out; returns their count. */
+static Py_ssize_t chain(const DualPoint *pts, Py_ssize_t n, int reverse, Py_ssize_t *out) {
+    Py_ssize_t m = 0;
+    for (Py_ssize_t s = 0; s < n; s++) {
+        Py_ssize_t i = reverse ? n - 1 - s : s;
+        double x = pts[i].x, y = pts[i].y;
+        while (m >= 2) {
+            const DualPoint *A = &pts[out[m - 2]], *B = &pts[out[m - 1]];
+            if ((B->x - A->x) * (y - A->y) - (B->y - A->y) * (x - A->x) > 0) break;
+            m--;
+        }
+        out[m++] = i;
+    }
+    return m;
+}
+
+/* Polygon {w : p . w <= 1 for p in dual}: consecutive points of the dual hull give its vertices,
+ * counter-clockwise round the origin. */
+static Polytope *from_dual_polygon(DualPoint *pts, Py_ssize_t n) {
+    qsort(pts, (size_t)n, sizeof(DualPoint), dual_order);
+    Py_ssize_t *lower = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)(2 * n + 2));
+    if (lower == NULL) return (Polytope *)PyErr_NoMemory();
+    Py_ssize_t *upper = lower + n + 1;
+    Py_ssize_t nl = chain(pts, n, 0, lower), nu = chain(pts, n, 1, upper);
+    Py_ssize_t m = (nl - 1) + (nu - 1);
+    if (m > MAX_FACES || m < 3) {
+        PyMem_Free(lower);
+        PyErr_Format(PyExc_ValueError, "a polygon must have 3 to %d edges, got %zd", MAX_FACES, m);
+        return NULL;
+    }
+    Py_ssize_t hull[MAX_FACES];
+    for (Py_ssize_t e = 0; e < nl - 1; e++) hull[e] = lower[e];
+    for (Py_ssize_t e = 0; e < nu - 1; e++) hull[nl - 1 + e] = upper[e];
+    PyMem_Free(lower);
+    Polytope *p = poly_new(2, m);
+    if (p == NULL) return NULL;
+    for (Py_ssize_t e = 0; e < m; e++) {
+        const DualPoint *s = &pts[hull[e]], *t = &pts[hull[e + 1 < m ? e + 1 : 0]];
+        double det = s->x * t->y - s->y * t->x; /* the vertex solves s . v = t . v = 1 */
+        if (det == 0.0) {
+            Py_DECREF(p);
+            PyErr_SetString(PyExc_ValueError, "degenerate polygon: two planes are parallel");
+            return NULL;
+        }
+        double v[2] = {(t->y - s->y) / det, (s->x - t->x) / det};
+        /* face bits by position round the hull: vertex e lies on faces e and e + 1 */
+        poly_push(p, v, mask_or(mask_bit((int)e), mask_bit((int)((e + 1) % m))), 0);
+    }
+    poly_finish(p);
+    return p;
+}
+
+static int read_planes(PyObject *planes, PyObject *offsets, int k, double **a, double **b,
+                       Py_ssize_t *count) {
+    PyObject *fp = PySequence_Fast(planes, "planes must be a sequence");
+    if (fp == NULL) return -1;
+    PyObject *fo = PySequence_Fast(offsets, "offsets must be a sequence");
+    if (fo == NULL) {
+        Py_DECREF(fp);
+        return -1;
+    }
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fp);
+    int status = -1;
+    *a = NULL;
+    *b = NULL;
+    if (PySequence_Fast_GET_SIZE(fo) != n) {
+        PyErr_SetString(PyExc_ValueError, "planes and offsets must have the same length");
+        goto done;
+    }
+    *a = PyMem_Malloc(sizeof(double) * (size_t)(n * k + 1));
+    *b = PyMem_Malloc(sizeof(double) * (size_t)(n + 1));
+    if (*a == NULL || *b == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    for (Py_ssize_t h = 0; h < n; h++) {
+        if (read_vector(PySequence_Fast_GET_ITEM(fp, h), k, *a + h * k, "a plane") < 0) goto done;
+        (*b)[h] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fo, h));
+        if ((*b)[h] == -1.0 && PyErr_Occurred()) goto done;
+    }
+    *count = n;
+    status = 0;
+done:
+    if (status < 0) {
+        PyMem_Free(*a);
+        PyMem_Free(*b);
+        *a = *b = NULL;
+    }
+    Py_DECREF(fp);
+    Py_DECREF(fo);
+    return status;
+}
+
+/* -- Python methods -------------------------------------------------------------------------- */
+
+static PyObject *Polytope_cube(PyObject *cls, PyObject *args) {
+    int k;
+    double r;
+    if (!PyArg_ParseTuple(args, "id:cube", &k, &r)) return NULL;
+    return (PyObject *)cube(k, r);
+}
+
+static PyObject *Polytope_from_planes(PyObject *cls, PyObject *args) {
+    int k;
+    double r, tol;
+    PyObject *planes, *offsets;
+    if (!PyArg_ParseTuple(args, "idOOd:from_planes", &k, &r, &planes, &offsets, &tol)) return NULL;
+    if (k < 1 || 2 * k > MAX_FACES) {
+        PyErr_Format(PyExc_ValueError, "k must be in [1, %d], got %d", MAX_FACES / 2, k);
+        return NULL;
+    }
+    double *a, *b;
+    Py_ssize_t n;
+    if (read_planes(planes, offsets, k, &a, &b, &n) < 0) return NULL;
+    Polytope *p = NULL;
+    if (k == 2) {
+        DualPoint *pts = PyMem_Malloc(sizeof(DualPoint) * (size_t)(n + 4));
+        if (pts == NULL) {
+            PyErr_NoMemory();
+        } else {
+            double inv = 1.0 / r;
+            const double cube_dual[4][2] = {{inv, 0.0}, {-inv, 0.0}, {0.0, inv}, {0.0, -inv}};
+            for (Py_ssize_t h = 0; h < 4; h++)
+                pts[h] = (DualPoint){cube_dual[h][0], cube_dual[h][1], h};
+            for (Py_ssize_t h = 0; h < n; h++)
+                pts[4 + h] = (DualPoint){a[2 * h] / b[h], a[2 * h + 1] / b[h], 4 + h};
+            p = from_dual_polygon(pts, n + 4);
+            PyMem_Free(pts);
+        }
+    } else {
+        p = cube(k, r);
+        for (Py_ssize_t h = 0; p != NULL && h < n; h++) {
+            if (poly_cut(p, a + h * k, b[h], tol) < 0) Py_CLEAR(p);
+        }
+    }
+    PyMem_Free(a);
+    PyMem_Free(b);
+    return (PyObject *)p;
+}
+
+static PyObject *Polytope_copy(Polytope *self, PyObject *unused) {
+    Polytope *p = poly_new(self->k, self->n);
+    if (p == NULL) return NULL;
+    memcpy(p->verts, self->verts, sizeof(double) * (size_t)(self->n * self->k));
+    memcpy(p->norm2, self->norm2, sizeof(double) * (size_t)self->n);
+    memcpy(p->masks, self->masks, sizeof(Mask) * (size_t)self->n);
+    memcpy(p->blocked, self->blocked, (size_t)self->n);
+    p->n = self->n;
+    p->reach2 = self->reach2;
+    return (PyObject *)p;
+}
+
+static PyObject *Polytope_expandable(Polytope *self, PyObject *arg) {
+    double r2 = PyFloat_AsDouble(arg);
+    if (r2 == -1.0 && PyErr_Occurred()) return NULL;
+    double best = INFINITY;
+    Py_ssize_t v = -1;
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        double n2 = self->norm2[i];
+        if (r2 <= n2 && n2 < best && !self->blocked[i]) {
+            best = n2;
+            v = i;
+        }
+    }
+    return PyLong_FromSsize_t(v);
+}
+
+static PyObject *Polytope_cut(Polytope *self, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 3) {
+        PyErr_SetString(PyExc_TypeError, "cut(a, b, tol) takes 3 arguments");
+        return NULL;
+    }
+    double a[MAX_FACES / 2];
+    if (read_vector(args[0], self->k, a, "a") < 0) return NULL;
+    double b = PyFloat_AsDouble(args[1]), tol = PyFloat_AsDouble(args[2]);
+    if (PyErr_Occurred()) return NULL;
+    int removed = poly_cut(self, a, b, tol);
+    if (removed < 0) return NULL;
+    return PyBool_FromLong(removed);
+}
+
+static int vertex_index(Polytope *self, PyObject *arg, Py_ssize_t *i) {
+    *i = PyLong_AsSsize_t(arg);
+    if (*i == -1 && PyErr_Occurred()) return -1;
+    if (*i < 0 || *i >= self->n) {
+        PyErr_Format(PyExc_IndexError, "vertex %zd of a polytope with %zd", *i, self->n);
+        return -1;
+    }
+    return 0;
+}
+
+static PyObject *vertex_tuple(const Polytope *self, Py_ssize_t i) {
+    PyObject *t = PyTuple_New(self->k);
+    if (t == NULL) return NULL;
+    for (int d = 0; d < self->k; d++) {
+        PyObject *x = PyFloat_FromDouble(self->verts[i * self->k + d]);
+        if (x == NULL) {
+            Py_DECREF(t);
+            return NULL;
+        }
+        PyTuple_SET_ITEM(t, d, x);
+    }
+    return t;
+}
+
+static PyObject *Polytope_vertex(Polytope *self, PyObject *arg) {
+    Py_ssize_t i;
+    if (vertex_index(self, arg, &i) < 0) return NULL;
+    return vertex_tuple(self, i);
+}
+
+static PyObject *Polytope_vertex_norm2(Polytope *self, PyObject *arg) {
+    Py_ssize_t i;
+    if (vertex_index(self, arg, &i) < 0) return NULL;
+    return PyFloat_FromDouble(self->norm2[i]);
+}
+
+static PyObject *Polytope_block(Polytope *self, PyObject *arg) {
+    Py_ssize_t i;
+    if (vertex_index(self, arg, &i) < 0) return NULL;
+    self->blocked[i] = 1;
+    Py_RETURN_NONE;
+}
+
+static PyObject *Polytope_index(Polytope *self, PyObject *arg) {
+    double v[MAX_FACES / 2];
+    if (read_vector(arg, self->k, v, "vertex") < 0) return NULL;
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        const double *w = self->verts + i * self->k;
+        int d = 0;
+        while (d < self->k && w[d] == v[d]) d++;
+        if (d == self->k) return PyLong_FromSsize_t(i);
+    }
+    PyErr_SetString(PyExc_ValueError, "the vertex is not one of the polytope's");
+    return NULL;
+}
+
+static PyObject *Polytope_get_verts(Polytope *self, void *closure) {
+    PyObject *list = PyList_New(self->n);
+    if (list == NULL) return NULL;
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        PyObject *t = vertex_tuple(self, i);
+        if (t == NULL) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, i, t);
+    }
+    return list;
+}
+
+static PyObject *Polytope_get_masks(Polytope *self, void *closure) {
+    PyObject *list = PyList_New(self->n);
+    if (list == NULL) return NULL;
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        PyObject *value = PyLong_FromUnsignedLongLong(self->masks[i].w[WORDS - 1]);
+        for (int w = WORDS - 2; value != NULL && w >= 0; w--) {
+            PyObject *shift = PyLong_FromLong(64), *low = PyLong_FromUnsignedLongLong(self->masks[i].w[w]);
+            PyObject *high = shift ? PyNumber_Lshift(value, shift) : NULL;
+            Py_DECREF(value);
+            value = high && low ? PyNumber_Or(high, low) : NULL;
+            Py_XDECREF(shift);
+            Py_XDECREF(low);
+            Py_XDECREF(high);
+        }
+        if (value == NULL) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, i, value);
+    }
+    return list;
+}
+
+static PyObject *Polytope_get_norm2(Polytope *self, void *closure) {
+    PyObject *list = PyList_New(self->n);
+    if (list == NULL) return NULL;
+    for (Py_ssize_t i = 0; i < self->n; i++) {
+        PyObject *x = PyFloat_FromDouble(self->norm2[i]);
+        if (x == NULL) {
+            Py_DECREF(list);
+            return NULL;
+        }
+        PyList_SET_ITEM(list, i, x);
+    }
+    return list;
+}
+
+static PyObject *Polytope_get_blocked(Polytope *self, void *closure) {
+    PyObject *list = PyList_New(self->n);
+    if (list == NULL) return NULL;
+    for (Py_ssize_t i = 0; i < self->n; i++) PyList_SET_ITEM(list, i, PyBool_FromLong(self->blocked[i]));
+    return list;
+}
+
+static PyObject *Polytope_get_reach2(Polytope *self, void *closure) {
+    return PyFloat_FromDouble(self->reach2);
+}
+
+static PyObject *Polytope_get_k(Polytope *self, void *closure) { return PyLong_FromLong(self->k); }
+
+static Py_ssize_t Polytope_len(Polytope *self) { return self->n; }
+
+static PyMethodDef Polytope_methods[] = {
+    {"cube", (PyCFunction)Polytope_cube, METH_VARARGS | METH_CLASS,
+     "cube(k, r): the k-cube [-r, r]^k; face 2d+s is x_d = -+r (k = 2: counter-clockwise)."},
+    {"from_planes", (PyCFunction)Polytope_from_planes, METH_VARARGS | METH_CLASS,
+     "from_planes(k, r, planes, offsets, tol): the cube [-r, r]^k cut by every half-space\n"
+     "planes[h] . w <= offsets[h] (> 0); k = 2 through the dual polygon, otherwise one cut per\n"
+     "plane in order."},
+    {"copy", (PyCFunction)Polytope_copy, METH_NOARGS, "An independent copy."},
+    {"expandable", (PyCFunction)Polytope_expandable, METH_O,
+     "expandable(r2): index of the nearest unblocked vertex with squared norm >= r2, or -1."},
+    {"cut", (PyCFunction)(void (*)(void))Polytope_cut, METH_FASTCALL,
+     "cut(a, b, tol): intersect with a . w <= b; True when a vertex was removed."},
+    {"vertex", (PyCFunction)Polytope_vertex, METH_O, "vertex(i): vertex i as a tuple."},
+    {"vertex_norm2", (PyCFunction)Polytope_vertex_norm2, METH_O,
+     "vertex_norm2(i): squared norm of vertex i."},
+    {"block", (PyCFunction)Polytope_block, METH_O, "block(i): mark vertex i as blocked."},
+    {"index", (PyCFunction)Polytope_index, METH_O,
+     "index(vertex): index of the vertex equal to the given one; ValueError if none."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef Polytope_getset[] = {
+    {"verts", (getter)Polytope_get_verts, NULL, "Vertices, a list of tuples.", NULL},
+    {"masks", (getter)Polytope_get_masks, NULL, "Faces through each vertex, as int bit masks.", NULL},
+    {"norm2", (getter)Polytope_get_norm2, NULL, "Squared norm of each vertex.", NULL},
+    {"blocked", (getter)Polytope_get_blocked, NULL, "Blocked flag of each vertex.", NULL},
+    {"reach2", (getter)Polytope_get_reach2, NULL, "Largest squared vertex norm.", NULL},
+    {"k", (getter)Polytope_get_k, NULL, "Dimension.", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+static PySequenceMethods Polytope_as_sequence = {
+    .sq_length = (lenfunc)Polytope_len,
+};
+
+static PyTypeObject PolytopeType = {
+    PyVarObject_HEAD_INIT(NULL, 0)
+    .tp_name = "sahgrasp.atlas._polytope.Polytope",
+    .tp_doc = "Convex polytope in a chart's parameter space (vertices and face masks).",
+    .tp_basicsize = sizeof(Polytope),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_dealloc = (destructor)poly_dealloc,
+    .tp_methods = Polytope_methods,
+    .tp_getset = Polytope_getset,
+    .tp_as_sequence = &Polytope_as_sequence,
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT,
+    .m_name = "sahgrasp.atlas._polytope",
+    .m_doc = "Compiled chart polytopes of the atlas builder.",
+    .m_size = -1,
+};
+
+PyMODINIT_FUNC PyInit__polytope(void) {
+    if (PyType_Ready(&PolytopeType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL) return NULL;
+    Py_INCREF(&PolytopeType);
+    if (PyModule_AddObject(m, "Polytope", (PyObject *)&PolytopeType) < 0) {
+        Py_DECREF(&PolytopeType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    PyModule_AddIntConstant(m, "MAX_FACES", MAX_FACES);
+    return m;
+}
