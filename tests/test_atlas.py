@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 from dataclasses import fields
@@ -307,3 +308,37 @@ def test_polytope_copy_block_and_index() -> None:
     poly.block(poly.expandable(0.0))
     assert poly.blocked == [True, False, False, False] and poly.expandable(0.0) == 1
     assert poly.index(poly.vertex(2)) == 2 and poly.vertex_norm2(2) == pytest.approx(0.02)
+
+
+def _brute_force_vertices(k: int, r: float, planes: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Vertices of ``{|w_d| <= r, planes @ w <= offsets}``: every k tight constraints, solved."""
+    A = np.concatenate((np.eye(k), -np.eye(k), planes))
+    b = np.concatenate((np.full(2 * k, r), offsets))
+    found = []
+    for rows in itertools.combinations(range(len(A)), k):
+        M = A[list(rows)]
+        if abs(np.linalg.det(M)) < 1e-12:
+            continue
+        w = np.linalg.solve(M, b[list(rows)])
+        if (A @ w <= b + 1e-12).all():
+            found.append(w)
+    return np.unique(np.round(np.array(found), 12), axis=0)
+
+
+@pytest.mark.parametrize("k", [2, 3])
+@pytest.mark.parametrize("seed", range(6))
+def test_polytope_cuts_give_the_brute_force_vertices(seed: int, k: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    r = 0.1
+    u = rng.normal(size=(8, k))
+    u *= (rng.uniform(0.6, 1.9, 8) * r / np.linalg.norm(u, axis=1))[:, None]
+    offsets = 0.5 * np.einsum("ij,ij->i", u, u)
+    poly = Polytope.cube(k, r)
+    for a, b in zip(u.tolist(), offsets.tolist(), strict=True):
+        poly.cut(a, b, 1e-9 * r)
+    expected = _brute_force_vertices(k, r, u, offsets)
+    got = np.array(poly.verts)
+    assert len(got) == len(expected)
+    gap, _ = cKDTree(expected).query(got)
+    assert gap.max() <= 1e-12
+    assert poly.reach2 == pytest.approx(float((expected**2).sum(axis=1).max()))
