@@ -8,7 +8,6 @@ reach out of the solid by no more than the chord (revolved) or merge (mesh) tole
 from __future__ import annotations
 
 import functools
-import math
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +16,7 @@ import trimesh
 from numpy.typing import NDArray
 
 from sahgrasp.objects import load_object
-from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
+from sahgrasp.objects.collision import CollisionShape, signed_distances
 from sahgrasp.objects.mesh_file import MERGE_TOLERANCE_M, MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count
 from sahgrasp.objects.solids import COLLISION_SAGITTA_M, RevolvedSolid, _bands, _slabs
@@ -31,7 +30,9 @@ def _band_pieces(solid: RevolvedSolid) -> list[CollisionShape]:
     n_sectors = chord_count(solid._turn_rad, solid._max_radius_m, COLLISION_SAGITTA_M)
     angles = np.linspace(*solid.angle_range_rad, n_sectors + 1)
     return [
-        solid._hull(band, angles[k : k + 2]) for band in _bands(solid.profile) for k in range(n_sectors)
+        solid._hull(band, angles[k : k + 2])
+        for band in _bands(solid.profile)
+        for k in range(n_sectors)
     ]
 
 
@@ -76,7 +77,9 @@ def test_slab_sections_are_convex_and_cover_the_bands() -> None:
                 edges = np.roll(ring, -1, axis=0) - ring
                 turns = edges[:, 0] * np.roll(edges, -1, axis=0)[:, 1]
                 turns -= edges[:, 1] * np.roll(edges, -1, axis=0)[:, 0]
-                lengths = np.linalg.norm(edges, axis=1) * np.linalg.norm(np.roll(edges, -1, 0), axis=1)
+                lengths = np.linalg.norm(edges, axis=1) * np.linalg.norm(
+                    np.roll(edges, -1, 0), axis=1
+                )
                 keep = lengths > 0
                 assert np.all(turns[keep] / lengths[keep] > -1e-9), (obj_name, solid.name)
 
@@ -110,9 +113,9 @@ def test_merged_prisms_hold_every_prism_and_stay_in_the_mesh(name: str) -> None:
     # The pieces' surfaces: outside the mesh by no more than the merge tolerance (+ EPA's).
     samples = np.vstack(
         [
-            trimesh.sample.sample_surface(
-                trimesh.convex.convex_hull(_points(p)), 30, seed=int(k)
-            )[0]
+            trimesh.sample.sample_surface(trimesh.convex.convex_hull(_points(p)), 30, seed=int(k))[
+                0
+            ]
             for k, p in enumerate(pieces)
         ]
     )
@@ -132,8 +135,8 @@ def _points(piece: CollisionShape) -> NDArray[np.float64]:
     return np.asarray(piece.geometry.points(), dtype=np.float64) + piece.placement[:3, 3]
 
 
-def test_a_hull_across_a_cavity_is_refused() -> None:
-    """The mug's whole hull fills its cavity: a prism pair across it does not merge."""
-    solid = _mesh("mug.stl")
-    whole = convex_hull(solid.vertices_m)
-    assert not any(math.isclose(whole.bounding_radius_m, p.bounding_radius_m) for p in solid.collision_shapes())
+def test_the_mug_cavity_and_handle_gap_stay_empty() -> None:
+    """Hulls across the cavity or the handle's gap are refused: those points stay outside."""
+    pieces = _mesh("mug.stl").collision_shapes()
+    cavity, gap = [0.0, 0.0, 0.05], [0.0, 0.052, 0.05]  # mid-cavity; between wall and handle
+    assert np.all(signed_distances(pieces, IDENTITY, [cavity, gap]) > 5e-3)
