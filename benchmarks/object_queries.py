@@ -27,7 +27,9 @@ with the benchmark's per-object seed), solves each without and then with the obj
 * ``finer``: every solution claimed with the object, re-checked as the grasp benchmark does
   (``ObjectPenetration``, links other than the contact tips deeper than 0.2 mm) against the
   finer pieces the joined ones replaced (one per band sector of a revolved solid, one prism per
-  mesh triangle): whether joining the pieces let a solution through the finer geometry.
+  mesh triangle): whether joining the pieces let a solution through the finer geometry;
+* ``pieces``: the queries the IK made (with the joined pieces), timed with a checker of the
+  finer pieces and one of the joined pieces, query by query alternating, best of ``--repeats``.
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
@@ -36,6 +38,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
     python benchmarks/object_queries.py alone --sets 100 --objects coffee_cup
     python benchmarks/object_queries.py verdicts --sets 20
     python benchmarks/object_queries.py finer --sets 200 --objects coffee_cup can mesh:mug.stl
+    python benchmarks/object_queries.py pieces --sets 40 --repeats 3
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
 the mug and the bottle meshes).
@@ -368,15 +371,36 @@ def finer(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
     )
 
 
+def pieces(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
+    finer_obj = _object(obj.name)
+    finer_pieces = tuple(_finer_pieces(finer_obj))
+    object.__setattr__(finer_obj, "collision_shapes", lambda: finer_pieces)
+    log = _queries(hand, obj, targets)
+    checkers = (HandObjectClearance(hand, finer_obj), HandObjectClearance(hand, obj))
+    for kind in ("penetrations", "clearance"):
+        queries = [entry for entry in log if entry[0] == kind]
+        best = np.full((len(queries), 2), np.inf)
+        for _ in range(repeats):
+            for i, (_, q, contacts, arg) in enumerate(queries):
+                for j, checker in enumerate(checkers):
+                    best[i, j] = min(best[i, j], _cpu(_answer, checker, kind, q, contacts, arg)[0])
+        finer_us, joined_us = best.mean(axis=0) * 1e6
+        print(
+            f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: {len(finer_pieces)} finer "
+            f"pieces {finer_us:6.0f} us, {len(obj.collision_shapes())} joined {joined_us:6.0f} us "
+            f"({joined_us / finer_us - 1:+.0%})"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "mode",
-        choices=("profile", "compare", "solves", "sets", "alone", "verdicts", "finer"),
+        choices=("profile", "compare", "solves", "sets", "alone", "verdicts", "finer", "pieces"),
     )
     parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
-    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
+    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts, pieces: best of")
     parser.add_argument("--new-first", action="store_true", help="solves: this code first")
     parser.add_argument(
         "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
@@ -401,6 +425,8 @@ def main() -> None:
             alone(hand, obj, targets)
         elif args.mode == "finer":
             finer(hand, obj, targets)
+        elif args.mode == "pieces":
+            pieces(hand, obj, targets, args.repeats)
         else:
             verdicts(hand, obj, targets, args.repeats)
 
