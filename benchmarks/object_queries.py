@@ -23,7 +23,13 @@ with the benchmark's per-object seed), solves each without and then with the obj
 * ``alone``: the sets solved with the object only, one after the other: the CPU and the solved
   count, for comparing versions in separate processes (``PYTHONPATH`` selecting the code);
 * ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
-  that stops at the first link inside (``until_inside=True``), split by verdict.
+  that stops at the first link inside (``until_inside=True``), split by verdict;
+* ``finer``: every solution claimed with the object, re-checked as the grasp benchmark does
+  (``ObjectPenetration``, links other than the contact tips deeper than 0.2 mm) against the
+  finer pieces the joined ones replaced (one per band sector of a revolved solid, one prism per
+  mesh triangle): whether joining the pieces let a solution through the finer geometry;
+* ``pieces``: the queries the IK made (with the joined pieces), timed with a checker of the
+  finer pieces and one of the joined pieces, query by query alternating, best of ``--repeats``.
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
@@ -31,6 +37,8 @@ with the benchmark's per-object seed), solves each without and then with the obj
     python benchmarks/object_queries.py sets --sets 30
     python benchmarks/object_queries.py alone --sets 100 --objects coffee_cup
     python benchmarks/object_queries.py verdicts --sets 20
+    python benchmarks/object_queries.py finer --sets 200 --objects coffee_cup can mesh:mug.stl
+    python benchmarks/object_queries.py pieces --sets 40 --repeats 3
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
 the mug and the bottle meshes).
@@ -40,6 +48,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import math
 import sys
 import time
 from collections import defaultdict
@@ -49,15 +58,24 @@ from typing import Any
 
 import numpy as np
 
-from sahgrasp.bench.grasps import BENCH_SEED, _object_seed, _prepare
+from sahgrasp.bench.grasps import (
+    BENCH_SEED,
+    PENETRATION_TOLERANCE_M,
+    ObjectPenetration,
+    _object_seed,
+    _prepare,
+)
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik.obstacle import Obstacle
 from sahgrasp.objects import GraspObject, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
+from sahgrasp.objects.collision import CollisionShape, convex_hull
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
-from sahgrasp.objects.mesh_file import load_mesh
+from sahgrasp.objects.mesh_file import MeshSolid, load_mesh
+from sahgrasp.objects.profiles import chord_count
+from sahgrasp.objects.solids import COLLISION_SAGITTA_M, RevolvedSolid, _bands
 
 MESHES = Path(__file__).resolve().parent.parent / "examples" / "meshes"
 ALLOWANCE_M = IKSettings().d_min_m
@@ -309,14 +327,80 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
             )
 
 
+def _finer_pieces(obj: GraspObject) -> list[CollisionShape]:
+    """The pieces before joining: band sectors at the solid's largest radius, triangle prisms."""
+    pieces: list[CollisionShape] = []
+    for solid in obj.solids:
+        if isinstance(solid, RevolvedSolid):
+            count = chord_count(solid._turn_rad, solid._max_radius_m, COLLISION_SAGITTA_M)
+            angles = np.linspace(*solid.angle_range_rad, count + 1)
+            for band in _bands(solid.profile):
+                if math.isclose(solid._turn_rad, 2 * math.pi) and np.allclose(band[:, 0], 0.0):
+                    pieces.append(solid._hull(band[:, 2:], angles))
+                else:
+                    pieces.extend(solid._hull(band, angles[k : k + 2]) for k in range(count))
+        elif isinstance(solid, MeshSolid) and solid.collision == "prisms":
+            corners = solid.vertices_m[solid.faces]
+            depth = solid.wall_thickness_m()[:, None, None] * solid.trimesh.face_normals[:, None]
+            pieces.extend(convex_hull(p) for p in np.concatenate([corners, corners - depth], 1))
+        else:
+            pieces.extend(solid.collision_shapes())
+    return pieces
+
+
+def finer(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
+    check = ObjectPenetration(hand, obj)
+    check.pieces = tuple(_finer_pieces(obj))
+    check._piece_transforms = [s.transform(obj.T_world_object) for s in check.pieces]
+    centres = np.array([s.placement[:3, 3] for s in check.pieces])
+    check._piece_centres = centres @ obj.T_world_object[:3, :3].T + obj.T_world_object[:3, 3]
+    check._piece_radii = np.array([s.bounding_radius_m for s in check.pieces])
+    tips = {f.tip_link for f in hand.description.fingers}
+    deepest = []
+    for t in targets:
+        r = solve_ik(hand, t, IKSettings(), obstacle=obj)
+        if r.success:
+            depths = check.depths(r.q)
+            deepest.append(max((v for k, v in depths.items() if k not in tips), default=0.0))
+    depth_mm = np.array(deepest) * 1e3
+    deep = int((depth_mm > PENETRATION_TOLERANCE_M * 1e3).sum())
+    print(
+        f"{obj.name:16s} {len(obj.collision_shapes())} pieces, {len(check.pieces)} finer: "
+        f"{len(deepest)} of {len(targets)} solved, {deep} penetrate the finer pieces "
+        f"(deepest link other than a contact tip: {depth_mm.max(initial=0.0):.3f} mm)"
+    )
+
+
+def pieces(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
+    finer_obj = _object(obj.name)
+    finer_pieces = tuple(_finer_pieces(finer_obj))
+    object.__setattr__(finer_obj, "collision_shapes", lambda: finer_pieces)
+    log = _queries(hand, obj, targets)
+    checkers = (HandObjectClearance(hand, finer_obj), HandObjectClearance(hand, obj))
+    for kind in ("penetrations", "clearance"):
+        queries = [entry for entry in log if entry[0] == kind]
+        best = np.full((len(queries), 2), np.inf)
+        for _ in range(repeats):
+            for i, (_, q, contacts, arg) in enumerate(queries):
+                for j, checker in enumerate(checkers):
+                    best[i, j] = min(best[i, j], _cpu(_answer, checker, kind, q, contacts, arg)[0])
+        finer_us, joined_us = best.mean(axis=0) * 1e6
+        print(
+            f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: {len(finer_pieces)} finer "
+            f"pieces {finer_us:6.0f} us, {len(obj.collision_shapes())} joined {joined_us:6.0f} us "
+            f"({joined_us / finer_us - 1:+.0%})"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "mode", choices=("profile", "compare", "solves", "sets", "alone", "verdicts")
+        "mode",
+        choices=("profile", "compare", "solves", "sets", "alone", "verdicts", "finer", "pieces"),
     )
     parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
-    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts: best of")
+    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts, pieces: best of")
     parser.add_argument("--new-first", action="store_true", help="solves: this code first")
     parser.add_argument(
         "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
@@ -339,6 +423,10 @@ def main() -> None:
             sets(hand, obj, targets)
         elif args.mode == "alone":
             alone(hand, obj, targets)
+        elif args.mode == "finer":
+            finer(hand, obj, targets)
+        elif args.mode == "pieces":
+            pieces(hand, obj, targets, args.repeats)
         else:
             verdicts(hand, obj, targets, args.repeats)
 

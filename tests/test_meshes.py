@@ -36,7 +36,7 @@ def test_shipped_meshes_are_small_and_closed(shipped: Path) -> None:
     obj = load_mesh(shipped)
     solid = obj.solids[0]
     assert solid.trimesh.is_watertight and solid.trimesh.volume > 0
-    assert len(obj.collision_shapes()) == len(solid.faces)
+    assert 0 < len(obj.collision_shapes()) < len(solid.faces)  # joined prisms (test_objects_pieces)
     assert obj.mesh().faces.shape == solid.faces.shape
 
 

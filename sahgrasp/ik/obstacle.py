@@ -44,9 +44,10 @@ link the can's three-finger paper grasp (ring free) needs 6 starts instead of 1.
 def checker_of(hand: Hand, obj: GraspObject) -> HandObjectClearance:
     """One clearance checker per (hand, object) pair, by identity.
 
-    Building one builds the piece tree (0.02-0.14 s for the catalog objects) and, on the
-    object's first use, its convex pieces (0.03 s for the can, about 1 s for the coffee cup):
-    too much to repeat for every problem.
+    Building one builds the piece tree (up to 0.04 s for the catalog objects) and, on the
+    object's first use, its convex pieces (0.01 s for the can, 0.15 s for the coffee cup,
+    1.6-2.2 s for the shipped meshes, whose triangle prisms are merged): too much to repeat for
+    every problem.
     """
     from sahgrasp.objects.clearance import HandObjectClearance
 

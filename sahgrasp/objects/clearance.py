@@ -717,8 +717,11 @@ class HandObjectClearance:
             found = [p for p in pieces.tolist() if distance(p) < threshold_m]
             if len(found) <= 1 and pairs is None:
                 return found
-            # In the order of a search by bound: the repair's rows come in the same order.
-            pieces = self._piece_bounds(T, g, np.array(found, dtype=np.intp), math.inf)[0]
+            # In the order of a search by bound: the repair's rows come in the same order (no
+            # order to find for one piece: its witnesses come from measuring it again below).
+            pieces = np.array(found, dtype=np.intp)
+            if len(found) > 1:
+                pieces = self._piece_bounds(T, g, pieces, math.inf)[0]
         else:
             pieces, bounds = self._piece_bounds(T, g, pieces, threshold_m)
             pieces = pieces[bounds < threshold_m]

@@ -45,6 +45,8 @@ DISPLAY_SAGITTA_M = 5e-5
 COLLISION_SAGITTA_M = 5e-5
 """Largest chord gap of a collision piece [m], across the axis and along the profile each."""
 _FULL_TURN = 2.0 * math.pi
+_TURN_TOLERANCE = 1e-9
+"""Largest sine of a turn [-] between two profile chords counted as straight (rounding only)."""
 
 
 class Solid(Protocol):
@@ -124,30 +126,35 @@ class RevolvedSolid(BuiltOnce):
         )
 
     def collision_shapes(self) -> tuple[CollisionShape, ...]:
-        """Convex pieces: the cross-section cut into horizontal bands, each band revolved.
+        """Convex pieces: the cross-section cut into convex slabs, each slab revolved.
 
-        A band touching the axis over a full turn is one convex frustum; any other band is cut
-        into angular sectors, each the convex hull of its corners. The cross-section must meet
-        every horizontal line in a single interval. Built once per solid (Qhull per sector:
-        about a second for the coffee cup).
+        The cross-section is cut into horizontal bands (at the profile's sample heights) and
+        consecutive bands are joined while their union stays a convex polygon (:func:`_slabs`).
+        A slab touching the axis over a full turn is one convex solid of revolution; any other
+        slab is cut into angular sectors (as few as keep its own largest radius within
+        ``COLLISION_SAGITTA_M``), each the convex hull of its corners. The cross-section must
+        meet every horizontal line in a single interval. Built once per solid (Qhull per
+        sector).
         """
         return self._shapes
 
     @cached_property
     def _shapes(self) -> tuple[CollisionShape, ...]:
-        n_sectors = chord_count(self._turn_rad, self._max_radius_m, COLLISION_SAGITTA_M)
-        angles = np.linspace(*self.angle_range_rad, n_sectors + 1)
         full_turn = math.isclose(self._turn_rad, _FULL_TURN)
         shapes = []
-        for band in _bands(self.profile):
-            if full_turn and np.allclose(band[:, 0], 0.0):
-                shapes.append(self._hull(band[:, 2:], angles))
+        for slab in _slabs(_bands(self.profile)):
+            n_sectors = chord_count(self._turn_rad, slab[:, 2].max(), COLLISION_SAGITTA_M)
+            angles = np.linspace(*self.angle_range_rad, n_sectors + 1)
+            if full_turn and np.allclose(slab[:, 0], 0.0):
+                # A convex section against the axis: its outer radius is concave in z, so the
+                # whole turn is convex (one piece, its rings within the sagitta).
+                shapes.append(self._hull(slab[:, 2:], angles))
             else:
-                shapes.extend(self._hull(band, angles[k : k + 2]) for k in range(n_sectors))
+                shapes.extend(self._hull(slab, angles[k : k + 2]) for k in range(n_sectors))
         return tuple(shapes)
 
     def _hull(self, band: FloatArray, angles: FloatArray) -> CollisionShape:
-        """Hull of the band's ``(r, z, r, z)`` rows revolved to every angle in ``angles``."""
+        """Hull of the slab's ``(r, z, r, z)`` rows revolved to every angle in ``angles``."""
         rz = band.reshape(-1, 2)
         c, s = np.cos(angles)[:, None], np.sin(angles)[:, None]
         z = np.broadcast_to(rz[:, 1], (len(angles), len(rz)))
@@ -218,6 +225,49 @@ def _bands(profile: tuple[ProfilePiece, ...]) -> list[FloatArray]:
         inner, outer = ends[np.argsort(ends.sum(axis=1))]
         bands.append(np.array([[inner[0], low, outer[0], low], [inner[1], high, outer[1], high]]))
     return bands
+
+
+def _slabs(bands: list[FloatArray]) -> list[FloatArray]:
+    """Join consecutive bands into slabs whose cross-sections are convex polygons.
+
+    A slab's rows ``(r_in, z, r_out, z)`` run up its levels; its polygon is convex when the
+    outer radius is concave in ``z`` and the inner one convex (each chain turns one way only),
+    checked turn by turn with a relative tolerance for the collinear samples of a straight
+    profile piece. Bands on the axis (``r_in = 0``) are joined only with bands on the axis, so
+    that a slab either touches the axis all along or not at all. The slabs' union is the
+    bands' union: a slab's sector hull holds its bands' sector hulls and, its polygon being
+    convex, lies within the same sagitta of the exact solid (docs/objects.md).
+    """
+    slabs: list[FloatArray] = []
+    for band in bands:
+        if slabs and _joinable(slabs[-1], band):
+            slabs[-1] = np.vstack([slabs[-1], band[1:]])
+        else:
+            slabs.append(band)
+    return slabs
+
+
+def _joinable(slab: FloatArray, band: FloatArray) -> bool:
+    """Whether ``band`` on top of ``slab`` leaves the joined cross-section convex."""
+    on_axis = np.allclose(slab[:, 0], 0.0)
+    if on_axis != bool(np.allclose(band[:, 0], 0.0)):
+        return False
+    below, top = slab[-2:], band[1]
+    # Going up, the outer chain of a convex polygon turns left (towards -r) or runs straight,
+    # the inner chain right.
+    return _turn(below[:, 2:], top[2:]) >= -_TURN_TOLERANCE and (
+        on_axis or _turn(below[:, :2], top[:2]) <= _TURN_TOLERANCE
+    )
+
+
+def _turn(first: FloatArray, point: FloatArray) -> float:
+    """Sine of the turn from edge ``first[0] -> first[1]`` to ``first[1] -> point``, in (r, z).
+
+    Positive: a left turn (counter-clockwise in the plane of ``r`` right and ``z`` up).
+    """
+    a, b = first[1] - first[0], point - first[1]
+    length = float(np.hypot(*a) * np.hypot(*b))
+    return float(a[0] * b[1] - a[1] * b[0]) / length if length > 0.0 else 0.0
 
 
 def _r_at(edge: FloatArray, height_m: float) -> float:
