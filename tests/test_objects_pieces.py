@@ -15,7 +15,7 @@ import pytest
 import trimesh
 from numpy.typing import NDArray
 
-from sahgrasp.objects import load_object
+from sahgrasp.objects import load_object, mesh_file
 from sahgrasp.objects.collision import CollisionShape, signed_distances
 from sahgrasp.objects.mesh_file import MERGE_TOLERANCE_M, MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count
@@ -140,3 +140,28 @@ def test_the_mug_cavity_and_handle_gap_stay_empty() -> None:
     pieces = _mesh("mug.stl").collision_shapes()
     cavity, gap = [0.0, 0.0, 0.05], [0.0, 0.052, 0.05]  # mid-cavity; between wall and handle
     assert np.all(signed_distances(pieces, IDENTITY, [cavity, gap]) > 5e-3)
+
+
+def test_a_convex_mesh_is_its_hull(tmp_path: Path) -> None:
+    path = tmp_path / "ball.stl"
+    trimesh.creation.icosphere(subdivisions=3, radius=0.04).export(path)
+    solid = load_mesh(path).solids[0]
+    assert isinstance(solid, MeshSolid) and len(solid.collision_shapes()) == 1
+
+
+def test_the_merge_budget_leaves_the_rest_as_single_prisms(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    full = len(_mesh("bottle.obj").collision_shapes())
+    monkeypatch.setattr(mesh_file, "MERGE_BUDGET", 20_000)
+    copy = tmp_path / "bottle.obj"  # another path: load_mesh keeps the shipped one's pieces
+    copy.write_bytes((MESHES / "bottle.obj").read_bytes())
+    solid = load_mesh(copy).solids[0]
+    assert isinstance(solid, MeshSolid)
+    pieces = solid.collision_shapes()
+    assert full < len(pieces) < len(solid.faces)
+    # Whatever the budget, every prism's centroid lies inside the pieces.
+    corners = solid.vertices_m[solid.faces]
+    depth = solid.wall_thickness_m()[:, None, None] * solid.trimesh.face_normals[:, None, :]
+    centroids = np.concatenate([corners, corners - depth], axis=1).mean(axis=1)
+    assert np.all(signed_distances(pieces, IDENTITY, centroids) < 0.0)
