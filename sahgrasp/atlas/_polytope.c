@@ -616,48 +616,14 @@ static PyObject *Polytope_index(Polytope *self, PyObject *arg) {
     return NULL;
 }
 
-static PyObject *Polytope_get_verts(Polytope *self, void *closure) {
-    PyObject *list = PyList_New(self->n);
-    if (list == NULL) return NULL;
-    for (Py_ssize_t i = 0; i < self->n; i++) {
-        PyObject *t = vertex_tuple(self, i);
-        if (t == NULL) {
-            Py_DECREF(list);
-            return NULL;
-        }
-        PyList_SET_ITEM(list, i, t);
-    }
-    return list;
-}
+/* One Python object per vertex, as a list: the getters below differ only in the item. */
+typedef PyObject *(*VertexItem)(const Polytope *, Py_ssize_t);
 
-static PyObject *Polytope_get_masks(Polytope *self, void *closure) {
+static PyObject *vertex_list(const Polytope *self, VertexItem item) {
     PyObject *list = PyList_New(self->n);
     if (list == NULL) return NULL;
     for (Py_ssize_t i = 0; i < self->n; i++) {
-        PyObject *value = PyLong_FromUnsignedLongLong(self->masks[i].w[WORDS - 1]);
-        for (int w = WORDS - 2; value != NULL && w >= 0; w--) {
-            PyObject *shift = PyLong_FromLong(64), *low = PyLong_FromUnsignedLongLong(self->masks[i].w[w]);
-            PyObject *high = shift ? PyNumber_Lshift(value, shift) : NULL;
-            Py_DECREF(value);
-            value = high && low ? PyNumber_Or(high, low) : NULL;
-            Py_XDECREF(shift);
-            Py_XDECREF(low);
-            Py_XDECREF(high);
-        }
-        if (value == NULL) {
-            Py_DECREF(list);
-            return NULL;
-        }
-        PyList_SET_ITEM(list, i, value);
-    }
-    return list;
-}
-
-static PyObject *Polytope_get_norm2(Polytope *self, void *closure) {
-    PyObject *list = PyList_New(self->n);
-    if (list == NULL) return NULL;
-    for (Py_ssize_t i = 0; i < self->n; i++) {
-        PyObject *x = PyFloat_FromDouble(self->norm2[i]);
+        PyObject *x = item(self, i);
         if (x == NULL) {
             Py_DECREF(list);
             return NULL;
@@ -667,11 +633,44 @@ static PyObject *Polytope_get_norm2(Polytope *self, void *closure) {
     return list;
 }
 
+static PyObject *mask_int(const Polytope *self, Py_ssize_t i) {
+    PyObject *shift = PyLong_FromLong(64);
+    if (shift == NULL) return NULL;
+    PyObject *value = PyLong_FromLong(0);
+    for (int w = WORDS - 1; value != NULL && w >= 0; w--) {
+        PyObject *word = PyLong_FromUnsignedLongLong(self->masks[i].w[w]);
+        PyObject *high = word ? PyNumber_Lshift(value, shift) : NULL;
+        Py_DECREF(value);
+        value = high ? PyNumber_Or(high, word) : NULL;
+        Py_XDECREF(high);
+        Py_XDECREF(word);
+    }
+    Py_DECREF(shift);
+    return value;
+}
+
+static PyObject *norm2_float(const Polytope *self, Py_ssize_t i) {
+    return PyFloat_FromDouble(self->norm2[i]);
+}
+
+static PyObject *blocked_bool(const Polytope *self, Py_ssize_t i) {
+    return PyBool_FromLong(self->blocked[i]);
+}
+
+static PyObject *Polytope_get_verts(Polytope *self, void *closure) {
+    return vertex_list(self, vertex_tuple);
+}
+
+static PyObject *Polytope_get_masks(Polytope *self, void *closure) {
+    return vertex_list(self, mask_int);
+}
+
+static PyObject *Polytope_get_norm2(Polytope *self, void *closure) {
+    return vertex_list(self, norm2_float);
+}
+
 static PyObject *Polytope_get_blocked(Polytope *self, void *closure) {
-    PyObject *list = PyList_New(self->n);
-    if (list == NULL) return NULL;
-    for (Py_ssize_t i = 0; i < self->n; i++) PyList_SET_ITEM(list, i, PyBool_FromLong(self->blocked[i]));
-    return list;
+    return vertex_list(self, blocked_bool);
 }
 
 static PyObject *Polytope_get_reach2(Polytope *self, void *closure) {
