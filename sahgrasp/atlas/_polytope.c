@@ -188,6 +188,16 @@ static void poly_take(Polytope *p, Polytope *src) {
     Py_DECREF(src);
 }
 
+/* Replace the vertices of p by those of out (consumed): 1, or -1 with an exception. */
+static int poly_replace(Polytope *p, Polytope *out) {
+    if (poly_finish(out) < 0) {
+        Py_DECREF(out);
+        return -1;
+    }
+    poly_take(p, out);
+    return 1;
+}
+
 /* -- arguments ------------------------------------------------------------------------------- */
 
 /* Read ``k`` floats of a sequence into out; -1 with an exception if it is not that. */
@@ -271,9 +281,7 @@ static int cut_general(Polytope *p, const double *a, double b, double tol, doubl
         }
     }
     PyMem_Free(v);
-    if (poly_finish(out) < 0) goto fail;
-    poly_take(p, out);
-    return 1;
+    return poly_replace(p, out);
 fail:
     Py_DECREF(out);
     return -1;
@@ -309,9 +317,7 @@ static int clip(Polytope *p, const double *a, double b, double tol, double *d) {
             if (poly_push(out, v, m, 0) < 0) goto fail;
         }
     }
-    if (poly_finish(out) < 0) goto fail;
-    poly_take(p, out);
-    return 1;
+    return poly_replace(p, out);
 fail:
     Py_DECREF(out);
     return -1;
