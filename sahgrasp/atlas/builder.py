@@ -197,8 +197,9 @@ class _Builder:
         gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
         later, earlier = np.nonzero(np.tril((gap * gap).sum(axis=2) < 4 * self.r**2, -1))
         # Grouped by new chart: earlier charts (index tree, then its tail), then the same wave.
-        order = np.argsort(np.concatenate((rows, later)), kind="stable")
-        owner = np.concatenate((rows, later))[order]
+        owners = np.concatenate((rows, later))
+        order = np.argsort(owners, kind="stable")
+        owner = owners[order]
         nbrs = np.concatenate((cols, j0 + earlier)).astype(np.int64)[order]
         self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
         if self.new_charts is not None:
