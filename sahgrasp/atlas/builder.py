@@ -445,19 +445,29 @@ class _Builder:
         off = near & ((Uc * verts[None]).sum(axis=2) - Bc > self.tol)
         # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
         # nearer than the picked vertex can create a nearer one.
-        closer = (near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])).T.tolist()
-        # Plain lists for the sequential loop: one conversion each instead of one per element.
-        cuts_off, Uc_rows, Bc_rows = off.tolist(), Uc.tolist(), Bc.tolist()
-        parent_list = parents.tolist()
-        gone = [False] * len(parent_list)  # cut off by an accepted centre's plane
+        closer = near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])
+        # Plain lists for the sequential loop, from the few pairs it reads: cut_off[p], the tries
+        # p's plane cuts off; nearer[q], the (p, a, b) planes nearer than q's vertex.
+        n = len(parents)
+        cut_off: list[list[int]] = [[] for _ in range(n)]
+        for p, q in zip(*(i.tolist() for i in np.nonzero(off)), strict=True):
+            cut_off[p].append(q)
+        nearer: list[list[tuple[int, list[float], float]]] = [[] for _ in range(n)]
+        q_near, p_near = np.nonzero(closer.T)
+        pairs = (q_near.tolist(), p_near.tolist(), Uc[p_near, q_near].tolist())
+        for q, p, a, b in zip(*pairs, Bc[p_near, q_near].tolist(), strict=True):
+            nearer[q].append((p, a, b))
+        gone, taken = [False] * n, [False] * n
         accepted: list[int] = []
-        for q, parent in enumerate(parent_list):
+        for q, parent in enumerate(parents.tolist()):
             if gone[q]:
                 continue
-            planes = [(Uc_rows[p][q], Bc_rows[p][q]) for p in accepted if closer[q][p]]
+            planes = [(a, b) for p, a, b in nearer[q] if taken[p]]
             if not planes or self._still_picked(parent, vertices[q], planes) >= 0:
                 accepted.append(q)
-                gone = [g or c for g, c in zip(gone, cuts_off[q], strict=True)]
+                taken[q] = True
+                for later in cut_off[q]:
+                    gone[later] = True
         return accepted
 
     def _still_picked(
