@@ -432,7 +432,8 @@ class _Builder:
             return []
         parent_phi = self.PHI[parents]
         diff = x[:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
-        Uc = np.einsum("pqn,qnk->pqk", diff, parent_phi)
+        # [p, q] = diff[p, q] @ parent_phi[q]: matmul over q (einsum costs 10x more per call)
+        Uc = np.matmul(diff.transpose(1, 0, 2), parent_phi).transpose(1, 0, 2)
         Bc = 0.5 * (Uc * Uc).sum(axis=2)
         verts = np.array(vertices)
         near = (diff * diff).sum(axis=2) < 4 * self.r**2
