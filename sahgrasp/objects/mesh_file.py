@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.errors import SahGraspError
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.collision import BuiltOnce, CollisionShape, convex_hull
+from sahgrasp.objects.collision import BuiltOnce, CollisionShape, _support_points, convex_hull
 from sahgrasp.objects.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh
 from sahgrasp.objects.patches import Patch
@@ -232,17 +232,19 @@ class _PrismMerger:
                 if taken[face]:
                     continue
                 joined = convex_hull(np.vstack([points, prisms[face]]))
-                if self._inside(joined):
+                joined_points = _support_points(joined)
+                if self._inside(joined, joined_points):
                     taken[face] = True
-                    piece = joined
-                    points = np.asarray(joined.geometry.points()) + joined.placement[:3, 3]
+                    piece, points = joined, joined_points
                     frontier.extend(n for n in self._neighbours[face] if not taken[n])
             pieces.append(piece)
         return pieces
 
-    def _inside(self, piece: CollisionShape) -> bool:
-        """Whether no triangle enters ``piece`` deeper than :data:`MERGE_TOLERANCE_M`."""
-        points = np.asarray(piece.geometry.points()) + piece.placement[:3, 3]
+    def _inside(self, piece: CollisionShape, points: FloatArray) -> bool:
+        """Whether no triangle enters ``piece`` (vertices ``points``) deeper than the tolerance.
+
+        The tolerance is :data:`MERGE_TOLERANCE_M`.
+        """
         low = points.min(axis=0) - MERGE_TOLERANCE_M
         high = points.max(axis=0) + MERGE_TOLERANCE_M
         near = np.all((self._lows <= high) & (self._highs >= low), axis=1)
