@@ -259,11 +259,7 @@ static int cut_general(Polytope *p, const double *a, double b, double tol, doubl
         if (poly_push_from(out, p, i, m) < 0) goto fail;
     }
     int k1 = p->k - 1;
-    double *v = PyMem_Malloc(sizeof(double) * p->k);
-    if (v == NULL) {
-        PyErr_NoMemory();
-        goto fail;
-    }
+    double v[MAX_FACES / 2];
     for (Py_ssize_t i = 0; i < p->n; i++) {
         if (d[i] > tol || d[i] >= -tol) continue;
         const double *vi = p->verts + i * p->k;
@@ -274,13 +270,9 @@ static int cut_general(Polytope *p, const double *a, double b, double tol, doubl
             double t = d[i] / (d[i] - d[o]);
             const double *vo = p->verts + o * p->k;
             for (int c = 0; c < p->k; c++) v[c] = vi[c] + t * (vo[c] - vi[c]);
-            if (poly_push(out, v, mask_or(shared, bit), 0) < 0) {
-                PyMem_Free(v);
-                goto fail;
-            }
+            if (poly_push(out, v, mask_or(shared, bit), 0) < 0) goto fail;
         }
     }
-    PyMem_Free(v);
     return poly_replace(p, out);
 fail:
     Py_DECREF(out);
@@ -291,12 +283,7 @@ fail:
  * the order. An edge from a vertex strictly inside to one strictly outside (or back) gives a new
  * vertex, computed from the inner end as cut_general does. */
 static int clip(Polytope *p, const double *a, double b, double tol, double *d) {
-    double largest = -INFINITY;
-    for (Py_ssize_t i = 0; i < p->n; i++) {
-        d[i] = a[0] * p->verts[2 * i] + a[1] * p->verts[2 * i + 1] - b;
-        if (d[i] > largest) largest = d[i];
-    }
-    if (largest <= tol) return 0;
+    if (distances(p, a, b, d) <= tol) return 0;
     Mask bit;
     if (face_bit(p, d, tol, &bit) < 0) return -1;
     Polytope *out = poly_new(2, p->n + 2);
@@ -337,22 +324,20 @@ static int poly_cut(Polytope *p, const double *a, double b, double tol) {
 
 /* -- construction ---------------------------------------------------------------------------- */
 
+static int check_k(int k) {
+    if (k >= 1 && 2 * k <= MAX_FACES) return 0;
+    PyErr_Format(PyExc_ValueError, "k must be in [1, %d], got %d", MAX_FACES / 2, k);
+    return -1;
+}
+
 static Polytope *cube(int k, double r) {
-    if (k < 1 || 2 * k > MAX_FACES) {
-        PyErr_Format(PyExc_ValueError, "k must be in [1, %d], got %d", MAX_FACES / 2, k);
-        return NULL;
-    }
+    if (check_k(k) < 0) return NULL;
     Py_ssize_t count = (Py_ssize_t)1 << k;
     Polytope *p = poly_new(k, count);
     if (p == NULL) return NULL;
     /* itertools.product((-r, r), repeat=k) order; k = 2 goes counter-clockwise instead. */
     static const Py_ssize_t square[4] = {0, 2, 3, 1};
-    double *v = PyMem_Malloc(sizeof(double) * k);
-    if (v == NULL) {
-        Py_DECREF(p);
-        PyErr_NoMemory();
-        return NULL;
-    }
+    double v[MAX_FACES / 2];
     for (Py_ssize_t n = 0; n < count; n++) {
         Py_ssize_t code = k == 2 ? square[n] : n;
         Mask mask = {{0}};
@@ -362,12 +347,10 @@ static Polytope *cube(int k, double r) {
             mask = mask_or(mask, mask_bit(2 * d + negative));
         }
         if (poly_push(p, v, mask, 0) < 0) {
-            PyMem_Free(v);
             Py_DECREF(p);
             return NULL;
         }
     }
-    PyMem_Free(v);
     poly_finish(p);
     return p;
 }
@@ -492,10 +475,7 @@ static PyObject *Polytope_from_planes(PyObject *cls, PyObject *args) {
     double r, tol;
     PyObject *planes, *offsets;
     if (!PyArg_ParseTuple(args, "idOOd:from_planes", &k, &r, &planes, &offsets, &tol)) return NULL;
-    if (k < 1 || 2 * k > MAX_FACES) {
-        PyErr_Format(PyExc_ValueError, "k must be in [1, %d], got %d", MAX_FACES / 2, k);
-        return NULL;
-    }
+    if (check_k(k) < 0) return NULL;
     double *a, *b;
     Py_ssize_t n;
     if (read_planes(planes, offsets, k, &a, &b, &n) < 0) return NULL;
