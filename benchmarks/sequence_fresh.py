@@ -14,16 +14,15 @@ import dataclasses
 
 from tqdm import tqdm
 
-from sahgrasp.hand import load_hand
+from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, Sequence, random_problems, solve_ik
 from sahgrasp.ik.initial import PAPER_TABLE1_LAMBDAS, default_sequence
 
 COLUMNS = (1, 2, 3, 4, 6, 8, 12)
 
 
-def within(hand_name: str, sequence: Sequence, problems: int, seed: int) -> list[float]:
+def within(hand: Hand, sequence: Sequence, problems: int, seed: int) -> list[float]:
     """Share of the problems solved with at most i initial poses, i in :data:`COLUMNS`."""
-    hand = load_hand(hand_name)
     settings = IKSettings(init="sequence")
     used = []
     for target in tqdm(random_problems(hand, problems, seed), desc=sequence.source, leave=False):
@@ -38,11 +37,12 @@ def main() -> None:
     parser.add_argument("--problems", type=int, default=300)
     parser.add_argument("--seed", type=int, default=12345)
     args = parser.parse_args()
-    shipped = default_sequence(load_hand(args.hand))
+    hand = load_hand(args.hand)
+    shipped = default_sequence(hand)
     table1 = dataclasses.replace(shipped, lambdas=PAPER_TABLE1_LAMBDAS, source="paper-table1")
     print("| i | " + " | ".join(map(str, COLUMNS)) + " |")
     for name, sequence in (("search sequence", shipped), ("Table 1 lambdas", table1)):
-        shares = within(args.hand, sequence, args.problems, args.seed)
+        shares = within(hand, sequence, args.problems, args.seed)
         cells = " | ".join(f"{100 * s:.1f}%" for s in shares)
         print(f"| {args.hand}, {name} | {cells} |")
 
