@@ -33,6 +33,7 @@ from scipy.linalg.lapack import dposv
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
+from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, default_database
 from sahgrasp.ik.obstacle import Obstacle
@@ -425,44 +426,32 @@ def _lm_loop(
 ) -> Attempt:
     """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set.
 
-    The hot loop of the IK: it works on the flat residual of :meth:`Hand.contact_stack` and
-    its Jacobian, so that an iteration is a handful of numpy calls (docs/ik.md, "Cost").
+    The hot loop of the IK, compiled (``sahgrasp/ik/_lm.c``, docs/ik.md "Compiled loop"): from
+    the damping 1e-3, each iteration solves ``(J_F^T J_F + mu I) dx = J_F^T e`` on the free
+    coordinates ``F`` (a coordinate at a bound that the gradient pushes outwards is fixed),
+    integrates, clamps the joints to their limits, and accepts the step if the cost ``|e|^2``
+    decreased (``mu / 3``, at least 1e-7), else retries with ``4 mu`` up to 1e4. A start ends
+    converged once every contact error is below ``refine_m``, or when its cost has not halved in
+    ``stall_iterations`` accepted steps or the damping ran out (converged if every error is
+    below ``d_min_m``, else ``no_progress``).
     """
-    damping = 1e-3
-    stack, J = hand.contact_stack_jacobian(q, problem.stack_fingers)
-    residual = problem.target_stack - stack
-    costs = [float(residual.dot(residual))]
-    # The largest error is at least sqrt(cost / blocks): below that bound it must be computed.
-    refine_cost = (len(residual) // 3) * s.refine_m**2
-    for k in range(max_iterations):
-        if costs[-1] < refine_cost and (error := _max_error(residual)) < s.refine_m:
-            return Attempt(q, "converged", k, error, history)
-        stalled = (
-            len(costs) > s.stall_iterations and costs[-1] > 0.5 * costs[-1 - s.stall_iterations]
-        )
-        if stalled or damping > 1e4:
-            error = _max_error(residual)
-            return Attempt(
-                q, "converged" if error < s.d_min_m else "no_progress", k, error, history
-            )
-        step = _damped_step(hand, problem, q, J, residual, costs[-1], damping)
-        q_new, r_new, stack_new, damping = step
-        if q_new is None or r_new is None or stack_new is None:
-            continue
-        q, residual = q_new, r_new
-        if history is not None:
-            history.append(q.copy())
-        # The step's kinematics gave the residual and the stack; only the Jacobian is new.
-        J = hand.contact_jacobian(q, problem.stack_fingers, stack_new)
-        costs.append(float(residual.dot(residual)))
-    error = _max_error(residual)
-    outcome = "converged" if error < s.d_min_m else "max_iterations"
-    return Attempt(q, outcome, max_iterations, error, history)
+    q = np.array(q, dtype=np.float64)  # the compiled loop updates it in place
 
+    def record() -> None:
+        assert history is not None
+        history.append(q.copy())
 
-def _max_error(residual: NDArray[np.float64]) -> float:
-    """Largest contact-point or centre error [m] of a stacked residual."""
-    return math.sqrt(float((residual * residual).reshape(-1, 3).sum(axis=1).max()))
+    code, iterations, error = compiled_tree(hand).solve(
+        q,
+        problem.target_stack,
+        problem.rows,
+        max_iterations,
+        s.refine_m,
+        s.d_min_m,
+        s.stall_iterations,
+        None if history is None else record,
+    )
+    return Attempt(q, OUTCOMES[code], iterations, error, history)
 
 
 def _free_coordinates(
@@ -523,39 +512,6 @@ def _full_step(
     step = np.zeros(hand.nv)
     step[free] = x
     return step
-
-
-def _damped_step(
-    hand: Hand,
-    problem: ContactProblem,
-    q: NDArray[np.float64],
-    J: NDArray[np.float64],
-    residual: NDArray[np.float64],
-    cost: float,
-    damping: float,
-) -> tuple[
-    NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None, float
-]:
-    """One Marquardt step, its damping adapted until the cost decreases.
-
-    Returns the new configuration, its residual and its :meth:`Hand.contact_stack` (None, None,
-    None if the damping ran out) and the new damping.
-    """
-    gradient = J.T.dot(residual)
-    free = _free_coordinates(hand, q, gradient)
-    # With every coordinate free the gradient is g itself: no second product.
-    JF, g = (J, gradient) if free is None else (J[:, free], gradient[free])
-    A = JF.T.dot(JF)
-    while damping <= 1e4:
-        x = _damped_solve(A, g, damping)
-        if x is not None:
-            candidate = _clamped_step(hand, q, _full_step(hand, free, x))
-            stack = hand.contact_stack(candidate, problem.stack_fingers)
-            r_new = problem.target_stack - stack
-            if float(r_new.dot(r_new)) < cost:
-                return candidate, r_new, stack, max(damping / 3.0, 1e-7)
-        damping *= 4.0
-    return None, None, None, damping
 
 
 REPAIR_PATIENCE = 3

@@ -1,0 +1,700 @@
+/* The auto method's Levenberg-Marquardt loop in one native call (docs/ik.md, "Compiled loop").
+ *
+ * A Tree holds a hand's kinematic tree as exported from its Pinocchio model by sahgrasp/ik/lm.py:
+ * a free-flyer root (the wrist) and 1-DoF revolute or prismatic joints, mimic joints included
+ * (a joint's value is scale * q[q_index] + offset). It evaluates the contact stack (p_i, r_i) of
+ * the IK, its Jacobian with respect to v, Pinocchio's integration q (+) v, and the whole loop of
+ * sahgrasp/ik/solver.py's `_lm_loop`. Python measured about 160 us per iteration, of which the
+ * unavoidable calls alone were about 37 us (docs/ik.md, "Why 30 us per iteration is out of reach
+ * in Python"); here an iteration is a few microseconds of arithmetic.
+ *
+ * Rotations are row-major 3 x 3. Buffers are C-contiguous float64 (int64 for finger indices).
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+typedef struct {
+    double R[9];
+    double t[3];
+} Pose;
+
+typedef struct {
+    PyObject_HEAD
+    int nj;          /* joints, the root first (Pinocchio's joints 1..njoints-1) */
+    int nq, nv, nf;  /* configuration and velocity sizes, fingers */
+    int *parent;     /* index of the parent joint, -1 for the root */
+    Pose *place;     /* placement of each joint in its parent */
+    double *axis;    /* unit axis in the joint frame, 3 per joint (unused for the root) */
+    int *prismatic;  /* 1 for a prismatic joint, 0 for a revolute one */
+    int *q_index, *v_index;
+    double *scale, *offset;
+    int *yaw;        /* per finger, the joint whose frame is the contact frame's parent */
+    int *chain;      /* per finger, the non-root joints moving its yaw joint, nj per finger */
+    int *chain_len;
+    double radius;   /* fingertip sphere radius [m] */
+    double *lower, *upper;  /* limits of q[7:] */
+} Tree;
+
+/* ---------------------------------------------------------------- small linear algebra -- */
+
+static void compose(const Pose *a, const Pose *b, Pose *out) {
+    Pose r;
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++)
+            r.R[3 * i + j] = a->R[3 * i] * b->R[j] + a->R[3 * i + 1] * b->R[3 + j] +
+                             a->R[3 * i + 2] * b->R[6 + j];
+        r.t[i] = a->R[3 * i] * b->t[0] + a->R[3 * i + 1] * b->t[1] + a->R[3 * i + 2] * b->t[2] +
+                 a->t[i];
+    }
+    *out = r;
+}
+
+/* The motion of a 1-DoF joint by `value` (rad or m) about / along the unit `axis`. */
+static void joint_motion(const double *axis, int prismatic, double value, Pose *out) {
+    memset(out, 0, sizeof(Pose));
+    if (prismatic) {
+        out->R[0] = out->R[4] = out->R[8] = 1.0;
+        for (int i = 0; i < 3; i++) out->t[i] = axis[i] * value;
+        return;
+    }
+    double s = sin(value), c = cos(value), v = 1.0 - c;
+    double x = axis[0], y = axis[1], z = axis[2];
+    out->R[0] = c + x * x * v;
+    out->R[1] = x * y * v - z * s;
+    out->R[2] = x * z * v + y * s;
+    out->R[3] = y * x * v + z * s;
+    out->R[4] = c + y * y * v;
+    out->R[5] = y * z * v - x * s;
+    out->R[6] = z * x * v - y * s;
+    out->R[7] = z * y * v + x * s;
+    out->R[8] = c + z * z * v;
+}
+
+/* Rotation of the unit quaternion (x, y, z, w). */
+static void quat_rotation(const double *q, double *R) {
+    double x = q[0], y = q[1], z = q[2], w = q[3];
+    R[0] = 1.0 - 2.0 * (y * y + z * z);
+    R[1] = 2.0 * (x * y - z * w);
+    R[2] = 2.0 * (x * z + y * w);
+    R[3] = 2.0 * (x * y + z * w);
+    R[4] = 1.0 - 2.0 * (x * x + z * z);
+    R[5] = 2.0 * (y * z - x * w);
+    R[6] = 2.0 * (x * z - y * w);
+    R[7] = 2.0 * (y * z + x * w);
+    R[8] = 1.0 - 2.0 * (x * x + y * y);
+}
+
+static void cross(const double *a, const double *b, double *out) {
+    out[0] = a[1] * b[2] - a[2] * b[1];
+    out[1] = a[2] * b[0] - a[0] * b[2];
+    out[2] = a[0] * b[1] - a[1] * b[0];
+}
+
+/* -------------------------------------------------------------------------- kinematics -- */
+
+/* World placements of every joint at q (Pinocchio's data.oMi[1:]). */
+static void forward(const Tree *T, const double *q, Pose *M) {
+    Pose wrist;
+    quat_rotation(q + 3, wrist.R);
+    memcpy(wrist.t, q, 3 * sizeof(double));
+    compose(&T->place[0], &wrist, &M[0]);
+    for (int j = 1; j < T->nj; j++) {
+        Pose motion, local;
+        joint_motion(T->axis + 3 * j, T->prismatic[j],
+                     T->scale[j] * q[T->q_index[j]] + T->offset[j], &motion);
+        compose(&T->place[j], &motion, &local);
+        compose(&M[T->parent[j]], &local, &M[j]);
+    }
+}
+
+/* The contact stack (p_i, r_i) of `fingers` from the placements: the yaw joint's x axis is the
+ * outward normal n_i, its origin the sphere centre r_i, and p_i = r_i + radius n_i. */
+static void stack_of(const Tree *T, const Pose *M, const long long *fingers, int nf, double *s) {
+    for (int b = 0; b < nf; b++) {
+        const Pose *Y = &M[T->yaw[fingers[b]]];
+        for (int i = 0; i < 3; i++) {
+            s[6 * b + i] = Y->t[i] + T->radius * Y->R[3 * i];
+            s[6 * b + 3 + i] = Y->t[i];
+        }
+    }
+}
+
+/* Jacobian (6 nf x nv, row-major) of the stack with respect to v at the placements M. The root's
+ * columns are Pinocchio's free-flyer velocity (linear, angular) in the wrist frame; a mimic
+ * joint adds its scaled column to its leader's. */
+static void jacobian_of(const Tree *T, const Pose *M, const long long *fingers, int nf,
+                        const double *stack, double *J) {
+    int nv = T->nv;
+    memset(J, 0, (size_t)(6 * nf * nv) * sizeof(double));
+    const Pose *W = &M[0];
+    for (int b = 0; b < nf; b++) {
+        int f = (int)fingers[b];
+        for (int half = 0; half < 2; half++) {
+            const double *x = stack + 6 * b + 3 * half;
+            double *rows = J + (size_t)(6 * b + 3 * half) * nv;
+            double d[3] = {x[0] - W->t[0], x[1] - W->t[1], x[2] - W->t[2]};
+            for (int c = 0; c < 3; c++) {
+                double col[3] = {W->R[c], W->R[3 + c], W->R[6 + c]}, m[3];
+                cross(col, d, m);
+                for (int i = 0; i < 3; i++) {
+                    rows[i * nv + c] = col[i];
+                    rows[i * nv + 3 + c] = m[i];
+                }
+            }
+            for (int n = 0; n < T->chain_len[f]; n++) {
+                int k = T->chain[f * T->nj + n];
+                const Pose *K = &M[k];
+                const double *u = T->axis + 3 * k;
+                double a[3], m[3];
+                for (int i = 0; i < 3; i++)
+                    a[i] = K->R[3 * i] * u[0] + K->R[3 * i + 1] * u[1] + K->R[3 * i + 2] * u[2];
+                if (T->prismatic[k]) {
+                    memcpy(m, a, sizeof m);
+                } else {
+                    double e[3] = {x[0] - K->t[0], x[1] - K->t[1], x[2] - K->t[2]};
+                    cross(a, e, m);
+                }
+                for (int i = 0; i < 3; i++) rows[i * nv + T->v_index[k]] += T->scale[k] * m[i];
+            }
+        }
+    }
+}
+
+/* q (+) v on the free flyer's Lie group (M exp6(v), quaternion renormalised) and on the joints,
+ * then the joints clamped to their limits. */
+static void integrate_clamped(const Tree *T, const double *q, const double *v, double *out,
+                              int clamp) {
+    const double *w = v + 3;
+    double th2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2], th = sqrt(th2);
+    double half_sin, B, C;  /* sin(th/2)/th, (1-cos th)/th^2, (th - sin th)/th^3 */
+    if (th < 1e-4) {
+        half_sin = 0.5 - th2 / 48.0;
+        B = 0.5 - th2 / 24.0;
+        C = 1.0 / 6.0 - th2 / 120.0;
+    } else {
+        half_sin = sin(0.5 * th) / th;
+        B = (1.0 - cos(th)) / th2;
+        C = (th - sin(th)) / (th2 * th);
+    }
+    double wv[3], wwv[3], Vv[3], R[9];
+    cross(w, v, wv);
+    cross(w, wv, wwv);
+    for (int i = 0; i < 3; i++) Vv[i] = v[i] + B * wv[i] + C * wwv[i];
+    quat_rotation(q + 3, R);
+    for (int i = 0; i < 3; i++)
+        out[i] = q[i] + R[3 * i] * Vv[0] + R[3 * i + 1] * Vv[1] + R[3 * i + 2] * Vv[2];
+    double ex = half_sin * w[0], ey = half_sin * w[1], ez = half_sin * w[2];
+    double ew = th < 1e-4 ? 1.0 - th2 / 8.0 : cos(0.5 * th);
+    double x = q[3], y = q[4], z = q[5], s = q[6];
+    double qx = s * ex + x * ew + y * ez - z * ey;
+    double qy = s * ey - x * ez + y * ew + z * ex;
+    double qz = s * ez + x * ey - y * ex + z * ew;
+    double qw = s * ew - x * ex - y * ey - z * ez;
+    double norm = sqrt(qx * qx + qy * qy + qz * qz + qw * qw);
+    out[3] = qx / norm;
+    out[4] = qy / norm;
+    out[5] = qz / norm;
+    out[6] = qw / norm;
+    for (int i = 0; i < T->nq - 7; i++) {
+        double value = q[7 + i] + v[6 + i];
+        if (clamp) {
+            if (value < T->lower[i]) value = T->lower[i];
+            if (value > T->upper[i]) value = T->upper[i];
+        }
+        out[7 + i] = value;
+    }
+}
+
+/* ---------------------------------------------------------------------- the LM loop -- */
+
+/* Solve (A + mu I) x = g in place by Cholesky; 0 if A + mu I is not positive definite. */
+static int damped_solve(const double *A, const double *g, double mu, int n, double *L,
+                        double *x) {
+    for (int i = 0; i < n; i++) {
+        for (int j = 0; j <= i; j++) {
+            double sum = A[i * n + j] + (i == j ? mu : 0.0);
+            for (int k = 0; k < j; k++) sum -= L[i * n + k] * L[j * n + k];
+            if (i == j) {
+                if (!(sum > 0.0)) return 0;
+                L[i * n + i] = sqrt(sum);
+            } else {
+                L[i * n + j] = sum / L[j * n + j];
+            }
+        }
+    }
+    for (int i = 0; i < n; i++) {
+        double sum = g[i];
+        for (int k = 0; k < i; k++) sum -= L[i * n + k] * x[k];
+        x[i] = sum / L[i * n + i];
+    }
+    for (int i = n - 1; i >= 0; i--) {
+        double sum = x[i];
+        for (int k = i + 1; k < n; k++) sum -= L[k * n + i] * x[k];
+        x[i] = sum / L[i * n + i];
+    }
+    return 1;
+}
+
+static double dot(const double *a, const double *b, int n) {
+    double s = 0.0;
+    for (int i = 0; i < n; i++) s += a[i] * b[i];
+    return s;
+}
+
+/* Largest contact-point or centre error [m] of a stacked residual (3-blocks). */
+static double max_error(const double *r, int m) {
+    double worst = 0.0;
+    for (int i = 0; i < m; i += 3) {
+        double e = r[i] * r[i] + r[i + 1] * r[i + 1] + r[i + 2] * r[i + 2];
+        if (e > worst) worst = e;
+    }
+    return sqrt(worst);
+}
+
+enum { CONVERGED = 0, NO_PROGRESS = 1, MAX_ITERATIONS = 2 };
+
+typedef struct {
+    const Tree *T;
+    const long long *fingers;
+    int nf, m, nv;
+    const double *target;
+    Pose *M;
+    double *stack, *J, *r, *g, *A, *L, *x, *step, *cand, *r_new;
+    int *free_cols;
+} Work;
+
+/* residual = target - stack of q's placements (M must hold them); returns its cost. */
+static double residual_of(Work *w, const double *q, double *stack, double *r) {
+    forward(w->T, q, w->M);
+    stack_of(w->T, w->M, w->fingers, w->nf, stack);
+    for (int i = 0; i < w->m; i++) r[i] = w->target[i] - stack[i];
+    return dot(r, r, w->m);
+}
+
+/* Active set: the free columns (at a bound with the gradient pushing outwards = fixed). */
+static int free_columns(const Work *w, const double *q) {
+    int n = 0;
+    for (int c = 0; c < w->nv; c++) {
+        if (c >= 6) {
+            double value = q[c + 1], grad = w->g[c];
+            double lo = w->T->lower[c - 6] + 1e-12, hi = w->T->upper[c - 6] - 1e-12;
+            if ((value <= lo && grad < 0.0) || (value >= hi && grad > 0.0)) continue;
+        }
+        w->free_cols[n++] = c;
+    }
+    return n;
+}
+
+/* One Marquardt step from q with damping adapted until the cost decreases: 1 and the new
+ * configuration in w->cand (its residual in w->r_new, its stack in w->stack), or 0 if the damping
+ * ran out. */
+static int damped_step(Work *w, const double *q, double cost, double *damping) {
+    int m = w->m, nv = w->nv;
+    for (int c = 0; c < nv; c++) {
+        double s = 0.0;
+        for (int i = 0; i < m; i++) s += w->J[i * nv + c] * w->r[i];
+        w->g[c] = s;
+    }
+    int n = free_columns(w, q);
+    double *gf = w->step;  /* the gradient's free part, before the step reuses the buffer */
+    for (int a = 0; a < n; a++) {
+        int ca = w->free_cols[a];
+        gf[a] = w->g[ca];
+        for (int b = 0; b <= a; b++) {
+            int cb = w->free_cols[b];
+            double s = 0.0;
+            for (int i = 0; i < m; i++) s += w->J[i * nv + ca] * w->J[i * nv + cb];
+            w->A[a * n + b] = w->A[b * n + a] = s;
+        }
+    }
+    memcpy(w->g, gf, (size_t)n * sizeof(double));
+    double *cand_stack = w->step + nv;
+    while (*damping <= 1e4) {
+        if (damped_solve(w->A, w->g, *damping, n, w->L, w->x)) {
+            memset(w->step, 0, (size_t)nv * sizeof(double));
+            for (int a = 0; a < n; a++) w->step[w->free_cols[a]] = w->x[a];
+            integrate_clamped(w->T, q, w->step, w->cand, 1);
+            if (residual_of(w, w->cand, cand_stack, w->r_new) < cost) {
+                memcpy(w->stack, cand_stack, (size_t)m * sizeof(double));
+                *damping = *damping / 3.0 > 1e-7 ? *damping / 3.0 : 1e-7;
+                return 1;
+            }
+        }
+        *damping *= 4.0;
+    }
+    return 0;
+}
+
+typedef struct {
+    int outcome, iterations;
+    double error;
+} Outcome;
+
+/* sahgrasp/ik/solver.py's loop: Levenberg-Marquardt on the stacked contacts, free wrist, bounds
+ * as an active set, early abandonment, refinement to refine_m. q is updated in place; `history`
+ * (or NULL) is called after every accepted step. Returns -1 on a Python error (from history). */
+static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, double d_min_m,
+                   int stall, PyObject *history, Outcome *out) {
+    int m = w->m, nq = w->T->nq;
+    double damping = 1e-3;
+    double *costs = malloc((size_t)(max_iterations + 1) * sizeof(double));
+    if (!costs) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    int ncosts = 0;
+    costs[ncosts++] = residual_of(w, q, w->stack, w->r);
+    jacobian_of(w->T, w->M, w->fingers, w->nf, w->stack, w->J);
+    double refine_cost = (double)(m / 3) * refine_m * refine_m;
+    int status = 0;
+    for (int k = 0; k < max_iterations; k++) {
+        double cost = costs[ncosts - 1], error;
+        if (cost < refine_cost && (error = max_error(w->r, m)) < refine_m) {
+            *out = (Outcome){CONVERGED, k, error};
+            goto done;
+        }
+        int stalled = ncosts > stall && cost > 0.5 * costs[ncosts - 1 - stall];
+        if (stalled || damping > 1e4) {
+            error = max_error(w->r, m);
+            *out = (Outcome){error < d_min_m ? CONVERGED : NO_PROGRESS, k, error};
+            goto done;
+        }
+        if (!damped_step(w, q, cost, &damping)) continue;
+        memcpy(q, w->cand, (size_t)nq * sizeof(double));
+        memcpy(w->r, w->r_new, (size_t)m * sizeof(double));
+        if (history != NULL) {
+            PyObject *res = PyObject_CallNoArgs(history);
+            if (res == NULL) {
+                status = -1;
+                goto done;
+            }
+            Py_DECREF(res);
+        }
+        /* The candidate's placements are still in w->M: only the Jacobian is new. */
+        jacobian_of(w->T, w->M, w->fingers, w->nf, w->stack, w->J);
+        costs[ncosts++] = dot(w->r, w->r, m);
+    }
+    double error = max_error(w->r, m);
+    *out = (Outcome){error < d_min_m ? CONVERGED : MAX_ITERATIONS, max_iterations, error};
+done:
+    free(costs);
+    return status;
+}
+
+/* ------------------------------------------------------------------- Python interface -- */
+
+static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t n, int writable,
+                      const char *format, const char *what) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
+    /* numpy's int64 is 'l' where C long has 64 bits and 'q' elsewhere. */
+    int same = strcmp(view->format, format) == 0 ||
+               (format[0] == 'q' && view->format[0] == 'l' && view->itemsize == 8);
+    if (!same || (n >= 0 && view->len != n * view->itemsize)) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous values of format '%s'", what,
+                     n, format);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    return 0;
+}
+
+static void Tree_dealloc(Tree *self) {
+    free(self->parent);
+    free(self->place);
+    free(self->axis);
+    free(self->prismatic);
+    free(self->q_index);
+    free(self->v_index);
+    free(self->scale);
+    free(self->offset);
+    free(self->yaw);
+    free(self->chain);
+    free(self->chain_len);
+    free(self->lower);
+    free(self->upper);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
+    static char *kwlist[] = {"parents", "placements", "axes", "prismatic", "q_index", "v_index",
+                             "scale", "offset", "yaw", "radius", "lower", "upper", "nq", "nv",
+                             NULL};
+    PyObject *o[11];
+    double radius;
+    int nq, nv;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOOdOOii", kwlist, &o[0], &o[1], &o[2],
+                                     &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &radius, &o[9],
+                                     &o[10], &nq, &nv))
+        return -1;
+    if (self->parent != NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Tree is already initialised");
+        return -1;
+    }
+    Py_buffer b[11];
+    int got = 0, status = -1;
+    const char *names[11] = {"parents", "placements", "axes", "prismatic", "q_index", "v_index",
+                             "scale", "offset", "yaw", "lower", "upper"};
+    const char *formats[11] = {"q", "d", "d", "q", "q", "q", "d", "d", "q", "d", "d"};
+    for (; got < 11; got++)
+        if (get_buffer(o[got], &b[got], -1, 0, formats[got], names[got]) < 0) goto out;
+    Py_ssize_t nj = b[0].len / 8, nf = b[8].len / 8;
+    if (nj < 1 || b[1].len != nj * 12 * 8 || b[2].len != nj * 3 * 8 || b[3].len != nj * 8 ||
+        b[4].len != nj * 8 || b[5].len != nj * 8 || b[6].len != nj * 8 || b[7].len != nj * 8 ||
+        nf < 1 || nq < 7 || nv != nq - 1 || b[9].len != (nq - 7) * 8 ||
+        b[10].len != (nq - 7) * 8) {
+        PyErr_SetString(PyExc_ValueError, "Tree: inconsistent array sizes");
+        goto out;
+    }
+    const long long *parents = b[0].buf, *prismatic = b[3].buf, *qi = b[4].buf, *vi = b[5].buf,
+                    *yaw = b[8].buf;
+    for (Py_ssize_t j = 0; j < nj; j++) {
+        int bad_parent = j == 0 ? parents[0] != -1 : (parents[j] < 0 || parents[j] >= j);
+        int bad_index = j > 0 && (qi[j] < 7 || qi[j] >= nq || vi[j] < 6 || vi[j] >= nv);
+        if (bad_parent || bad_index) {
+            PyErr_Format(PyExc_ValueError, "Tree: joint %zd has an invalid parent or index", j);
+            goto out;
+        }
+    }
+    for (Py_ssize_t f = 0; f < nf; f++)
+        if (yaw[f] < 1 || yaw[f] >= nj) {
+            PyErr_SetString(PyExc_ValueError, "Tree: a yaw joint index is out of range");
+            goto out;
+        }
+    self->nj = (int)nj;
+    self->nq = nq;
+    self->nv = nv;
+    self->nf = (int)nf;
+    self->radius = radius;
+    self->parent = malloc(nj * sizeof(int));
+    self->place = malloc(nj * sizeof(Pose));
+    self->axis = malloc(nj * 3 * sizeof(double));
+    self->prismatic = malloc(nj * sizeof(int));
+    self->q_index = malloc(nj * sizeof(int));
+    self->v_index = malloc(nj * sizeof(int));
+    self->scale = malloc(nj * sizeof(double));
+    self->offset = malloc(nj * sizeof(double));
+    self->yaw = malloc(nf * sizeof(int));
+    self->chain = malloc(nf * nj * sizeof(int));
+    self->chain_len = malloc(nf * sizeof(int));
+    self->lower = malloc((nq - 7) * sizeof(double));
+    self->upper = malloc((nq - 7) * sizeof(double));
+    if (!self->parent || !self->place || !self->axis || !self->prismatic || !self->q_index ||
+        !self->v_index || !self->scale || !self->offset || !self->yaw || !self->chain ||
+        !self->chain_len || !self->lower || !self->upper) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    const double *placements = b[1].buf;
+    for (Py_ssize_t j = 0; j < nj; j++) {
+        self->parent[j] = (int)parents[j];
+        memcpy(self->place[j].R, placements + 12 * j, 9 * sizeof(double));
+        memcpy(self->place[j].t, placements + 12 * j + 9, 3 * sizeof(double));
+        self->prismatic[j] = prismatic[j] != 0;
+        self->q_index[j] = (int)qi[j];
+        self->v_index[j] = (int)vi[j];
+    }
+    memcpy(self->axis, b[2].buf, nj * 3 * sizeof(double));
+    memcpy(self->scale, b[6].buf, nj * sizeof(double));
+    memcpy(self->offset, b[7].buf, nj * sizeof(double));
+    memcpy(self->lower, b[9].buf, (nq - 7) * sizeof(double));
+    memcpy(self->upper, b[10].buf, (nq - 7) * sizeof(double));
+    for (Py_ssize_t f = 0; f < nf; f++) {
+        int n = 0;
+        self->yaw[f] = (int)yaw[f];
+        for (int j = self->yaw[f]; j > 0; j = self->parent[j]) self->chain[f * nj + n++] = j;
+        self->chain_len[f] = n;
+    }
+    status = 0;
+out:
+    while (got-- > 0) PyBuffer_Release(&b[got]);
+    return status;
+}
+
+static int check_ready(const Tree *self) {
+    if (self->parent == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Tree is not initialised");
+        return -1;
+    }
+    return 0;
+}
+
+static void work_free(Work *w) {
+    free(w->M);
+    free(w->stack);
+    free(w->free_cols);
+}
+
+/* Buffers of one call, from one allocation each for doubles. */
+static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
+                     const double *target) {
+    int m = 6 * nf, nv = T->nv;
+    memset(w, 0, sizeof(Work));
+    for (int b = 0; b < nf; b++)
+        if (fingers[b] < 0 || fingers[b] >= T->nf) {
+            PyErr_SetString(PyExc_ValueError, "finger index out of range");
+            return -1;
+        }
+    *w = (Work){.T = T, .fingers = fingers, .nf = nf, .m = m, .nv = nv, .target = target};
+    size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 5) + T->nq + m;
+    w->M = malloc((size_t)T->nj * sizeof(Pose));
+    w->stack = malloc(doubles * sizeof(double));
+    w->free_cols = malloc((size_t)nv * sizeof(int));
+    if (!w->M || !w->stack || !w->free_cols) {
+        work_free(w);
+        PyErr_NoMemory();
+        return -1;
+    }
+    double *p = w->stack + m;
+    w->r = p, p += m;
+    w->r_new = p, p += m;
+    w->J = p, p += (size_t)m * nv;
+    w->g = p, p += nv;
+    w->A = p, p += (size_t)nv * nv;
+    w->L = p, p += (size_t)nv * nv;
+    w->x = p, p += nv;
+    w->step = p, p += nv + m; /* the step, then a candidate's stack */
+    w->cand = p;
+    return 0;
+}
+
+static PyObject *Tree_solve(Tree *self, PyObject *args) {
+    PyObject *q_obj, *target_obj, *fingers_obj, *history;
+    int max_iterations, stall;
+    double refine_m, d_min_m;
+    if (!PyArg_ParseTuple(args, "OOOiddiO:solve", &q_obj, &target_obj, &fingers_obj,
+                          &max_iterations, &refine_m, &d_min_m, &stall, &history))
+        return NULL;
+    if (check_ready(self) < 0) return NULL;
+    if (max_iterations < 0 || stall < 1) {
+        PyErr_SetString(PyExc_ValueError, "max_iterations must be >= 0 and stall >= 1");
+        return NULL;
+    }
+    Py_buffer qb, tb, fb;
+    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
+    int nf = (int)(fb.len / 8);
+    PyObject *result = NULL;
+    if (get_buffer(q_obj, &qb, self->nq, 1, "d", "q") < 0) goto release_f;
+    if (get_buffer(target_obj, &tb, 6 * nf, 0, "d", "target") < 0) goto release_q;
+    Work w;
+    if (nf < 1 || work_init(&w, self, fb.buf, nf, tb.buf) < 0) {
+        if (nf < 1) PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
+        goto release_t;
+    }
+    Outcome out;
+    if (lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall,
+                history == Py_None ? NULL : history, &out) == 0)
+        result = Py_BuildValue("iid", out.outcome, out.iterations, out.error);
+    work_free(&w);
+release_t:
+    PyBuffer_Release(&tb);
+release_q:
+    PyBuffer_Release(&qb);
+release_f:
+    PyBuffer_Release(&fb);
+    return result;
+}
+
+/* stack(q, fingers, stack_out, jacobian_out or None): the contact stack and its Jacobian. */
+static PyObject *Tree_stack(Tree *self, PyObject *args) {
+    PyObject *q_obj, *fingers_obj, *stack_obj, *jac_obj;
+    if (!PyArg_ParseTuple(args, "OOOO:stack", &q_obj, &fingers_obj, &stack_obj, &jac_obj))
+        return NULL;
+    if (check_ready(self) < 0) return NULL;
+    Py_buffer qb, fb, sb, jb;
+    int ok = 0;
+    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
+    int nf = (int)(fb.len / 8);
+    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) goto release_f;
+    if (get_buffer(stack_obj, &sb, 6 * nf, 1, "d", "stack") < 0) goto release_q;
+    if (jac_obj != Py_None &&
+        get_buffer(jac_obj, &jb, (Py_ssize_t)6 * nf * self->nv, 1, "d", "jacobian") < 0)
+        goto release_s;
+    Work w;
+    if (work_init(&w, self, fb.buf, nf, sb.buf) == 0) {
+        forward(self, qb.buf, w.M);
+        stack_of(self, w.M, fb.buf, nf, sb.buf);
+        if (jac_obj != Py_None) jacobian_of(self, w.M, fb.buf, nf, sb.buf, jb.buf);
+        work_free(&w);
+        ok = 1;
+    }
+    if (jac_obj != Py_None) PyBuffer_Release(&jb);
+release_s:
+    PyBuffer_Release(&sb);
+release_q:
+    PyBuffer_Release(&qb);
+release_f:
+    PyBuffer_Release(&fb);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
+/* integrate(q, v, out, clamp): q (+) v, the joints clamped to their limits if clamp. */
+static PyObject *Tree_integrate(Tree *self, PyObject *args) {
+    PyObject *q_obj, *v_obj, *out_obj;
+    int clamp;
+    if (!PyArg_ParseTuple(args, "OOOp:integrate", &q_obj, &v_obj, &out_obj, &clamp)) return NULL;
+    if (check_ready(self) < 0) return NULL;
+    Py_buffer qb, vb, ob;
+    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) return NULL;
+    if (get_buffer(v_obj, &vb, self->nv, 0, "d", "v") < 0) {
+        PyBuffer_Release(&qb);
+        return NULL;
+    }
+    if (get_buffer(out_obj, &ob, self->nq, 1, "d", "out") < 0) {
+        PyBuffer_Release(&vb);
+        PyBuffer_Release(&qb);
+        return NULL;
+    }
+    integrate_clamped(self, qb.buf, vb.buf, ob.buf, clamp);
+    PyBuffer_Release(&ob);
+    PyBuffer_Release(&vb);
+    PyBuffer_Release(&qb);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef Tree_methods[] = {
+    {"solve", (PyCFunction)Tree_solve, METH_VARARGS,
+     "solve(q, target, fingers, max_iterations, refine_m, d_min_m, stall, history) -> "
+     "(outcome, iterations, error_m); q is updated in place."},
+    {"stack", (PyCFunction)Tree_stack, METH_VARARGS,
+     "stack(q, fingers, stack_out, jacobian_out_or_None): contact stack and its Jacobian."},
+    {"integrate", (PyCFunction)Tree_integrate, METH_VARARGS,
+     "integrate(q, v, out, clamp): q (+) v, joints clamped to their limits if clamp."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyTypeObject TreeType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "sahgrasp.ik._lm.Tree",
+    .tp_basicsize = sizeof(Tree),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "A hand's kinematic tree and the compiled Levenberg-Marquardt loop of the IK.",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Tree_init,
+    .tp_dealloc = (destructor)Tree_dealloc,
+    .tp_methods = Tree_methods,
+};
+
+static struct PyModuleDef module = {
+    PyModuleDef_HEAD_INIT, .m_name = "_lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
+    .m_size = -1,
+};
+
+PyMODINIT_FUNC PyInit__lm(void) {
+    if (PyType_Ready(&TreeType) < 0) return NULL;
+    PyObject *m = PyModule_Create(&module);
+    if (m == NULL) return NULL;
+    Py_INCREF(&TreeType);
+    if (PyModule_AddObject(m, "Tree", (PyObject *)&TreeType) < 0) {
+        Py_DECREF(&TreeType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    PyModule_AddIntConstant(m, "CONVERGED", CONVERGED);
+    PyModule_AddIntConstant(m, "NO_PROGRESS", NO_PROGRESS);
+    PyModule_AddIntConstant(m, "MAX_ITERATIONS", MAX_ITERATIONS);
+    return m;
+}

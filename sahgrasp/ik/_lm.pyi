@@ -1,0 +1,43 @@
+"""Type stub of the compiled IK loop (``_lm.c``)."""
+
+from collections.abc import Callable
+
+from numpy.typing import NDArray
+
+CONVERGED: int
+NO_PROGRESS: int
+MAX_ITERATIONS: int
+
+class Tree:
+    def __init__(
+        self,
+        parents: NDArray,
+        placements: NDArray,
+        axes: NDArray,
+        prismatic: NDArray,
+        q_index: NDArray,
+        v_index: NDArray,
+        scale: NDArray,
+        offset: NDArray,
+        yaw: NDArray,
+        radius: float,
+        lower: NDArray,
+        upper: NDArray,
+        nq: int,
+        nv: int,
+    ) -> None: ...
+    def solve(
+        self,
+        q: NDArray,
+        target: NDArray,
+        fingers: NDArray,
+        max_iterations: int,
+        refine_m: float,
+        d_min_m: float,
+        stall: int,
+        history: Callable[[], object] | None,
+    ) -> tuple[int, int, float]: ...
+    def stack(
+        self, q: NDArray, fingers: NDArray, stack_out: NDArray, jacobian_out: NDArray | None
+    ) -> None: ...
+    def integrate(self, q: NDArray, v: NDArray, out: NDArray, clamp: bool) -> None: ...

@@ -1,0 +1,198 @@
+"""The compiled tree and loop of the IK against Pinocchio, finite differences and a plain loop."""
+
+import dataclasses
+import itertools
+import math
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.linalg import solve
+
+from sahgrasp.contacts import GraspTarget
+from sahgrasp.hand import Hand, load_hand, sah_description
+from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems
+from sahgrasp.ik._lm import Tree
+from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
+from sahgrasp.ik.solver import ContactProblem, _lm_loop
+
+FINGER_SETS = (None, [0, 2, 3], [1])
+
+
+def _indices(hand: Hand, fingers: list[int] | None) -> np.ndarray:
+    return np.arange(len(hand.fingers)) if fingers is None else np.array(fingers)
+
+
+def _stack(tree: Tree, hand: Hand, q: np.ndarray, fingers: np.ndarray) -> tuple:
+    stack, J = np.empty(6 * len(fingers)), np.empty((6 * len(fingers), hand.nv))
+    tree.stack(q, fingers, stack, J)
+    return stack, J
+
+
+def _configurations(hand: Hand, count: int, seed: int) -> list[np.ndarray]:
+    rng = np.random.default_rng(seed)
+    pin.seed(seed)
+    return [hand.random_configuration(rng, T_world_palm=pin.SE3.Random()) for _ in range(count)]
+
+
+@pytest.fixture(scope="module")
+def prismatic_hand(tmp_path_factory: pytest.TempPathFactory) -> Hand:
+    """The SAH with its index proximal joint made a slide (limits in metres)."""
+    description = sah_description()
+    urdf = description.urdf_path.read_text()
+    old = '<joint name="index_j2" type="revolute">'
+    assert old in urdf
+    urdf = urdf.replace(old, '<joint name="index_j2" type="prismatic">').replace(
+        'lower="-1.30899694" upper="0.0698131701"', 'lower="-0.02" upper="0.02"', 1
+    )
+    path = Path(tmp_path_factory.mktemp("prismatic")) / "sah_prismatic.urdf"
+    path.write_text(urdf)
+    return Hand(dataclasses.replace(description, urdf_path=path))
+
+
+@pytest.fixture(params=["sah", "allegro", "prismatic"])
+def hand(request: pytest.FixtureRequest, sah: Hand, allegro: Hand, prismatic_hand: Hand) -> Hand:
+    return {"sah": sah, "allegro": allegro, "prismatic": prismatic_hand}[request.param]
+
+
+@pytest.mark.parametrize("fingers", FINGER_SETS)
+def test_stack_and_jacobian_match_pinocchio(hand: Hand, fingers: list[int] | None) -> None:
+    tree = compiled_tree(hand)
+    for q in _configurations(hand, 20, 3):
+        stack, J = _stack(tree, hand, q, _indices(hand, fingers))
+        expected_stack, expected_J = hand.contact_stack_jacobian(q, fingers)
+        np.testing.assert_allclose(stack, expected_stack, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(J, expected_J, rtol=0, atol=1e-12)
+
+
+def test_jacobian_matches_finite_differences(hand: Hand) -> None:
+    tree, fingers, h = compiled_tree(hand), _indices(hand, None), 1e-7
+    for q in _configurations(hand, 5, 4):
+        stack, J = _stack(tree, hand, q, fingers)
+        moved, numeric = np.empty(hand.nq), np.empty_like(J)
+        for c in range(hand.nv):
+            tree.integrate(q, h * np.eye(hand.nv)[c], moved, False)
+            numeric[:, c] = (_stack(tree, hand, moved, fingers)[0] - stack) / h
+        np.testing.assert_allclose(J, numeric, rtol=0, atol=1e-6)
+
+
+def test_integration_matches_pinocchio_and_clamps(hand: Hand) -> None:
+    tree, rng = compiled_tree(hand), np.random.default_rng(5)
+    out = np.empty(hand.nq)
+    for q in _configurations(hand, 20, 5):
+        v = rng.normal(size=hand.nv) * rng.choice([1e-9, 1e-5, 1.0])
+        tree.integrate(q, v, out, False)
+        np.testing.assert_allclose(out, pin.integrate(hand.model, q, v), rtol=0, atol=1e-12)
+        tree.integrate(q, 10.0 * v / np.abs(v).max(), out, True)
+        assert np.all(out[7:] >= hand.lower) and np.all(out[7:] <= hand.upper)
+        assert np.linalg.norm(out[3:7]) == pytest.approx(1.0, abs=1e-15)
+
+
+def _plain_loop(hand: Hand, problem: ContactProblem, q: np.ndarray, s: IKSettings) -> tuple:
+    """The loop of ``_lm_loop`` written out in numpy on Pinocchio's kinematics (the reference)."""
+    damping, fingers = 1e-3, problem.stack_fingers
+    stack, J = hand.contact_stack_jacobian(q, fingers)
+    e = problem.target_stack - stack
+    costs = [e.dot(e)]
+
+    def max_error(r: np.ndarray) -> float:
+        return math.sqrt((r * r).reshape(-1, 3).sum(axis=1).max())
+
+    for k in range(s.max_iterations):
+        if max_error(e) < s.refine_m:
+            return q, "converged", k
+        stall = s.stall_iterations
+        if (len(costs) > stall and costs[-1] > 0.5 * costs[-1 - stall]) or damping > 1e4:
+            return q, "converged" if max_error(e) < s.d_min_m else "no_progress", k
+        g = J.T @ e
+        x = q[7:]
+        fixed = ((x <= hand.lower + 1e-12) & (g[6:] < 0)) | (
+            (x >= hand.upper - 1e-12) & (g[6:] > 0)
+        )
+        free = np.concatenate([np.ones(6, bool), ~fixed])
+        while damping <= 1e4:
+            step = np.zeros(hand.nv)
+            A = J[:, free].T @ J[:, free] + damping * np.eye(free.sum())
+            step[free] = solve(A, g[free], assume_a="pos")
+            candidate = pin.integrate(hand.model, q, step)
+            candidate[7:] = np.clip(candidate[7:], hand.lower, hand.upper)
+            e_new = problem.target_stack - hand.contact_stack(candidate, fingers)
+            if e_new.dot(e_new) < costs[-1]:
+                q, e, damping = candidate, e_new, max(damping / 3, 1e-7)
+                J = hand.contact_stack_jacobian(q, fingers)[1]
+                costs.append(e.dot(e))
+                break
+            damping *= 4
+    return q, "converged" if max_error(e) < s.d_min_m else "max_iterations", s.max_iterations
+
+
+def _start(hand: Hand, target: GraspTarget) -> np.ndarray:
+    """The hand at mid-range, hung from the thumb contact."""
+    return hang_from_thumb(hand, 0.5 * (hand.lower + hand.upper), target)[0]
+
+
+@pytest.mark.parametrize("free", [(), ("ring",)])
+def test_loop_matches_a_plain_numpy_loop(sah: Hand, free: tuple[str, ...]) -> None:
+    settings = IKSettings()
+    outcomes = []
+    for target in random_problems(sah, 25, 6):
+        if free:
+            target = GraspTarget(target.name, [c for c in target.contacts if c.finger not in free])
+        problem = ContactProblem(sah, target, free)
+        q0 = _start(sah, target)
+        attempt = _lm_loop(sah, problem, q0, settings, settings.max_iterations, None)
+        q, outcome, iterations = _plain_loop(sah, problem, q0, settings)
+        outcomes.append(attempt.outcome)
+        assert (attempt.outcome, attempt.iterations) == (outcome, iterations)
+        np.testing.assert_allclose(attempt.q, q, rtol=0, atol=1e-6)
+    assert set(outcomes) >= {"converged", "no_progress"}
+
+
+def test_history_holds_every_accepted_step(sah: Hand) -> None:
+    settings = IKSettings()
+    target = random_problems(sah, 1, 7)[0]
+    problem = ContactProblem(sah, target)
+    q0 = _start(sah, target)
+    history = [q0.copy()]
+    attempt = _lm_loop(sah, problem, q0, settings, settings.max_iterations, history)
+    assert attempt.outcome in OUTCOMES
+    assert len(history) > 2 and np.array_equal(history[-1], attempt.q)
+    assert all(not np.array_equal(a, b) for a, b in itertools.pairwise(history))
+
+
+def test_bad_input_is_a_value_error(sah: Hand) -> None:
+    tree, q = compiled_tree(sah), np.array(sah.configuration())
+    stack, target = np.empty(24), np.zeros(24)
+    with pytest.raises(ValueError, match="q: expected 28"):
+        tree.stack(q[:-1], np.arange(4), stack, None)
+    with pytest.raises(ValueError, match="finger index out of range"):
+        tree.stack(q, np.array([0, 4]), np.empty(12), None)
+    with pytest.raises(ValueError, match="stack"):
+        tree.stack(q, np.arange(4), np.empty(12), None)
+    with pytest.raises(ValueError, match="fingers"):
+        tree.stack(q, np.arange(4.0), stack, None)
+    with pytest.raises(ValueError, match="max_iterations"):
+        tree.solve(q, target, np.arange(4), -1, 1e-5, 1.5e-3, 10, None)
+    with pytest.raises(ValueError, match="fingers must not be empty"):
+        tree.solve(q, np.zeros(0), np.arange(0), 10, 1e-5, 1.5e-3, 10, None)
+    with pytest.raises(RuntimeError, match="not initialised"):
+        Tree.__new__(Tree).integrate(q, np.zeros(27), q.copy(), False)
+
+
+def test_errors_raised_by_history_propagate(sah: Hand) -> None:
+    tree, target = compiled_tree(sah), random_problems(sah, 1, 8)[0]
+    problem = ContactProblem(sah, target)
+    q = _start(sah, target)
+
+    def failing() -> None:
+        raise KeyError("from history")
+
+    with pytest.raises(KeyError, match="from history"):
+        tree.solve(q, problem.target_stack, problem.rows, 50, 1e-5, 1.5e-3, 10, failing)
+
+
+def test_a_second_load_of_the_hand_gets_its_own_tree() -> None:
+    first, second = load_hand("sah"), load_hand("sah")
+    assert compiled_tree(first) is compiled_tree(first)
+    assert compiled_tree(first) is not compiled_tree(second)
