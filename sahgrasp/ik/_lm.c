@@ -34,6 +34,8 @@ typedef struct {
     int *yaw;        /* per finger, the joint whose frame is the contact frame's parent */
     int *chain;      /* per finger, the non-root joints moving its yaw joint, nj per finger */
     int *chain_len;
+    int *columns;    /* per finger, the columns of v that move it (ascending), nv per finger */
+    int *columns_len;
     double radius;   /* fingertip sphere radius [m] */
     double *lower, *upper;  /* limits of q[7:] */
 } Tree;
@@ -210,19 +212,24 @@ static void integrate_clamped(const Tree *T, const double *q, const double *v, d
 
 /* ---------------------------------------------------------------------- the LM loop -- */
 
-/* Solve (A + mu I) x = g in place by Cholesky; 0 if A + mu I is not positive definite. */
+/* Solve (A + mu I) x = g by Cholesky (A's lower triangle read); 0 if A + mu I is not positive
+ * definite. Right-looking: each column updates the trailing rows with independent operations,
+ * which pipeline, where the dot-product form waits on one long chain of additions per entry. */
 static int damped_solve(const double *A, const double *g, double mu, int n, double *L,
                         double *x) {
     for (int i = 0; i < n; i++) {
-        for (int j = 0; j <= i; j++) {
-            double sum = A[i * n + j] + (i == j ? mu : 0.0);
-            for (int k = 0; k < j; k++) sum -= L[i * n + k] * L[j * n + k];
-            if (i == j) {
-                if (!(sum > 0.0)) return 0;
-                L[i * n + i] = sqrt(sum);
-            } else {
-                L[i * n + j] = sum / L[j * n + j];
-            }
+        memcpy(L + i * n, A + i * n, (size_t)(i + 1) * sizeof(double));
+        L[i * n + i] += mu;
+    }
+    for (int j = 0; j < n; j++) {
+        double d = L[j * n + j];
+        if (!(d > 0.0)) return 0;
+        d = sqrt(d);
+        L[j * n + j] = d;
+        for (int i = j + 1; i < n; i++) L[i * n + j] /= d;
+        for (int i = j + 1; i < n; i++) {
+            double lij = L[i * n + j];
+            for (int k = j + 1; k <= i; k++) L[i * n + k] -= lij * L[k * n + j];
         }
     }
     for (int i = 0; i < n; i++) {
@@ -263,7 +270,7 @@ typedef struct {
     const double *target;
     Pose *M;
     double *stack, *J, *r, *g, *A, *L, *x, *step, *cand, *r_new;
-    int *free_cols;
+    int *free_cols, *position; /* the free columns; per column its place among them, or -1 */
 } Work;
 
 /* residual = target - stack of q's placements (M must hold them); returns its cost. */
@@ -278,14 +285,53 @@ static double residual_of(Work *w, const double *q, double *stack, double *r) {
 static int free_columns(const Work *w, const double *q) {
     int n = 0;
     for (int c = 0; c < w->nv; c++) {
+        w->position[c] = -1;
         if (c >= 6) {
             double value = q[c + 1], grad = w->g[c];
             double lo = w->T->lower[c - 6] + 1e-12, hi = w->T->upper[c - 6] - 1e-12;
             if ((value <= lo && grad < 0.0) || (value >= hi && grad > 0.0)) continue;
         }
+        w->position[c] = n;
         w->free_cols[n++] = c;
     }
     return n;
+}
+
+/* g = J^T r and the lower triangle of A = J_F^T J_F, finger by finger on the columns that move
+ * each finger (a finger's rows are zero elsewhere: about a fifth of the dense products). */
+static void gradient(Work *w) {
+    int nv = w->nv;
+    memset(w->g, 0, (size_t)nv * sizeof(double));
+    for (int b = 0; b < w->nf; b++) {
+        int f = (int)w->fingers[b];
+        const int *cols = w->T->columns + f * nv;
+        for (int a = 0; a < w->T->columns_len[f]; a++) {
+            double s = 0.0;
+            for (int i = 6 * b; i < 6 * b + 6; i++) s += w->J[i * nv + cols[a]] * w->r[i];
+            w->g[cols[a]] += s;
+        }
+    }
+}
+
+static void gram(Work *w, int n) {
+    int nv = w->nv;
+    memset(w->A, 0, (size_t)n * n * sizeof(double));
+    for (int b = 0; b < w->nf; b++) {
+        int f = (int)w->fingers[b];
+        const int *cols = w->T->columns + f * nv;
+        for (int u = 0; u < w->T->columns_len[f]; u++) {
+            int pu = w->position[cols[u]];
+            if (pu < 0) continue;
+            for (int v = 0; v <= u; v++) {
+                int pv = w->position[cols[v]];
+                if (pv < 0) continue;
+                double s = 0.0;
+                for (int i = 6 * b; i < 6 * b + 6; i++)
+                    s += w->J[i * nv + cols[u]] * w->J[i * nv + cols[v]];
+                w->A[pu * n + pv] += s;
+            }
+        }
+    }
 }
 
 /* One Marquardt step from q with damping adapted until the cost decreases: 1 and the new
@@ -293,24 +339,10 @@ static int free_columns(const Work *w, const double *q) {
  * ran out. */
 static int damped_step(Work *w, const double *q, double cost, double *damping) {
     int m = w->m, nv = w->nv;
-    for (int c = 0; c < nv; c++) {
-        double s = 0.0;
-        for (int i = 0; i < m; i++) s += w->J[i * nv + c] * w->r[i];
-        w->g[c] = s;
-    }
+    gradient(w);
     int n = free_columns(w, q);
-    double *gf = w->step;  /* the gradient's free part, before the step reuses the buffer */
-    for (int a = 0; a < n; a++) {
-        int ca = w->free_cols[a];
-        gf[a] = w->g[ca];
-        for (int b = 0; b <= a; b++) {
-            int cb = w->free_cols[b];
-            double s = 0.0;
-            for (int i = 0; i < m; i++) s += w->J[i * nv + ca] * w->J[i * nv + cb];
-            w->A[a * n + b] = w->A[b * n + a] = s;
-        }
-    }
-    memcpy(w->g, gf, (size_t)n * sizeof(double));
+    gram(w, n);
+    for (int a = 0; a < n; a++) w->g[a] = w->g[w->free_cols[a]]; /* free_cols ascend: in place */
     double *cand_stack = w->step + nv;
     while (*damping <= 1e4) {
         if (damped_solve(w->A, w->g, *damping, n, w->L, w->x)) {
@@ -414,6 +446,8 @@ static void Tree_dealloc(Tree *self) {
     free(self->yaw);
     free(self->chain);
     free(self->chain_len);
+    free(self->columns);
+    free(self->columns_len);
     free(self->lower);
     free(self->upper);
     Py_TYPE(self)->tp_free((PyObject *)self);
@@ -480,11 +514,13 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
     self->yaw = malloc(nf * sizeof(int));
     self->chain = malloc(nf * nj * sizeof(int));
     self->chain_len = malloc(nf * sizeof(int));
+    self->columns = malloc(nf * nv * sizeof(int));
+    self->columns_len = malloc(nf * sizeof(int));
     self->lower = malloc((nq - 7) * sizeof(double));
     self->upper = malloc((nq - 7) * sizeof(double));
     if (!self->parent || !self->place || !self->axis || !self->prismatic || !self->q_index ||
         !self->v_index || !self->scale || !self->offset || !self->yaw || !self->chain ||
-        !self->chain_len || !self->lower || !self->upper) {
+        !self->chain_len || !self->columns || !self->columns_len || !self->lower || !self->upper) {
         PyErr_NoMemory();
         goto out;
     }
@@ -507,6 +543,13 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
         self->yaw[f] = (int)yaw[f];
         for (int j = self->yaw[f]; j > 0; j = self->parent[j]) self->chain[f * nj + n++] = j;
         self->chain_len[f] = n;
+        int *cols = self->columns + f * nv, count = 0;
+        for (int c = 0; c < nv; c++) {
+            int moves = c < 6;
+            for (int k = 0; k < n && !moves; k++) moves = self->v_index[self->chain[f * nj + k]] == c;
+            if (moves) cols[count++] = c;
+        }
+        self->columns_len[f] = count;
     }
     status = 0;
 out:
@@ -526,6 +569,7 @@ static void work_free(Work *w) {
     free(w->M);
     free(w->stack);
     free(w->free_cols);
+    free(w->position);
 }
 
 /* Buffers of one call, from one allocation each for doubles. */
@@ -543,7 +587,8 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
     w->M = malloc((size_t)T->nj * sizeof(Pose));
     w->stack = malloc(doubles * sizeof(double));
     w->free_cols = malloc((size_t)nv * sizeof(int));
-    if (!w->M || !w->stack || !w->free_cols) {
+    w->position = malloc((size_t)nv * sizeof(int));
+    if (!w->M || !w->stack || !w->free_cols || !w->position) {
         work_free(w);
         PyErr_NoMemory();
         return -1;
