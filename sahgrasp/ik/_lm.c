@@ -269,7 +269,7 @@ typedef struct {
     int nf, m, nv;
     const double *target;
     Pose *M;
-    double *stack, *J, *r, *g, *A, *L, *x, *step, *cand, *r_new;
+    double *stack, *J, *r, *g, *A, *L, *x, *step, *cand, *r_new, *costs;
     int *free_cols, *position; /* the free columns; per column its place among them, or -1 */
 } Work;
 
@@ -371,12 +371,7 @@ typedef struct {
 static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, double d_min_m,
                    int stall, PyObject *history, Outcome *out) {
     int m = w->m, nq = w->T->nq;
-    double damping = 1e-3;
-    double *costs = malloc((size_t)(max_iterations + 1) * sizeof(double));
-    if (!costs) {
-        PyErr_NoMemory();
-        return -1;
-    }
+    double damping = 1e-3, *costs = w->costs;
     int ncosts = 0;
     costs[ncosts++] = residual_of(w, q, w->stack, w->r);
     jacobian_of(w->T, w->M, w->fingers, w->nf, w->stack, w->J);
@@ -412,7 +407,6 @@ static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, doub
     double error = max_error(w->r, m);
     *out = (Outcome){error < d_min_m ? CONVERGED : MAX_ITERATIONS, max_iterations, error};
 done:
-    free(costs);
     return status;
 }
 
@@ -572,9 +566,9 @@ static void work_free(Work *w) {
     free(w->position);
 }
 
-/* Buffers of one call, from one allocation each for doubles. */
+/* Buffers of one call (the costs of up to `iterations` steps), one allocation for the doubles. */
 static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
-                     const double *target) {
+                     const double *target, int iterations) {
     int m = 6 * nf, nv = T->nv;
     memset(w, 0, sizeof(Work));
     for (int b = 0; b < nf; b++)
@@ -583,7 +577,8 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
             return -1;
         }
     *w = (Work){.T = T, .fingers = fingers, .nf = nf, .m = m, .nv = nv, .target = target};
-    size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 5) + T->nq + m;
+    size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 5) + T->nq +
+                     (size_t)iterations + 1;
     w->M = malloc((size_t)T->nj * sizeof(Pose));
     w->stack = malloc(doubles * sizeof(double));
     w->free_cols = malloc((size_t)nv * sizeof(int));
@@ -602,7 +597,8 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
     w->L = p, p += (size_t)nv * nv;
     w->x = p, p += nv;
     w->step = p, p += nv + m; /* the step, then a candidate's stack */
-    w->cand = p;
+    w->cand = p, p += T->nq;
+    w->costs = p;
     return 0;
 }
 
@@ -625,14 +621,21 @@ static PyObject *Tree_solve(Tree *self, PyObject *args) {
     if (get_buffer(q_obj, &qb, self->nq, 1, "d", "q") < 0) goto release_f;
     if (get_buffer(target_obj, &tb, 6 * nf, 0, "d", "target") < 0) goto release_q;
     Work w;
-    if (nf < 1 || work_init(&w, self, fb.buf, nf, tb.buf) < 0) {
+    if (nf < 1 || work_init(&w, self, fb.buf, nf, tb.buf, max_iterations) < 0) {
         if (nf < 1) PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
         goto release_t;
     }
     Outcome out;
-    if (lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall,
-                history == Py_None ? NULL : history, &out) == 0)
-        result = Py_BuildValue("iid", out.outcome, out.iterations, out.error);
+    int status;
+    if (history == Py_None) {
+        /* No Python call inside: other threads (threaded executors' workers) run meanwhile. */
+        Py_BEGIN_ALLOW_THREADS
+        status = lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall, NULL, &out);
+        Py_END_ALLOW_THREADS
+    } else {
+        status = lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall, history, &out);
+    }
+    if (status == 0) result = Py_BuildValue("iid", out.outcome, out.iterations, out.error);
     work_free(&w);
 release_t:
     PyBuffer_Release(&tb);
@@ -659,7 +662,7 @@ static PyObject *Tree_stack(Tree *self, PyObject *args) {
         get_buffer(jac_obj, &jb, (Py_ssize_t)6 * nf * self->nv, 1, "d", "jacobian") < 0)
         goto release_s;
     Work w;
-    if (work_init(&w, self, fb.buf, nf, sb.buf) == 0) {
+    if (work_init(&w, self, fb.buf, nf, sb.buf, 0) == 0) {
         forward(self, qb.buf, w.M);
         stack_of(self, w.M, fb.buf, nf, sb.buf);
         if (jac_obj != Py_None) jacobian_of(self, w.M, fb.buf, nf, sb.buf, jb.buf);
