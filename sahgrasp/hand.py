@@ -820,29 +820,6 @@ class Hand:
         stack = np.asarray(layout.select.dot(self._joint_vector()))
         return stack, self._rows_jacobian(layout, stack)
 
-    def contact_jacobian(
-        self,
-        q: NDArray[np.float64],
-        fingers: list[int] | None = None,
-        stack: NDArray[np.float64] | None = None,
-    ) -> NDArray[np.float64]:
-        """The Jacobian of :meth:`contact_stack_jacobian` alone, for a caller that has the stack.
-
-        Args:
-            q: Configuration.
-            fingers: As in :meth:`contact_stack`.
-            stack: ``contact_stack(q, fingers)`` if the caller has it (it is not computed again;
-                it must be that of ``q``).
-
-        Raises:
-            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
-        """
-        pin.computeJointJacobians(self.model, self.data, self._finite(q))
-        layout = self._all_fingers if fingers is None else self._stack_layout(fingers)
-        if stack is None:
-            stack = np.asarray(layout.select.dot(self._joint_vector()))
-        return self._rows_jacobian(layout, stack)
-
     def _rows_jacobian(self, layout: _Layout, values: NDArray[np.float64]) -> NDArray[np.float64]:
         """Jacobian (rows, nv) of ``layout``'s ``values`` from ``data.J`` (joint Jacobians set).
 

@@ -113,7 +113,7 @@ def test_every_option_has_help_and_shows_its_default() -> None:
             else:
                 assert "%(default)s" in shown, f"{parser.prog} {action.dest} hides its default"
     sequence = next(p for p in parsers if p.prog.endswith(" sequence"))
-    assert "about 20 minutes on 2 cores" in " ".join(sequence.format_help().split())
+    assert "about 10 minutes on 2 cores (SAH)" in " ".join(sequence.format_help().split())
 
 
 def test_cli_defaults_are_the_library_defaults() -> None:

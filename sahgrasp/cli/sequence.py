@@ -26,7 +26,7 @@ SEARCH_DEFAULTS = {"grid": 10, "problems": 300, "rounds": 12, "seed": 0, "method
 
 DESCRIPTION = (
     "Search the sequence of initial hand poses (Claret & Suárez, Section 3.2). With the defaults "
-    "(N = 10, M = 300, 12 rounds) this is a job of about 20 minutes on 2 cores; the work is "
+    "(N = 10, M = 300, 12 rounds) this is a job of about 10 minutes on 2 cores (SAH); the work is "
     "checkpointed in DIR, so an interrupted search continues with --resume."
 )
 

@@ -83,14 +83,15 @@ class HandReach:
 
 
 SAH_REACH = HandReach(
-    finger_spacing_m=(0.028, 0.040), span_m=(0.001, 0.148), fingertip_radius_m=0.01
+    finger_spacing_m=(0.028, 0.040), span_m=(0.001, 0.146), fingertip_radius_m=0.01
 )
 """The SAH's reach, measured with ``solve_ik`` on flat antipodal grasps (docs/benchmarks.md).
 
 Thumb on one face of a plate, index, middle and ring in a line on the other, all normals along the
-plate's normal: solved for every thickness from 0.5 to 148 mm and unsolved from 150 mm on; solved
-for finger spacings from 28 mm up (26 mm puts neighbouring fingers, 26 mm wide, into each other).
-The upper spacing is the 40 mm between the finger bases.
+plate's normal, fingers 40 mm apart (the spacing of the finger bases): solved for every thickness
+from 0.5 to 146 mm and unsolved from 148 mm on (with the sequence shipped before the compiled IK
+loop: up to 148 mm); solved for finger spacings from 28 mm up (26 mm puts neighbouring fingers,
+26 mm wide, into each other).
 """
 
 
