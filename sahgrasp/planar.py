@@ -50,7 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
 from sahgrasp.optimization import ChartChecks
-from sahgrasp.quality import Manipulability, manipulability, null_space
+from sahgrasp.quality import Manipulability, full_rank_null_space, manipulability
 
 __all__ = [
     "DEFAULT_HAND",
@@ -419,9 +419,13 @@ class PlanarGraspProblem:
         return jac
 
     def manipulability(self, x: ArrayLike) -> Manipulability:
-        """Manipulability ellipsoids at configurations ``x`` (..., 19) with the tangent of F."""
+        """Manipulability ellipsoids at configurations ``x`` (..., 19) with the tangent of F.
+
+        ``x`` must be regular points of F (the grasp Jacobian of full rank 16), as the chart
+        centres of an atlas of R are: the tangent basis then comes from a QR, not an SVD.
+        """
         x = np.asarray(x, dtype=np.float64)
-        tangent = null_space(self.grasp_jacobian(x), T_DIM)
+        tangent = full_rank_null_space(self.grasp_jacobian(x))
         return manipulability(tangent, self.joint_jacobian(x), self.object_jacobian(x))
 
     def check_charts(self, centres: FloatArray, executor: Executor | None = None) -> ChartChecks:

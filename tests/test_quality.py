@@ -13,6 +13,7 @@ from sahgrasp.quality import (
     ellipsoid_indices,
     evaluate_index,
     manipulability,
+    full_rank_null_space,
     null_space,
     principal_projection,
     semi_axes,
@@ -85,6 +86,17 @@ def test_null_space_is_an_orthonormal_tangent_basis() -> None:
     assert N.shape == (4, 5, 3)
     assert np.allclose(jac @ N, 0.0, atol=1e-12)
     assert np.allclose(np.swapaxes(N, 1, 2) @ N, np.eye(3), atol=1e-12)
+
+
+def test_full_rank_null_space_spans_the_null_space_of_the_svd() -> None:
+    jac = np.random.default_rng(2).normal(size=(4, 3, 7))
+    N = full_rank_null_space(jac)
+    assert N.shape == (4, 7, 4)
+    assert np.allclose(jac @ N, 0.0, atol=1e-12)
+    assert np.allclose(np.swapaxes(N, 1, 2) @ N, np.eye(4), atol=1e-12)
+    reference = null_space(jac, 4)  # the same space: each basis is a rotation of the other
+    rotation = np.swapaxes(reference, 1, 2) @ N
+    assert np.allclose(np.swapaxes(rotation, 1, 2) @ rotation, np.eye(4), atol=1e-12)
 
 
 def sphere_atlas():  # type: ignore[no-untyped-def]
