@@ -5,7 +5,7 @@ from __future__ import annotations
 import operator
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.atlas.checks import check_bounds, start_point
 from sahgrasp.atlas.model import Atlas, AtlasSettings, FloatArray, Function, IndexArray
 from sahgrasp.atlas.neighbours import NeighbourIndex
-from sahgrasp.atlas.polytope import CUT_TOL, Polytope
+from sahgrasp.atlas.polytope import CUT_TOL, Polytope, compatible
 from sahgrasp.atlas.projection import (
     Point,
     crossing_sign,
@@ -157,6 +157,8 @@ class _Builder:
         self.bounded = bool((np.isfinite(self.lower) | np.isfinite(self.upper)).any())
         self.r = settings.radius
         self.tol = CUT_TOL * self.r
+        # cos(2 theta)^2 of the branch test (see _similar), theta = acos(1 - epsilon) of Eq. (18)
+        self.alike_threshold = max(2.0 * (1.0 - settings.epsilon) ** 2 - 1.0, 0.0) ** 2
         n = self.lower.size
         self.X = np.empty((1024, n))
         self.PHI = np.empty((1024, n, k))
@@ -246,7 +248,7 @@ class _Builder:
         through. ``|M|_F^2 - (k - 1)`` bounds the squared smallest singular value of M from below.
         """
         M = np.matmul(phis.transpose(0, 2, 1), bases)  # (q, k, k): phi^T Phi_c
-        threshold = max(2.0 * (1.0 - self.settings.epsilon) ** 2 - 1.0, 0.0) ** 2  # cos(2 theta)^2
+        threshold = self.alike_threshold
         unsure = (M * M).sum(axis=(1, 2)) - (self.k - 1) < threshold
         if unsure.any():
             sigma = np.linalg.svd(M[unsure], compute_uv=False)[:, -1]
@@ -424,68 +426,25 @@ class _Builder:
 
         Centre q comes from the picked vertex ``vertices[q]`` of chart ``parents[q]``. Each must
         be the try one-chart expansion would make after the earlier accepted ones: their planes
-        (as :meth:`add_charts` would cut its chart's polytope) must neither cut off its picked
-        vertex nor create a nearer exterior vertex. One that fails is left out; its chart stays
-        queued.
+        (as :meth:`add_charts` would cut its chart's polytope, alike charts only) must neither
+        cut off its picked vertex nor create a nearer exterior vertex. One that fails is left
+        out; its chart stays queued. Compiled (``_polytope.compatible``): called twice a wave,
+        its pairs and sequential loop cost about 100 us a call in numpy and Python.
         """
         if parents.size == 0:
             return []
-        parent_phi = self.PHI[parents]
-        diff = x[:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
-        # [p, q] = diff[p, q] @ parent_phi[q]: matmul over q (einsum costs 10x more per call)
-        Uc = np.matmul(diff.transpose(1, 0, 2), parent_phi).transpose(1, 0, 2)
-        # Two-operand einsum: a third of the cost of product-then-sum on these (B, B, k) stacks.
-        Bc = 0.5 * np.einsum("pqk,pqk->pq", Uc, Uc)
-        verts = np.array(vertices)
-        near = np.einsum("pqn,pqn->pq", diff, diff) < 4 * self.r**2
-        near &= self.tol * self.r < Bc
-        np.fill_diagonal(near, False)
-        p_idx, q_idx = np.nonzero(near)
-        if p_idx.size:  # the branch test of add_charts: only alike charts cut each other
-            alike = self._similar(parent_phi[q_idx], phi[p_idx])
-            near[p_idx[~alike], q_idx[~alike]] = False
-        off = near & (np.einsum("pqk,qk->pq", Uc, verts) - Bc > self.tol)
-        # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
-        # nearer than the picked vertex can create a nearer one.
-        closer = near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])
-        # Plain lists for the sequential loop, from the few pairs it reads: cut_off[p], the tries
-        # p's plane cuts off; nearer[q], the (p, a, b) planes nearer than q's vertex.
-        n = len(parents)
-        cut_off: list[list[int]] = [[] for _ in range(n)]
-        for p, q in zip(*(i.tolist() for i in np.nonzero(off)), strict=True):
-            cut_off[p].append(q)
-        nearer: list[list[tuple[int, list[float], float]]] = [[] for _ in range(n)]
-        q_near, p_near = np.nonzero(closer.T)
-        pairs = (q_near.tolist(), p_near.tolist(), Uc[p_near, q_near].tolist())
-        for q, p, a, b in zip(*pairs, Bc[p_near, q_near].tolist(), strict=True):
-            nearer[q].append((p, a, b))
-        gone, taken = [False] * n, [False] * n
-        accepted: list[int] = []
-        for q, parent in enumerate(parents.tolist()):
-            if gone[q]:
-                continue
-            planes = [(a, b) for p, a, b in nearer[q] if taken[p]]
-            if not planes or self._still_picked(parent, vertices[q], planes) >= 0:
-                accepted.append(q)
-                taken[q] = True
-                for later in cut_off[q]:
-                    gone[later] = True
-        return accepted
+        polys = [self._polytope(i) for i in parents.tolist()]
+        return compatible(
+            polys, x, self.X[parents], phi, self.PHI[parents], np.array(vertices), self.r,
+            self.r**2, self.tol, self.alike_threshold,
+        )  # fmt: skip
 
-    def _still_picked(
-        self, i: int, vertex: tuple[float, ...], planes: Sequence[tuple[list[float], float]] = ()
-    ) -> int:
+    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
         """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
 
-        A new chart's plane may have cut it off or created a nearer exterior vertex. ``planes``
-        (``a . w <= b`` pairs) are planes still to come: the test is made on a copy cut by them.
+        A new chart's plane may have cut it off or created a nearer exterior vertex.
         """
         poly = self._polytope(i)
-        if planes:
-            poly = poly.copy()
-            for a, b in planes:
-                if 0.5 * b < poly.reach2:
-                    poly.cut(a, b, self.tol)
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.vertex(v) == vertex else -1
 
