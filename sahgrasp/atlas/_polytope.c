@@ -717,10 +717,12 @@ static PyTypeObject PolytopeType = {
 
 /* -- the compatibility test of a wave's tries (builder._Builder._compatible) ---------------- */
 
-/* A C-contiguous float64 buffer of ``ndim`` dimensions; its shape goes to ``shape``. */
+/* A C-contiguous float64 buffer of ``ndim`` dimensions (writable if asked); its shape goes to
+ * ``shape``. */
 static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shape,
-                      const char *what) {
-    if (PyObject_GetBuffer(obj, view, PyBUF_C_CONTIGUOUS | PyBUF_FORMAT) < 0) return -1;
+                      const char *what, int writable) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
     if (view->ndim != ndim || view->itemsize != sizeof(double) || view->format == NULL ||
         strcmp(view->format, "d") != 0) {
         PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float64 array of %d dimensions",
@@ -733,25 +735,25 @@ static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shap
 }
 
 /* Smallest eigenvalue of the symmetric k x k matrix g (destroyed), by cyclic Jacobi sweeps. */
-static double min_eigenvalue(double *g, int k) {
+static double min_eigenvalue(double *g, Py_ssize_t k) {
     for (int sweep = 0; sweep < 64; sweep++) {
         double off = 0.0;
-        for (int i = 0; i < k; i++)
-            for (int j = i + 1; j < k; j++) off += g[i * k + j] * g[i * k + j];
+        for (Py_ssize_t i = 0; i < k; i++)
+            for (Py_ssize_t j = i + 1; j < k; j++) off += g[i * k + j] * g[i * k + j];
         if (off == 0.0) break;
-        for (int p = 0; p < k; p++) {
-            for (int q = p + 1; q < k; q++) {
+        for (Py_ssize_t p = 0; p < k; p++) {
+            for (Py_ssize_t q = p + 1; q < k; q++) {
                 double gpq = g[p * k + q];
                 if (gpq == 0.0) continue;
                 double theta = (g[q * k + q] - g[p * k + p]) / (2.0 * gpq);
                 double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
                 double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
-                for (int m = 0; m < k; m++) { /* columns p and q */
+                for (Py_ssize_t m = 0; m < k; m++) { /* columns p and q */
                     double gp = g[m * k + p], gq = g[m * k + q];
                     g[m * k + p] = c * gp - s * gq;
                     g[m * k + q] = s * gp + c * gq;
                 }
-                for (int m = 0; m < k; m++) { /* rows p and q */
+                for (Py_ssize_t m = 0; m < k; m++) { /* rows p and q */
                     double gp = g[p * k + m], gq = g[q * k + m];
                     g[p * k + m] = c * gp - s * gq;
                     g[q * k + m] = s * gp + c * gq;
@@ -760,7 +762,7 @@ static double min_eigenvalue(double *g, int k) {
         }
     }
     double smallest = g[0];
-    for (int i = 1; i < k; i++)
+    for (Py_ssize_t i = 1; i < k; i++)
         if (g[i * k + i] < smallest) smallest = g[i * k + i];
     return smallest;
 }
@@ -832,7 +834,7 @@ static PyObject *compatible(PyObject *mod, PyObject *args) {
     PyObject *result = NULL, *fast = NULL;
     double *work = NULL;
     for (; got < 5; got++)
-        if (read_array(objs[got], &views[got], dims[got], shapes[got], names[got]) < 0) goto done;
+        if (read_array(objs[got], &views[got], dims[got], shapes[got], names[got], 0) < 0) goto done;
     Py_ssize_t count = shapes[0][0], n = shapes[0][1];
     int k = (int)shapes[2][2];
     if (check_k(k) < 0) goto done;
@@ -939,17 +941,137 @@ done:
     return result;
 }
 
+
+/* -- signs and singular values of a wave's small matrices (projection.py) --------------------
+ *
+ * A wave asks these of a few dozen matrices of size k x k or n x n at a time; numpy.linalg
+ * costs 10-30 us per call for its LAPACK dispatch, several times the arithmetic. Only signs and
+ * a threshold test on a singular value are read, so LAPACK's own doubles are not needed. */
+
+/* The stack (B, rows, cols) and its output (B,), checked: 0, or -1 with an exception. */
+static int get_stack(PyObject *const *args, Py_ssize_t nargs, const char *name, int square,
+                     Py_buffer *in, Py_buffer *out) {
+    if (nargs != 2) {
+        PyErr_Format(PyExc_TypeError, "%s(a, out) takes 2 arguments", name);
+        return -1;
+    }
+    Py_ssize_t shape[3];
+    if (read_array(args[0], in, 3, shape, "a", 0) < 0) return -1;
+    if (read_array(args[1], out, 1, shape, "out", 1) < 0) {
+        PyBuffer_Release(in);
+        return -1;
+    }
+    if (out->shape[0] != in->shape[0] || (square && in->shape[1] != in->shape[2])) {
+        PyErr_Format(PyExc_ValueError, "%s: a must be (B, %s) and out (B,)", name,
+                     square ? "n, n" : "rows, cols");
+        PyBuffer_Release(in);
+        PyBuffer_Release(out);
+        return -1;
+    }
+    return 0;
+}
+
+/* Sign of det(a) (n x n, destroyed) by Gaussian elimination with partial pivoting: 1, -1, or 0
+ * when a pivot column is zero (numpy.linalg.slogdet's sign). */
+static double det_sign(double *a, Py_ssize_t n) {
+    double sign = 1.0;
+    for (Py_ssize_t c = 0; c < n; c++) {
+        Py_ssize_t pivot = c;
+        for (Py_ssize_t r = c + 1; r < n; r++)
+            if (fabs(a[r * n + c]) > fabs(a[pivot * n + c])) pivot = r;
+        double head = a[pivot * n + c];
+        if (head == 0.0) return 0.0;
+        if (pivot != c) {
+            for (Py_ssize_t j = c; j < n; j++) {
+                double t = a[c * n + j];
+                a[c * n + j] = a[pivot * n + j];
+                a[pivot * n + j] = t;
+            }
+            sign = -sign;
+        }
+        if (head < 0.0) sign = -sign;
+        for (Py_ssize_t r = c + 1; r < n; r++) {
+            double f = a[r * n + c] / head;
+            for (Py_ssize_t j = c + 1; j < n; j++) a[r * n + j] -= f * a[c * n + j];
+        }
+    }
+    return sign;
+}
+
+static PyObject *det_signs(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
+    Py_buffer in, out;
+    if (get_stack(args, nargs, "det_signs", 1, &in, &out) < 0) return NULL;
+    Py_ssize_t count = in.shape[0], n = in.shape[1];
+    double *work = PyMem_Malloc(sizeof(double) * (size_t)(n * n > 0 ? n * n : 1));
+    if (work == NULL) {
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return PyErr_NoMemory();
+    }
+    const double *a = in.buf;
+    double *sign = out.buf;
+    for (Py_ssize_t b = 0; b < count; b++) {
+        memcpy(work, a + b * n * n, sizeof(double) * (size_t)(n * n));
+        sign[b] = det_sign(work, n);
+    }
+    PyMem_Free(work);
+    PyBuffer_Release(&in);
+    PyBuffer_Release(&out);
+    Py_RETURN_NONE;
+}
+
+static PyObject *min_singular_values(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
+    Py_buffer in, out;
+    if (get_stack(args, nargs, "min_singular_values", 0, &in, &out) < 0) return NULL;
+    Py_ssize_t count = in.shape[0], rows = in.shape[1], k = in.shape[2];
+    if (rows < k || k < 1) {
+        PyErr_Format(PyExc_ValueError, "min_singular_values needs rows >= cols >= 1, got %zd x %zd",
+                     rows, k);
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return NULL;
+    }
+    double *g = PyMem_Malloc(sizeof(double) * (size_t)(k * k));
+    if (g == NULL) {
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return PyErr_NoMemory();
+    }
+    const double *a = in.buf;
+    double *sigma = out.buf;
+    for (Py_ssize_t b = 0; b < count; b++) {
+        const double *m = a + b * rows * k;
+        for (Py_ssize_t i = 0; i < k; i++) { /* g = m^T m */
+            for (Py_ssize_t j = 0; j < k; j++) {
+                double s = 0.0;
+                for (Py_ssize_t r = 0; r < rows; r++) s += m[r * k + i] * m[r * k + j];
+                g[i * k + j] = s;
+            }
+        }
+        double lambda = min_eigenvalue(g, k);
+        sigma[b] = lambda > 0.0 ? sqrt(lambda) : 0.0;
+    }
+    PyMem_Free(g);
+    PyBuffer_Release(&in);
+    PyBuffer_Release(&out);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef module_methods[] = {
     {"compatible", compatible, METH_VARARGS,
      "compatible(polys, centres, parent_centres, phi, parent_phi, vertices, r, r2, tol, "
      "threshold): the tries a wave can add together, in order (see polytope.py)."},
+    {"det_signs", (PyCFunction)(void (*)(void))det_signs, METH_FASTCALL,
+     "det_signs(a, out): out[b] = sign(det(a[b])) (1, -1 or 0) for a stack a (B, n, n)."},
+    {"min_singular_values", (PyCFunction)(void (*)(void))min_singular_values, METH_FASTCALL,
+     "min_singular_values(a, out): out[b] = smallest singular value of a[b], a (B, rows, k)."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT,
     .m_name = "sahgrasp.atlas._polytope",
-    .m_doc = "Compiled chart polytopes of the atlas builder.",
+    .m_doc = "Compiled chart polytopes and small dense kernels of the atlas builder.",
     .m_size = -1,
     .m_methods = module_methods,
 };

@@ -7,6 +7,12 @@ from numpy.typing import NDArray
 
 MAX_FACES: int
 
+def det_signs(a: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """``out[b] = sign(det(a[b]))`` (1, -1, or 0 for a singular matrix) for a stack (B, n, n)."""
+
+def min_singular_values(a: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """``out[b]``: the smallest singular value of ``a[b]`` for a stack (B, rows, k), rows >= k."""
+
 def compatible(
     polys: Sequence[Polytope],
     centres: NDArray[np.float64],
