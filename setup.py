@@ -13,6 +13,7 @@ setup(
             "sahgrasp.atlas._polytope",
             sources=["sahgrasp/atlas/_polytope.c"],
             extra_compile_args=FLAGS,
-        )
+        ),
+        Extension("sahgrasp._planar", sources=["sahgrasp/_planar.c"], extra_compile_args=FLAGS),
     ]
 )

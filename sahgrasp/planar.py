@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp._planar import jacobian
 from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
 from sahgrasp.optimization import ChartChecks
@@ -81,6 +82,8 @@ def _perp(a: FloatArray) -> FloatArray:
     """``a`` turned by +90 degrees over the last axis."""
     return np.stack((-a[..., 1], a[..., 0]), axis=-1)
 
+
+_NO_MOTIONS = np.zeros((0, 12))  # rates of no Eq. (13) rows: the grasp equations alone
 
 _JOINTS_FROM_PHALANGES = np.kron(np.eye(3), [[1.0, 0.0], [-1.0, 1.0]])
 """``theta = D phi``: joint angles from absolute phalanx angles (distal relative to proximal)."""
@@ -155,33 +158,6 @@ def _grasp_residual_map(hand: PlanarHand) -> tuple[FloatArray, FloatArray]:
     M[13 + fingers, 2 * N_VARS + 6 + fingers] = 1.0  # Eq. (8): cos u v_2y - sin u v_2x
     M[13 + fingers, 2 * N_VARS + 9 + fingers] = -1.0
     return M, c
-
-
-def _grasp_jacobian_values(hand: PlanarHand, x: FloatArray) -> FloatArray:
-    """The 29 variable entries of the grasp Jacobian (..., 29), in the order of the layout."""
-    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])
-    v2x, v2y = x[..., 2:12:4], x[..., 3:12:4]  # distal phalanges
-    return np.concatenate(
-        (
-            2.0 * x[..., :12],  # Eq. (19)
-            2.0 * x[..., _VO],  # Eq. (20)
-            hand.radii * su,  # Eq. (7), d/du_i, x then y
-            -hand.radii * cu,
-            -su,  # Eq. (8), d/dv_{i,2} x, y and d/du_i
-            cu,
-            -su * v2y - cu * v2x,
-        ),
-        axis=-1,
-    )
-
-
-def _assemble(
-    constant: FloatArray, where: NDArray[np.intp], values: FloatArray, rows: int
-) -> FloatArray:
-    """A Jacobian (..., rows, 19): the flattened ``constant`` with ``values`` put at ``where``."""
-    jac = np.broadcast_to(constant, (*values.shape[:-1], constant.size)).copy()
-    jac[..., where] = values
-    return jac.reshape(*values.shape[:-1], rows, N_VARS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -348,9 +324,8 @@ class PlanarGraspProblem:
 
     def grasp_jacobian(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`grasp_residual`, (..., 16, 19): a constant part plus 29 entries."""
-        x = np.asarray(x, dtype=np.float64)
         constant, where = _jacobian_layout(self.hand)
-        return _assemble(constant, where, _grasp_jacobian_values(self.hand, x), 16)
+        return self._jacobian(x, constant, where, _NO_MOTIONS)
 
     def F(self, x: ArrayLike) -> FloatArray:
         """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s).
@@ -366,13 +341,22 @@ class PlanarGraspProblem:
 
     def J(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`F`, (..., 16 + s, 19)."""
-        x = np.asarray(x, dtype=np.float64)
-        constant, where, rates = self._jacobian_map
-        motion = rates * _angle_gradients(x)[..., None, :]  # E_s^T J_a
-        values = np.concatenate(
-            (_grasp_jacobian_values(self.hand, x), motion.reshape(*x.shape[:-1], -1)), axis=-1
-        )
-        return _assemble(constant, where, values, 16 + rates.shape[0])
+        return self._jacobian(x, *self._jacobian_map)
+
+    def _jacobian(
+        self, x: ArrayLike, constant: FloatArray, where: NDArray[np.intp], rates: FloatArray
+    ) -> FloatArray:
+        """The layout ``constant`` with the variable entries put at ``where``, (..., rows, 19).
+
+        Compiled (``_planar.jacobian``): the atlas asks for J at a few points at a time, where
+        numpy's 20 array operations cost far more than the arithmetic (docs/atlas.md).
+        """
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        rows = 16 + rates.shape[0]
+        jac = np.empty((*x.shape[:-1], rows, N_VARS))
+        flat = jac.reshape(-1, rows, N_VARS)  # a view: the kernel fills jac
+        jacobian(x.reshape(-1, N_VARS), constant, where, self.hand.radii, rates, flat)
+        return jac
 
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """Box bounds on ``x``: the joint limits and the arcs ``[a_i, b_i]`` of the contacts."""

@@ -1,0 +1,19 @@
+"""Type stub of the planar hand's compiled Jacobian (``_planar.c``)."""
+
+import numpy as np
+from numpy.typing import NDArray
+
+def jacobian(
+    x: NDArray[np.float64],
+    constant: NDArray[np.float64],
+    where: NDArray[np.intp],
+    radii: NDArray[np.float64],
+    rates: NDArray[np.float64],
+    out: NDArray[np.float64],
+) -> None:
+    """The Jacobian of ``PlanarGraspProblem.F`` at each row of ``x`` (B, 19), into ``out``.
+
+    ``out[b]`` (16 + s, 19) is the flattened ``constant`` with the 29 variable entries of the
+    grasp equations and then ``rates * (angle gradients)`` (``rates`` (s, 12): Eq. (13)) put at
+    ``where`` (29 + 12 s flat indices); ``radii`` are the object's circle radii (3,).
+    """
