@@ -1,11 +1,12 @@
-/* The Jacobian of the planar hand's grasp equations (see planar.py), compiled.
+/* The planar hand's Jacobian and the terms its F is linear in (see planar.py), compiled.
  *
- * The atlas's Newton steps and tangent spaces ask for J at a few points at a time, about 430
- * times per atlas of the paper's size; in numpy that was some 20 array operations per call,
- * about 36 us, against well under 1 us of arithmetic per point. The entries are computed with
+ * The atlas's Newton steps and tangent spaces ask for F and J at a few points at a time, about
+ * 430 times each per atlas of the paper's size; in numpy each was some 20 array operations per
+ * call, 20-36 us, against well under 1 us of arithmetic per point. The entries are computed with
  * the operations numpy applied, in the same order (no fused multiply-add: setup.py passes
- * -ffp-contract=off), and the C library's sin and cos, which numpy's float64 sin and cos call:
- * the same doubles, hence the same atlases.
+ * -ffp-contract=off), and the C library's sin and cos, which gave numpy's float64 sin and cos
+ * bit for bit on 100 000 random angles: the same doubles, hence the same atlases. arctan2, for
+ * which numpy has code of its own, and F's matrix product stay in numpy.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -15,6 +16,7 @@
 
 #define N_VARS 19 /* 12 phalanx vectors, t_o (2), v_o (2), u (3) */
 #define GRASP_VALUES 29 /* variable entries of the grasp equations' Jacobian */
+#define FEATURES 56     /* the terms F is linear in (planar.py, PlanarGraspProblem.F) */
 
 /* A C-contiguous buffer of ``ndim`` dimensions whose items are float64 (or int64 when
  * ``integer``), writable when asked: 0, or -1 with an exception. */
@@ -106,17 +108,71 @@ done:
     return result;
 }
 
+/* features(x, reference, out, cosines): see _planar.pyi. */
+static PyObject *features(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
+    if (nargs != 4) {
+        PyErr_SetString(PyExc_TypeError, "features(x, reference, out, cosines) takes 4 arguments");
+        return NULL;
+    }
+    static const char *names[4] = {"x", "reference", "out", "cosines"};
+    static const int dims[4] = {2, 1, 2, 2};
+    Py_buffer views[4];
+    int got = 0;
+    PyObject *result = NULL;
+    for (; got < 4; got++)
+        if (get_array(args[got], &views[got], dims[got], 0, got >= 2, names[got]) < 0) goto done;
+    Py_ssize_t count = views[0].shape[0];
+    if (views[0].shape[1] != N_VARS || views[1].shape[0] != N_VARS ||
+        views[2].shape[0] != count || views[2].shape[1] != FEATURES ||
+        views[3].shape[0] != count || views[3].shape[1] != 6) {
+        PyErr_Format(PyExc_ValueError,
+                     "features needs x (B, %d), reference (%d,), out (B, %d) and cosines (B, 6)",
+                     N_VARS, N_VARS, FEATURES);
+        goto done;
+    }
+    const double *x_all = views[0].buf, *ref = views[1].buf;
+    double *out_all = views[2].buf, *cos_all = views[3].buf;
+    for (Py_ssize_t b = 0; b < count; b++) {
+        const double *x = x_all + b * N_VARS;
+        double *out = out_all + b * FEATURES, *cosine = cos_all + 6 * b;
+        for (int i = 0; i < N_VARS; i++) {
+            out[i] = x[i];
+            out[N_VARS + i] = x[i] * x[i];
+        }
+        for (int i = 0; i < 3; i++) { /* w(u_i), Eq. (24), and its products with v_{i,2} */
+            double cu = cos(x[16 + i]), su = sin(x[16 + i]);
+            out[38 + i] = cu;
+            out[41 + i] = su;
+            out[44 + i] = cu * x[4 * i + 3];
+            out[47 + i] = su * x[4 * i + 2];
+        }
+        for (int p = 0; p < 6; p++) { /* each phalanx's turn from the reference: its sine part */
+            double rx = ref[2 * p], ry = ref[2 * p + 1], vx = x[2 * p], vy = x[2 * p + 1];
+            out[50 + p] = rx * vy - ry * vx;
+            cosine[p] = rx * vx + ry * vy;
+        }
+    }
+    result = Py_None;
+    Py_INCREF(result);
+done:
+    for (int i = 0; i < got; i++) PyBuffer_Release(&views[i]);
+    return result;
+}
+
 static PyMethodDef methods[] = {
     {"jacobian", (PyCFunction)(void (*)(void))jacobian, METH_FASTCALL,
      "jacobian(x, constant, where, radii, rates, out): the planar hand's Jacobian at each row "
      "of x."},
+    {"features", (PyCFunction)(void (*)(void))features, METH_FASTCALL,
+     "features(x, reference, out, cosines): the terms F is linear in, turns as sine and cosine "
+     "parts."},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT,
     .m_name = "sahgrasp._planar",
-    .m_doc = "The planar hand's Jacobian, compiled (see planar.py).",
+    .m_doc = "The planar hand's Jacobian and the terms of its F, compiled (see planar.py).",
     .m_size = -1,
     .m_methods = methods,
 };

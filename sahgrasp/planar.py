@@ -47,6 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp._planar import features as features_of
 from sahgrasp._planar import jacobian
 from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
@@ -128,18 +129,12 @@ def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
 
 
 _N_FEATURES = 50  # x (19), its squares (19), cos u, sin u, cos u v_2y, sin u v_2x (3 each)
-
-
-def _grasp_features(x: FloatArray) -> FloatArray:
-    """The terms the grasp equations are linear in (..., 50) (see :func:`_grasp_residual_map`)."""
-    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])  # w(u_i), Eq. (24)
-    distal_x, distal_y = x[..., 2:12:4], x[..., 3:12:4]
-    return np.concatenate((x, x * x, cu, su, cu * distal_y, su * distal_x), axis=-1)
+_N_TURNS = 6  # the phalanx turns from x_1 of Eq. (13), after the grasp features
 
 
 @functools.cache
 def _grasp_residual_map(hand: PlanarHand) -> tuple[FloatArray, FloatArray]:
-    """The grasp equations as ``_grasp_features(x) @ M.T + c``: M (16, 50), c (16,).
+    """The grasp equations as ``features(x) @ M.T + c``: M (16, 50), c (16,) (see ``F``).
 
     The part linear in ``x`` is the constant part of the Jacobian (Eqs. (21), (23)); the rest:
     Eq. (19) (``|v_{i,j}|^2 - 1``), Eq. (20), the circle term ``-l_{i,3} w(u_i)`` of Eq. (23),
@@ -298,7 +293,7 @@ class PlanarGraspProblem:
         """``F(x) = features @ M.T + c``: M (16 + s, 56) and c (16 + s,) (see :meth:`F`)."""
         grasp, offset = _grasp_residual_map(self.hand)
         s = self.synergy.shape[1]
-        M = np.zeros((16 + s, _N_FEATURES + 6))
+        M = np.zeros((16 + s, _N_FEATURES + _N_TURNS))
         M[:16, :_N_FEATURES] = grasp
         M[16:, _N_FEATURES:] = (_JOINTS_FROM_PHALANGES.T @ self.synergy).T  # Eq. (13)
         return M, np.concatenate((offset, np.zeros(s)))
@@ -331,12 +326,18 @@ class PlanarGraspProblem:
         """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s).
 
         Every equation is linear in a few features of ``x`` (``x``, its squares, ``cos u_i``,
-        ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is a
-        handful of numpy calls and one matrix product, which matters in Newton's method.
+        ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is the
+        features (compiled, ``_planar.features``, but for numpy's arctan2) and one matrix
+        product, which matters in Newton's method.
         """
-        x = np.asarray(x, dtype=np.float64)
+        x = np.ascontiguousarray(x, dtype=np.float64)
         M, offset = self._residual_map
-        features = np.concatenate((_grasp_features(x), self._turns(x)), axis=-1)
+        features = np.empty((*x.shape[:-1], _N_FEATURES + _N_TURNS))
+        cosines = np.empty((*x.shape[:-1], _N_TURNS))
+        turns = features[..., _N_FEATURES:]  # sines from the compiled kernel, then the turns
+        features_of(x.reshape(-1, N_VARS), self.x1, features.reshape(-1, _N_FEATURES + _N_TURNS),
+                    cosines.reshape(-1, _N_TURNS))  # fmt: skip
+        np.arctan2(turns, cosines, out=turns)  # numpy's arctan2, as in _turns
         return features @ M.T + offset
 
     def J(self, x: ArrayLike) -> FloatArray:

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sahgrasp._planar import jacobian
+from sahgrasp._planar import features, jacobian
 from sahgrasp.errors import AtlasError, GraspSystemError, OptimizationError
 from sahgrasp.experiments.plotting import plot_planar
 from sahgrasp.experiments.report import summary
@@ -89,6 +89,22 @@ def test_compiled_jacobian_equals_the_reference(k: int) -> None:
     assert np.allclose(problem.J(X), reference_jacobian(problem, X), rtol=1e-15, atol=1e-17)
     assert np.array_equal(problem.grasp_jacobian(X), problem.J(X)[:, :16])
     assert np.array_equal(problem.J(X.reshape(4, 10, 19)).reshape(40, -1, 19), problem.J(X))
+
+
+def test_compiled_features_equal_the_reference() -> None:
+    problem = make_planar_problem()
+    X = problem.x1 + 0.2 * np.random.default_rng(5).normal(size=(40, 19))
+    out, cosines = np.empty((40, 56)), np.empty((40, 6))
+    features(X, problem.x1, out, cosines)
+    cu, su = np.cos(X[:, 16:]), np.sin(X[:, 16:])
+    grasp = np.concatenate((X, X * X, cu, su, cu * X[:, 3:12:4], su * X[:, 2:12:4]), axis=1)
+    assert np.allclose(out[:, :50], grasp, rtol=1e-15, atol=0.0)
+    turns = np.arctan2(out[:, 50:], cosines)  # each phalanx's angle from that at x_1
+    angles = np.arctan2(X[:, 1:12:2], X[:, 0:12:2])
+    start = np.arctan2(problem.x1[1:12:2], problem.x1[0:12:2])
+    assert np.allclose(np.exp(1j * turns), np.exp(1j * (angles - start)), atol=1e-12)
+    with pytest.raises(ValueError, match="needs"):
+        features(X, problem.x1, np.empty((40, 50)), cosines)
 
 
 def test_compiled_jacobian_refuses_bad_arrays() -> None:
