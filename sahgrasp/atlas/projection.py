@@ -167,29 +167,35 @@ def project_many(
     m = n - k
     x = x_tilde.copy()
     done = np.zeros(B, dtype=bool)
-    active = np.flatnonzero(np.isfinite(x).all(axis=1))
+    # The points still moving, kept compact (their rows of x, of the Newton matrices [J; phi^T]
+    # and their indices) and written back to x when they leave: fewer array calls per iteration.
+    idx = np.flatnonzero(np.isfinite(x).all(axis=1))
+    xa = x[idx]
+    A = np.empty((idx.size, n, n))
+    A[:, m:] = phi[idx].transpose(0, 2, 1)
     tol2 = tol * tol
-    A = np.empty((B, n, n))
-    A[:, m:] = phi.transpose(0, 2, 1)
-    rhs = np.zeros((B, n))
     for _ in range(max_iter):
-        if active.size == 0:
+        if idx.size == 0:
             break
-        xa = x[active]
         f = F(xa)
         converged = (f * f).sum(axis=1) <= tol2
-        done[active[converged]] = True
-        step = ~converged
-        active, xa, f = active[step], xa[step], f[step]
-        if active.size == 0:
-            break
-        Aa = A[active]
-        Aa[:, :m] = J(xa)
-        rhs_a = rhs[active]
-        rhs_a[:, :m] = -f
-        dx, solved = _solve_stack(Aa, rhs_a)  # Eq. (15), linearised
-        x[active] = xa + dx
-        active = active[solved & np.isfinite(x[active]).all(axis=1)]
+        if converged.any():
+            done[idx[converged]] = True
+            x[idx[converged]] = xa[converged]
+            step = ~converged
+            idx, xa, f, A = idx[step], xa[step], f[step], A[step]
+            if idx.size == 0:
+                break
+        A[:, :m] = J(xa)
+        rhs = np.zeros((idx.size, n))
+        rhs[:, :m] = -f
+        dx, solved = _solve_stack(A, rhs)  # Eq. (15), linearised
+        xa = xa + dx
+        moving = solved & np.isfinite(xa).all(axis=1)
+        if not moving.all():
+            x[idx[~moving]] = xa[~moving]
+            idx, xa, A = idx[moving], xa[moving], A[moving]
+    x[idx] = xa  # the last iterates of points that did not converge
     return x, done
 
 
