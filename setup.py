@@ -15,5 +15,6 @@ setup(
             extra_compile_args=FLAGS,
         ),
         Extension("sahgrasp._planar", sources=["sahgrasp/_planar.c"], extra_compile_args=FLAGS),
+        Extension("sahgrasp._quality", sources=["sahgrasp/_quality.c"], extra_compile_args=FLAGS),
     ]
 )

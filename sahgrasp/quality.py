@@ -26,6 +26,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp._quality import orthogonal_tail
 from sahgrasp.errors import QualityError
 
 __all__ = [
@@ -101,12 +102,20 @@ def full_rank_null_space(jac: ArrayLike) -> FloatArray:
 
     The last ``n - m`` columns of Q in the Householder QR ``J^T = Q R``: the same spaces as
     :func:`null_space` when every ``J`` has rank ``m`` (a regular point, such as a chart centre),
-    at about a fifth of the SVD's cost on a stack of chart centres (docs/atlas.md, "Benchmarks").
+    at a small part of the SVD's cost on a stack of chart centres. numpy factorises; only the
+    columns wanted are then formed from the reflectors (compiled, ``_quality.orthogonal_tail``:
+    numpy would form all of Q, which took most of the time; docs/atlas.md, "Benchmarks").
     A rank-deficient ``J`` gives a meaningless basis: use :func:`null_space` there.
     """
     jac = np.asarray(jac, dtype=np.float64)
-    q = np.linalg.qr(np.swapaxes(jac, -1, -2), mode="complete")[0]
-    basis: FloatArray = q[..., jac.shape[-2] :]
+    m, n = jac.shape[-2:]
+    reflectors, tau = np.linalg.qr(np.swapaxes(jac, -1, -2), mode="raw")  # (..., m, n), (..., m)
+    basis = np.empty((*jac.shape[:-2], n, n - m))
+    orthogonal_tail(
+        np.ascontiguousarray(reflectors).reshape(-1, m, n),
+        np.ascontiguousarray(tau).reshape(-1, m),
+        basis.reshape(-1, n, n - m),
+    )
     return basis
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sahgrasp._quality import orthogonal_tail
 from sahgrasp.atlas import AtlasSettings, build_atlas
 from sahgrasp.errors import QualityError
 from sahgrasp.quality import (
@@ -97,6 +98,18 @@ def test_full_rank_null_space_spans_the_null_space_of_the_svd() -> None:
     reference = null_space(jac, 4)  # the same space: each basis is a rotation of the other
     rotation = np.swapaxes(reference, 1, 2) @ N
     assert np.allclose(np.swapaxes(rotation, 1, 2) @ rotation, np.eye(4), atol=1e-12)
+
+
+@pytest.mark.parametrize(("n", "m"), [(2, 1), (5, 3), (19, 16)])
+def test_compiled_orthogonal_tail_equals_numpys_complete_q(n: int, m: int) -> None:
+    a = np.random.default_rng(n).normal(size=(6, n, m))
+    h, tau = np.linalg.qr(a, mode="raw")
+    tail = np.empty((6, n, n - m))
+    orthogonal_tail(np.ascontiguousarray(h), tau, tail)
+    q = np.linalg.qr(a, mode="complete")[0]
+    assert np.allclose(tail, q[:, :, m:], rtol=0.0, atol=1e-14)
+    with pytest.raises(ValueError, match="needs"):
+        orthogonal_tail(np.ascontiguousarray(h), tau, np.empty((6, n, n)))
 
 
 def sphere_atlas():  # type: ignore[no-untyped-def]

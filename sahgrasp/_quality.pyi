@@ -1,0 +1,13 @@
+"""Type stub of the compiled part of the quality indices (``_quality.c``)."""
+
+import numpy as np
+from numpy.typing import NDArray
+
+def orthogonal_tail(
+    h: NDArray[np.float64], tau: NDArray[np.float64], out: NDArray[np.float64]
+) -> None:
+    """The last ``n - m`` columns of each Q (B, n, n - m), into ``out``.
+
+    ``h`` (B, m, n) and ``tau`` (B, m) are ``numpy.linalg.qr(a, mode="raw")`` of a stack ``a``
+    (B, n, m), ``1 <= m < n``: reflector i is ``(0, ..., 0, 1, h[b, i, i + 1:])``.
+    """
