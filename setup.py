@@ -14,7 +14,15 @@ setup(
             sources=["sahgrasp/atlas/_polytope.c"],
             extra_compile_args=FLAGS,
         ),
-        Extension("sahgrasp._planar", sources=["sahgrasp/_planar.c"], extra_compile_args=FLAGS),
-        Extension("sahgrasp._quality", sources=["sahgrasp/_quality.c"], extra_compile_args=FLAGS),
+        Extension(
+            "sahgrasp.atlas._planar",
+            sources=["sahgrasp/atlas/_planar.c"],
+            extra_compile_args=FLAGS,
+        ),
+        Extension(
+            "sahgrasp.atlas._quality",
+            sources=["sahgrasp/atlas/_quality.c"],
+            extra_compile_args=FLAGS,
+        ),
     ]
 )

@@ -47,8 +47,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp._planar import features as features_of
-from sahgrasp._planar import jacobian
+from sahgrasp.atlas._planar import features as features_of
+from sahgrasp.atlas._planar import jacobian
 from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
 from sahgrasp.optimization import ChartChecks
@@ -101,7 +101,7 @@ def _angle_gradients(x: FloatArray) -> FloatArray:
 
 
 @functools.cache
-def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
+def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.int64]]:
     """Constant entries of the Jacobian of F (flattened 16 x 19) and where the others go.
 
     The variable entries are, in order: Eq. (19) (12), Eq. (20) (2), d/du_i of Eq. (7) (x for
@@ -125,7 +125,7 @@ def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
         (np.arange(12), [14, 15], 16 + fingers, 16 + fingers, 4 * fingers + 2, 4 * fingers + 3,
          16 + fingers)
     )  # fmt: skip
-    return jac.reshape(-1), rows * N_VARS + cols
+    return jac.reshape(-1), (rows * N_VARS + cols).astype(np.int64)  # the kernel reads int64
 
 
 _N_FEATURES = 50  # x (19), its squares (19), cos u, sin u, cos u v_2y, sin u v_2x (3 each)
@@ -299,7 +299,7 @@ class PlanarGraspProblem:
         return M, np.concatenate((offset, np.zeros(s)))
 
     @functools.cached_property
-    def _jacobian_map(self) -> tuple[FloatArray, NDArray[np.intp], FloatArray]:
+    def _jacobian_map(self) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
         """Constant part of J (flattened), where its variable entries go, and ``E_s^T J_a``.
 
         ``E_s^T J_a`` is ``rates * (angle gradients)`` with ``rates`` (s, 12) the joint motions
@@ -311,7 +311,7 @@ class PlanarGraspProblem:
         motion_where = (rows * N_VARS + np.arange(12)).reshape(-1)
         rates = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
         full = np.concatenate((constant, np.zeros(s * N_VARS)))
-        return full, np.concatenate((where, motion_where)), rates
+        return full, np.concatenate((where, motion_where)).astype(np.int64), rates
 
     def grasp_residual(self, x: ArrayLike) -> FloatArray:
         """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8)."""
@@ -327,7 +327,7 @@ class PlanarGraspProblem:
 
         Every equation is linear in a few features of ``x`` (``x``, its squares, ``cos u_i``,
         ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is the
-        features (compiled, ``_planar.features``, but for numpy's arctan2) and one matrix
+        features (compiled, ``atlas._planar.features``, but for numpy's arctan2) and one matrix
         product, which matters in Newton's method.
         """
         x = np.ascontiguousarray(x, dtype=np.float64)
@@ -345,11 +345,11 @@ class PlanarGraspProblem:
         return self._jacobian(x, *self._jacobian_map)
 
     def _jacobian(
-        self, x: ArrayLike, constant: FloatArray, where: NDArray[np.intp], rates: FloatArray
+        self, x: ArrayLike, constant: FloatArray, where: NDArray[np.int64], rates: FloatArray
     ) -> FloatArray:
         """The layout ``constant`` with the variable entries put at ``where``, (..., rows, 19).
 
-        Compiled (``_planar.jacobian``): the atlas asks for J at a few points at a time, where
+        Compiled (``atlas._planar.jacobian``): the atlas asks for J at a few points at a time, where
         numpy's 20 array operations cost far more than the arithmetic (docs/atlas.md).
         """
         x = np.ascontiguousarray(x, dtype=np.float64)

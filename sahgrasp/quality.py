@@ -26,7 +26,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp._quality import orthogonal_tail
+from sahgrasp.atlas._quality import orthogonal_tail
 from sahgrasp.errors import QualityError
 
 __all__ = [
@@ -103,8 +103,9 @@ def full_rank_null_space(jac: ArrayLike) -> FloatArray:
     The last ``n - m`` columns of Q in the Householder QR ``J^T = Q R``: the same spaces as
     :func:`null_space` when every ``J`` has rank ``m`` (a regular point, such as a chart centre),
     at a small part of the SVD's cost on a stack of chart centres. numpy factorises; only the
-    columns wanted are then formed from the reflectors (compiled, ``_quality.orthogonal_tail``:
-    numpy would form all of Q, which took most of the time; docs/atlas.md, "Benchmarks").
+    columns wanted are then formed from the reflectors (compiled,
+    ``atlas._quality.orthogonal_tail``: numpy would form all of Q, which took most of the time;
+    docs/atlas.md, "Benchmarks").
     A rank-deficient ``J`` gives a meaningless basis: use :func:`null_space` there.
     """
     jac = np.asarray(jac, dtype=np.float64)

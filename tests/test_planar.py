@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sahgrasp._planar import features, jacobian
+from sahgrasp.atlas._planar import features, jacobian
 from sahgrasp.errors import AtlasError, GraspSystemError, OptimizationError
 from sahgrasp.experiments.plotting import plot_planar
 from sahgrasp.experiments.report import summary

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sahgrasp._quality import orthogonal_tail
 from sahgrasp.atlas import AtlasSettings, build_atlas
+from sahgrasp.atlas._quality import orthogonal_tail
 from sahgrasp.errors import QualityError
 from sahgrasp.quality import (
     INDICES,

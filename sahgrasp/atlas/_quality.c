@@ -5,6 +5,9 @@
  * LAPACK call per matrix (dorgqr), which was more than half of the time of the planar hand's
  * indices; here numpy's raw factorisation is kept and only the n - m columns wanted are formed,
  * by applying the m reflectors to the last n - m columns of the identity.
+ *
+ * It is compiled beside the atlas's polytopes but serves quality.py (the same layer); a
+ * top-level sahgrasp._quality needs a row in docs/architecture.md's layer table.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -83,7 +86,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT,
-    .m_name = "sahgrasp._quality",
+    .m_name = "sahgrasp.atlas._quality",
     .m_doc = "The last columns of Q from stacked Householder QR factorisations (see quality.py).",
     .m_size = -1,
     .m_methods = methods,

@@ -7,6 +7,9 @@
  * -ffp-contract=off), and the C library's sin and cos, which gave numpy's float64 sin and cos
  * bit for bit on 100 000 random angles: the same doubles, hence the same atlases. arctan2, for
  * which numpy has code of its own, and F's matrix product stay in numpy.
+ *
+ * It is compiled beside the atlas's polytopes but belongs to the planar hand: the atlas code
+ * never uses it (a top-level sahgrasp._planar needs a row in docs/architecture.md's layer table).
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -171,7 +174,7 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT,
-    .m_name = "sahgrasp._planar",
+    .m_name = "sahgrasp.atlas._planar",
     .m_doc = "The planar hand's Jacobian and the terms of its F, compiled (see planar.py).",
     .m_size = -1,
     .m_methods = methods,

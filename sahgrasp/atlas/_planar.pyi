@@ -6,7 +6,7 @@ from numpy.typing import NDArray
 def jacobian(
     x: NDArray[np.float64],
     constant: NDArray[np.float64],
-    where: NDArray[np.intp],
+    where: NDArray[np.int64],
     radii: NDArray[np.float64],
     rates: NDArray[np.float64],
     out: NDArray[np.float64],
