@@ -209,7 +209,9 @@ class _Builder:
         j0 = self.count
         rows, cols = self.index.query(self.X, j0, new, 2 * self.r)
         gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
-        later, earlier = np.nonzero(np.tril((gap * gap).sum(axis=2) < 4 * self.r**2, -1))
+        later, earlier = np.nonzero((gap * gap).sum(axis=2) < 4 * self.r**2)
+        below = earlier < later  # the lower triangle, without np.tril's mask building
+        later, earlier = later[below], earlier[below]
         # Grouped by new chart: earlier charts (index tree, then its tail), then the same wave.
         owners = np.concatenate((rows, later))
         order = np.argsort(owners, kind="stable")
