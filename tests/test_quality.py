@@ -7,6 +7,7 @@ import pytest
 
 from sahgrasp.atlas import AtlasSettings, build_atlas
 from sahgrasp.atlas._quality import orthogonal_tail
+from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
 from sahgrasp.errors import QualityError
 from sahgrasp.quality import (
     INDICES,
@@ -110,6 +111,31 @@ def test_compiled_orthogonal_tail_equals_numpys_complete_q(n: int, m: int) -> No
     assert np.allclose(tail, q[:, :, m:], rtol=0.0, atol=1e-14)
     with pytest.raises(ValueError, match="needs"):
         orthogonal_tail(np.ascontiguousarray(h), tau, np.empty((6, n, n)))
+
+
+def reference_semi_axes(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The semi-axes by numpy's SVDs (what ``atlas._quality.semi_axes`` compiles)."""
+    _, s, vt = np.linalg.svd(A, full_matrices=False)  # A = U S V^T
+    deficient = s[..., -1] <= 1e-12 * s[..., 0]
+    M = (B @ np.swapaxes(vt, -1, -2)) / np.where(deficient[..., None], 1.0, s)[..., None, :]
+    sigma = np.linalg.svd(M, compute_uv=False)
+    axes = np.zeros((*sigma.shape[:-1], B.shape[-2]))
+    axes[..., : min(B.shape[-2], sigma.shape[-1])] = sigma[..., : B.shape[-2]]
+    axes[deficient] = 0.0
+    return axes
+
+
+@pytest.mark.parametrize(("a", "t", "o"), [(6, 3, 3), (10, 4, 6), (2, 3, 3), (3, 3, 1), (1, 1, 1)])
+def test_compiled_semi_axes_equal_numpys_svds(a: int, t: int, o: int) -> None:
+    rng = np.random.default_rng(a + 10 * t + 100 * o)
+    A, B = rng.normal(size=(60, a, t)), rng.normal(size=(60, o, t))
+    A[0] = 0.0  # rank deficient: all semi-axes zero
+    A[1] *= np.logspace(0, -14, t)  # nearly so
+    assert np.allclose(semi_axes(A, B), reference_semi_axes(A, B), rtol=1e-12, atol=1e-14)
+    assert not semi_axes(A, B)[0].any()
+    assert semi_axes(A[:, None], B[None, :3]).shape == (60, 3, o)  # batch shapes broadcast
+    with pytest.raises(ValueError, match="needs"):
+        compiled_semi_axes(A, B, np.empty((60, o + 1)), 1e-12)
 
 
 def sphere_atlas():  # type: ignore[no-untyped-def]
