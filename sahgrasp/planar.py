@@ -47,10 +47,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.atlas._planar import features as features_of
+from sahgrasp.atlas._planar import jacobian
 from sahgrasp.errors import GraspSystemError
 from sahgrasp.motions import principal_motions
 from sahgrasp.optimization import ChartChecks
-from sahgrasp.quality import Manipulability, manipulability, null_space
+from sahgrasp.quality import Manipulability, full_rank_null_space, manipulability
 
 __all__ = [
     "DEFAULT_HAND",
@@ -82,6 +84,8 @@ def _perp(a: FloatArray) -> FloatArray:
     return np.stack((-a[..., 1], a[..., 0]), axis=-1)
 
 
+_NO_MOTIONS = np.zeros((0, 12))  # rates of no Eq. (13) rows: the grasp equations alone
+
 _JOINTS_FROM_PHALANGES = np.kron(np.eye(3), [[1.0, 0.0], [-1.0, 1.0]])
 """``theta = D phi``: joint angles from absolute phalanx angles (distal relative to proximal)."""
 
@@ -97,7 +101,7 @@ def _angle_gradients(x: FloatArray) -> FloatArray:
 
 
 @functools.cache
-def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
+def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.int64]]:
     """Constant entries of the Jacobian of F (flattened 16 x 19) and where the others go.
 
     The variable entries are, in order: Eq. (19) (12), Eq. (20) (2), d/du_i of Eq. (7) (x for
@@ -121,22 +125,16 @@ def _jacobian_layout(hand: PlanarHand) -> tuple[FloatArray, NDArray[np.intp]]:
         (np.arange(12), [14, 15], 16 + fingers, 16 + fingers, 4 * fingers + 2, 4 * fingers + 3,
          16 + fingers)
     )  # fmt: skip
-    return jac.reshape(-1), rows * N_VARS + cols
+    return jac.reshape(-1), (rows * N_VARS + cols).astype(np.int64)  # the kernel reads int64
 
 
 _N_FEATURES = 50  # x (19), its squares (19), cos u, sin u, cos u v_2y, sin u v_2x (3 each)
-
-
-def _grasp_features(x: FloatArray) -> FloatArray:
-    """The terms the grasp equations are linear in (..., 50) (see :func:`_grasp_residual_map`)."""
-    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])  # w(u_i), Eq. (24)
-    distal_x, distal_y = x[..., 2:12:4], x[..., 3:12:4]
-    return np.concatenate((x, x * x, cu, su, cu * distal_y, su * distal_x), axis=-1)
+_N_TURNS = 6  # the phalanx turns from x_1 of Eq. (13), after the grasp features
 
 
 @functools.cache
 def _grasp_residual_map(hand: PlanarHand) -> tuple[FloatArray, FloatArray]:
-    """The grasp equations as ``_grasp_features(x) @ M.T + c``: M (16, 50), c (16,).
+    """The grasp equations as ``features(x) @ M.T + c``: M (16, 50), c (16,) (see ``F``).
 
     The part linear in ``x`` is the constant part of the Jacobian (Eqs. (21), (23)); the rest:
     Eq. (19) (``|v_{i,j}|^2 - 1``), Eq. (20), the circle term ``-l_{i,3} w(u_i)`` of Eq. (23),
@@ -155,33 +153,6 @@ def _grasp_residual_map(hand: PlanarHand) -> tuple[FloatArray, FloatArray]:
     M[13 + fingers, 2 * N_VARS + 6 + fingers] = 1.0  # Eq. (8): cos u v_2y - sin u v_2x
     M[13 + fingers, 2 * N_VARS + 9 + fingers] = -1.0
     return M, c
-
-
-def _grasp_jacobian_values(hand: PlanarHand, x: FloatArray) -> FloatArray:
-    """The 29 variable entries of the grasp Jacobian (..., 29), in the order of the layout."""
-    cu, su = np.cos(x[..., _U]), np.sin(x[..., _U])
-    v2x, v2y = x[..., 2:12:4], x[..., 3:12:4]  # distal phalanges
-    return np.concatenate(
-        (
-            2.0 * x[..., :12],  # Eq. (19)
-            2.0 * x[..., _VO],  # Eq. (20)
-            hand.radii * su,  # Eq. (7), d/du_i, x then y
-            -hand.radii * cu,
-            -su,  # Eq. (8), d/dv_{i,2} x, y and d/du_i
-            cu,
-            -su * v2y - cu * v2x,
-        ),
-        axis=-1,
-    )
-
-
-def _assemble(
-    constant: FloatArray, where: NDArray[np.intp], values: FloatArray, rows: int
-) -> FloatArray:
-    """A Jacobian (..., rows, 19): the flattened ``constant`` with ``values`` put at ``where``."""
-    jac = np.broadcast_to(constant, (*values.shape[:-1], constant.size)).copy()
-    jac[..., where] = values
-    return jac.reshape(*values.shape[:-1], rows, N_VARS)
 
 
 @dataclass(frozen=True, eq=False)
@@ -322,13 +293,13 @@ class PlanarGraspProblem:
         """``F(x) = features @ M.T + c``: M (16 + s, 56) and c (16 + s,) (see :meth:`F`)."""
         grasp, offset = _grasp_residual_map(self.hand)
         s = self.synergy.shape[1]
-        M = np.zeros((16 + s, _N_FEATURES + 6))
+        M = np.zeros((16 + s, _N_FEATURES + _N_TURNS))
         M[:16, :_N_FEATURES] = grasp
         M[16:, _N_FEATURES:] = (_JOINTS_FROM_PHALANGES.T @ self.synergy).T  # Eq. (13)
         return M, np.concatenate((offset, np.zeros(s)))
 
     @functools.cached_property
-    def _jacobian_map(self) -> tuple[FloatArray, NDArray[np.intp], FloatArray]:
+    def _jacobian_map(self) -> tuple[FloatArray, NDArray[np.int64], FloatArray]:
         """Constant part of J (flattened), where its variable entries go, and ``E_s^T J_a``.
 
         ``E_s^T J_a`` is ``rates * (angle gradients)`` with ``rates`` (s, 12) the joint motions
@@ -340,7 +311,7 @@ class PlanarGraspProblem:
         motion_where = (rows * N_VARS + np.arange(12)).reshape(-1)
         rates = np.repeat(self.synergy.T @ _JOINTS_FROM_PHALANGES, 2, axis=1)
         full = np.concatenate((constant, np.zeros(s * N_VARS)))
-        return full, np.concatenate((where, motion_where)), rates
+        return full, np.concatenate((where, motion_where)).astype(np.int64), rates
 
     def grasp_residual(self, x: ArrayLike) -> FloatArray:
         """``F(x)`` of Eq. (9), (..., 16): Eqs. (19), (20), (7) with (21), (23) and (8)."""
@@ -348,31 +319,45 @@ class PlanarGraspProblem:
 
     def grasp_jacobian(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`grasp_residual`, (..., 16, 19): a constant part plus 29 entries."""
-        x = np.asarray(x, dtype=np.float64)
         constant, where = _jacobian_layout(self.hand)
-        return _assemble(constant, where, _grasp_jacobian_values(self.hand, x), 16)
+        return self._jacobian(x, constant, where, _NO_MOTIONS)
 
     def F(self, x: ArrayLike) -> FloatArray:
         """``R(x)`` of Eq. (11): F plus Eq. (13) on the joint angles, (..., 16 + s).
 
         Every equation is linear in a few features of ``x`` (``x``, its squares, ``cos u_i``,
-        ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is a
-        handful of numpy calls and one matrix product, which matters in Newton's method.
+        ``sin u_i``, two products and the phalanx turns from ``x_1``), so one evaluation is the
+        features (compiled, ``atlas._planar.features``, but for numpy's arctan2) and one matrix
+        product, which matters in Newton's method.
         """
-        x = np.asarray(x, dtype=np.float64)
+        x = np.ascontiguousarray(x, dtype=np.float64)
         M, offset = self._residual_map
-        features = np.concatenate((_grasp_features(x), self._turns(x)), axis=-1)
+        features = np.empty((*x.shape[:-1], _N_FEATURES + _N_TURNS))
+        cosines = np.empty((*x.shape[:-1], _N_TURNS))
+        turns = features[..., _N_FEATURES:]  # sines from the compiled kernel, then the turns
+        features_of(x.reshape(-1, N_VARS), self.x1, features.reshape(-1, _N_FEATURES + _N_TURNS),
+                    cosines.reshape(-1, _N_TURNS))  # fmt: skip
+        np.arctan2(turns, cosines, out=turns)  # numpy's arctan2, as in _turns
         return features @ M.T + offset
 
     def J(self, x: ArrayLike) -> FloatArray:
         """Jacobian of :meth:`F`, (..., 16 + s, 19)."""
-        x = np.asarray(x, dtype=np.float64)
-        constant, where, rates = self._jacobian_map
-        motion = rates * _angle_gradients(x)[..., None, :]  # E_s^T J_a
-        values = np.concatenate(
-            (_grasp_jacobian_values(self.hand, x), motion.reshape(*x.shape[:-1], -1)), axis=-1
-        )
-        return _assemble(constant, where, values, 16 + rates.shape[0])
+        return self._jacobian(x, *self._jacobian_map)
+
+    def _jacobian(
+        self, x: ArrayLike, constant: FloatArray, where: NDArray[np.int64], rates: FloatArray
+    ) -> FloatArray:
+        """The layout ``constant`` with the variable entries put at ``where``, (..., rows, 19).
+
+        Compiled (``atlas._planar.jacobian``): the atlas asks for J at a few points at a time, where
+        numpy's 20 array operations cost far more than the arithmetic (docs/atlas.md).
+        """
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        rows = 16 + rates.shape[0]
+        jac = np.empty((*x.shape[:-1], rows, N_VARS))
+        flat = jac.reshape(-1, rows, N_VARS)  # a view: the kernel fills jac
+        jacobian(x.reshape(-1, N_VARS), constant, where, self.hand.radii, rates, flat)
+        return jac
 
     def bounds(self) -> tuple[FloatArray, FloatArray]:
         """Box bounds on ``x``: the joint limits and the arcs ``[a_i, b_i]`` of the contacts."""
@@ -419,9 +404,13 @@ class PlanarGraspProblem:
         return jac
 
     def manipulability(self, x: ArrayLike) -> Manipulability:
-        """Manipulability ellipsoids at configurations ``x`` (..., 19) with the tangent of F."""
+        """Manipulability ellipsoids at configurations ``x`` (..., 19) with the tangent of F.
+
+        ``x`` must be regular points of F (the grasp Jacobian of full rank 16), as the chart
+        centres of an atlas of R are: the tangent basis then comes from a QR, not an SVD.
+        """
         x = np.asarray(x, dtype=np.float64)
-        tangent = null_space(self.grasp_jacobian(x), T_DIM)
+        tangent = full_rank_null_space(self.grasp_jacobian(x))
         return manipulability(tangent, self.joint_jacobian(x), self.object_jacobian(x))
 
     def check_charts(self, centres: FloatArray, executor: Executor | None = None) -> ChartChecks:

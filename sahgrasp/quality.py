@@ -26,6 +26,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.atlas._quality import orthogonal_tail
+from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
 from sahgrasp.errors import QualityError
 
 __all__ = [
@@ -36,6 +38,7 @@ __all__ = [
     "Manipulability",
     "ellipsoid_indices",
     "evaluate_index",
+    "full_rank_null_space",
     "manipulability",
     "null_space",
     "principal_projection",
@@ -95,6 +98,29 @@ def null_space(jac: ArrayLike, dim: int) -> FloatArray:
     return np.swapaxes(vt[..., vt.shape[-1] - dim :, :], -1, -2)
 
 
+def full_rank_null_space(jac: ArrayLike) -> FloatArray:
+    """Orthonormal bases (..., n, n - m) of the null spaces of full-row-rank Jacobians (..., m, n).
+
+    The last ``n - m`` columns of Q in the Householder QR ``J^T = Q R``: the same spaces as
+    :func:`null_space` when every ``J`` has rank ``m`` (a regular point, such as a chart centre),
+    at a small part of the SVD's cost on a stack of chart centres. numpy factorises; only the
+    columns wanted are then formed from the reflectors (compiled,
+    ``atlas._quality.orthogonal_tail``: numpy would form all of Q, which took most of the time;
+    docs/atlas.md, "Benchmarks").
+    A rank-deficient ``J`` gives a meaningless basis: use :func:`null_space` there.
+    """
+    jac = np.asarray(jac, dtype=np.float64)
+    m, n = jac.shape[-2:]
+    reflectors, tau = np.linalg.qr(np.swapaxes(jac, -1, -2), mode="raw")  # (..., m, n), (..., m)
+    basis = np.empty((*jac.shape[:-2], n, n - m))
+    orthogonal_tail(
+        np.ascontiguousarray(reflectors).reshape(-1, m, n),
+        np.ascontiguousarray(tau).reshape(-1, m),
+        basis.reshape(-1, n, n - m),
+    )
+    return basis
+
+
 def semi_axes(actuated: ArrayLike, obj: ArrayLike) -> FloatArray:
     """Semi-axes of the manipulability ellipsoids ``{B tau : |A tau| <= 1}``.
 
@@ -106,15 +132,14 @@ def semi_axes(actuated: ArrayLike, obj: ArrayLike) -> FloatArray:
         Semi-axis lengths, decreasing, (..., o); all zero where ``A`` is rank deficient.
     """
     A, B = np.asarray(actuated, dtype=np.float64), np.asarray(obj, dtype=np.float64)
-    _, s, vt = np.linalg.svd(A, full_matrices=False)  # A = U S V^T
-    deficient = s[..., -1] <= _RANK_TOL * s[..., 0]
-    s_safe = np.where(deficient[..., None], 1.0, s)
-    M = (B @ np.swapaxes(vt, -1, -2)) / s_safe[..., None, :]  # M = B V S^-1
-    sigma = np.linalg.svd(M, compute_uv=False)
-    o = B.shape[-2]
-    axes = np.zeros((*sigma.shape[:-1], o))
-    axes[..., : min(o, sigma.shape[-1])] = sigma[..., :o]
-    axes[deficient] = 0.0
+    batch = np.broadcast_shapes(A.shape[:-2], B.shape[:-2])
+    (a, t), o = A.shape[-2:], B.shape[-2]
+    A = np.ascontiguousarray(np.broadcast_to(A, (*batch, a, t))).reshape(-1, a, t)
+    B = np.ascontiguousarray(np.broadcast_to(B, (*batch, o, t))).reshape(-1, o, t)
+    axes = np.empty((*batch, o))
+    # Compiled (atlas._quality.semi_axes): M = B V S^-1 from A = U S V^T and the singular values
+    # of M, by one-sided Jacobi per grasp; numpy's SVDs cost about 4 us a small matrix.
+    compiled_semi_axes(A, B, axes.reshape(-1, o), _RANK_TOL)
     return axes
 
 

@@ -14,6 +14,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas, project
+from sahgrasp.atlas._polytope import det_signs, min_singular_values
 from sahgrasp.atlas.polytope import Polytope
 from sahgrasp.errors import AtlasError
 
@@ -342,3 +343,37 @@ def test_polytope_cuts_give_the_brute_force_vertices(seed: int, k: int) -> None:
     gap, _ = cKDTree(expected).query(got)
     assert gap.max() <= 1e-12
     assert poly.reach2 == pytest.approx(float((expected**2).sum(axis=1).max()))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 19])
+def test_compiled_determinant_signs_equal_numpys(n: int) -> None:
+    rng = np.random.default_rng(n)
+    a = rng.normal(size=(50, n, n))
+    a[0] = 0.0  # singular: sign 0, as numpy's
+    a[1, :, 0] = 0.0
+    signs = np.empty(50)
+    det_signs(a, signs)
+    assert np.array_equal(signs, np.linalg.slogdet(a)[0])
+
+
+@pytest.mark.parametrize(("rows", "k"), [(1, 1), (2, 2), (3, 3), (5, 2), (4, 4)])
+def test_compiled_smallest_singular_values_equal_numpys(rows: int, k: int) -> None:
+    a = np.random.default_rng(rows + k).normal(size=(50, rows, k))
+    a[0] = 0.0
+    sigma = np.empty(50)
+    min_singular_values(a, sigma)
+    assert np.allclose(sigma, np.linalg.svd(a, compute_uv=False)[:, -1], rtol=1e-12, atol=1e-12)
+
+
+def test_compiled_linear_algebra_refuses_bad_arrays() -> None:
+    out = np.empty(2)
+    with pytest.raises(TypeError, match="C-contiguous float64"):
+        det_signs(np.ones((2, 3, 3), dtype=np.float32), out)
+    with pytest.raises(ValueError, match="n, n"):
+        det_signs(np.ones((2, 3, 2)), out)
+    with pytest.raises(ValueError, match="out"):
+        min_singular_values(np.ones((3, 2, 2)), out)
+    with pytest.raises(ValueError, match="rows >= cols"):
+        min_singular_values(np.ones((2, 1, 2)), out)
+    with pytest.raises(TypeError, match="float64"):
+        det_signs(np.ones((2, 3, 3)), np.ones(2, dtype=np.int64))

@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.atlas.polytope import Polytope, compatible
 from sahgrasp.errors import AtlasError
 from sahgrasp.planar import make_planar_problem
 
@@ -162,3 +163,125 @@ def test_a_wave_does_a_point_by_point_f_and_j_work_about_as_often_as_one_chart_e
         assert atlas.complete
         misses[batch] = cache.misses
     assert misses[32] <= 1.05 * misses[1]
+
+
+def reference_compatible(
+    polys: list[Polytope],
+    x: np.ndarray,
+    parent_x: np.ndarray,
+    phi: np.ndarray,
+    parent_phi: np.ndarray,
+    vertices: np.ndarray,
+    r: float,
+    tol: float,
+    threshold: float,
+) -> list[int]:
+    """The wave's compatibility test in plain numpy and Python (what ``compatible`` compiles)."""
+    count = len(vertices)
+    accepted: list[int] = []
+    gone = [False] * count
+    for q in range(count):
+        if gone[q]:
+            continue
+        state = []  # per earlier accepted p: 1 its plane cuts off q's vertex, 2 it is nearer
+        planes = []
+        for p in accepted:
+            diff = x[p] - parent_x[q]
+            a = diff @ parent_phi[q]
+            b = 0.5 * (a @ a)
+            if not (diff @ diff < 4 * r * r and tol * r < b):
+                continue
+            M = phi[p].T @ parent_phi[q]
+            if np.linalg.svd(M, compute_uv=False)[-1] ** 2 < threshold:
+                continue  # another branch: no plane
+            if a @ vertices[q] - b > tol:
+                state.append(1)
+            elif 0.5 * b < vertices[q] @ vertices[q]:
+                planes.append((a.tolist(), b))
+        if 1 in state:
+            continue
+        poly = polys[q].copy()
+        for a, b in planes:
+            if 0.5 * b < poly.reach2:
+                poly.cut(a, b, tol)
+        v = poly.expandable(r * r)
+        if planes and (v < 0 or poly.vertex(v) != tuple(vertices[q])):
+            continue
+        accepted.append(q)
+    return accepted
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_compiled_compatibility_test_equals_the_reference(k: int) -> None:
+    n, r, tol, count = k + 2, 0.3, 1e-9 * 0.3, 12
+    kept = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        parent_x = rng.normal(scale=0.25, size=(count, n))
+        parent_phi = np.linalg.qr(rng.normal(size=(count, n, k)))[0]
+        phi = np.linalg.qr(parent_phi + rng.normal(scale=0.6, size=(count, n, k)))[0]
+        polys, vertices = [], []
+        for _ in range(count):
+            planes = rng.normal(size=(3, k))
+            poly = Polytope.from_planes(
+                k, r, planes.tolist(), rng.uniform(0.1, 0.3, 3).tolist(), tol
+            )
+            v = poly.expandable(r * r)
+            v = v if v >= 0 else 0
+            polys.append(poly)
+            vertices.append(poly.vertex(v))
+        verts = np.array(vertices)
+        x = parent_x + np.einsum(
+            "qnk,qk->qn", parent_phi, r * verts / np.linalg.norm(verts, axis=1)[:, None]
+        )
+        threshold = 0.3
+        got = compatible(polys, x, parent_x, phi, parent_phi, verts, r, r * r, tol, threshold)
+        assert got == reference_compatible(
+            polys, x, parent_x, phi, parent_phi, verts, r, tol, threshold
+        )
+        kept += len(got)
+    assert 0 < kept < 40 * count  # both outcomes occur
+
+
+def test_compiled_compatibility_test_refuses_bad_arrays() -> None:
+    poly = Polytope.cube(2, 0.1)
+    ones = np.ones((1, 3))
+    with pytest.raises(TypeError, match="float64"):
+        compatible(
+            [poly],
+            ones.astype(np.float32),
+            ones,
+            np.ones((1, 3, 2)),
+            np.ones((1, 3, 2)),
+            np.ones((1, 2)),
+            0.1,
+            0.01,
+            1e-10,
+            0.5,
+        )
+    with pytest.raises(ValueError, match="does not match"):
+        compatible(
+            [poly],
+            ones,
+            ones,
+            np.ones((1, 3, 2)),
+            np.ones((1, 3, 2)),
+            np.ones((1, 3)),
+            0.1,
+            0.01,
+            1e-10,
+            0.5,
+        )
+    with pytest.raises(TypeError, match="polytope"):
+        compatible(
+            [None],
+            ones,
+            ones,
+            np.ones((1, 3, 2)),
+            np.ones((1, 3, 2)),
+            np.ones((1, 2)),
+            0.1,
+            0.01,
+            1e-10,
+            0.5,
+        )

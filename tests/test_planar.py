@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sahgrasp.atlas._planar import features, jacobian
 from sahgrasp.errors import AtlasError, GraspSystemError, OptimizationError
 from sahgrasp.experiments.plotting import plot_planar
 from sahgrasp.experiments.report import summary
@@ -53,6 +54,69 @@ def test_jacobians_match_central_differences() -> None:
         assert np.allclose(problem.J(x), central_differences(problem.F, x), atol=1e-8)
         joints = central_differences(problem.joint_motion, x)
         assert np.allclose(problem.joint_jacobian(x), joints, atol=1e-8)
+
+
+def reference_jacobian(problem: PlanarGraspProblem, x: np.ndarray) -> np.ndarray:
+    """J of the planar hand entry by entry in numpy (what ``_planar.jacobian`` compiles)."""
+    hand, jac = problem.hand, np.zeros((len(x), 16 + problem.synergy.shape[1], 19))
+    fingers = np.arange(3)
+    for i in range(3):  # Eqs. (21), (23): the contact points, linear in x
+        contact = slice(7 + 2 * i, 9 + 2 * i)
+        jac[:, contact, 4 * i : 4 * i + 2] = hand.phalanges[i, 0] * np.eye(2)
+        jac[:, contact, 4 * i + 2 : 4 * i + 4] = hand.phalanges[i, 1] * np.eye(2)
+        jac[:, contact, 12:14] = -np.eye(2)
+        jac[:, contact, 14] = hand.centres[i, ::-1] * [1.0, -1.0]
+        jac[:, contact, 15] = -hand.centres[i]
+    for row, cols in enumerate(np.array([*np.arange(12), 14, 15]).reshape(7, 2)):  # (19), (20)
+        jac[:, row, cols] = 2.0 * x[:, cols]
+    cu, su = np.cos(x[:, 16:]), np.sin(x[:, 16:])
+    jac[:, 7 + 2 * fingers, 16 + fingers] = hand.radii * su  # Eq. (23): -l_{i,3} w(u_i)
+    jac[:, 8 + 2 * fingers, 16 + fingers] = -hand.radii * cu
+    jac[:, 13 + fingers, 4 * fingers + 2] = -su  # Eq. (8): cos u v_2y - sin u v_2x
+    jac[:, 13 + fingers, 4 * fingers + 3] = cu
+    jac[:, 13 + fingers, 16 + fingers] = -su * x[:, 3:12:4] - cu * x[:, 2:12:4]
+    vx, vy = x[:, 0:12:2], x[:, 1:12:2]  # Eq. (13): E_s^T d(theta)/dv
+    grad = np.stack((-vy, vx), axis=-1).reshape(len(x), 12) / np.repeat(vx * vx + vy * vy, 2, 1)
+    rates = np.repeat(problem.synergy.T @ np.kron(np.eye(3), [[1.0, 0.0], [-1.0, 1.0]]), 2, 1)
+    jac[:, 16:, :12] = rates * grad[:, None, :]
+    return jac
+
+
+@pytest.mark.parametrize("k", [1, 2, 3])
+def test_compiled_jacobian_equals_the_reference(k: int) -> None:
+    problem = make_planar_problem(k=k)
+    X = problem.x1 + 0.2 * np.random.default_rng(k).normal(size=(40, 19))
+    assert np.allclose(problem.J(X), reference_jacobian(problem, X), rtol=1e-15, atol=1e-17)
+    assert np.array_equal(problem.grasp_jacobian(X), problem.J(X)[:, :16])
+    assert np.array_equal(problem.J(X.reshape(4, 10, 19)).reshape(40, -1, 19), problem.J(X))
+
+
+def test_compiled_features_equal_the_reference() -> None:
+    problem = make_planar_problem()
+    X = problem.x1 + 0.2 * np.random.default_rng(5).normal(size=(40, 19))
+    out, cosines = np.empty((40, 56)), np.empty((40, 6))
+    features(X, problem.x1, out, cosines)
+    cu, su = np.cos(X[:, 16:]), np.sin(X[:, 16:])
+    grasp = np.concatenate((X, X * X, cu, su, cu * X[:, 3:12:4], su * X[:, 2:12:4]), axis=1)
+    assert np.allclose(out[:, :50], grasp, rtol=1e-15, atol=0.0)
+    turns = np.arctan2(out[:, 50:], cosines)  # each phalanx's angle from that at x_1
+    angles = np.arctan2(X[:, 1:12:2], X[:, 0:12:2])
+    start = np.arctan2(problem.x1[1:12:2], problem.x1[0:12:2])
+    assert np.allclose(np.exp(1j * turns), np.exp(1j * (angles - start)), atol=1e-12)
+    with pytest.raises(ValueError, match="needs"):
+        features(X, problem.x1, np.empty((40, 50)), cosines)
+
+
+def test_compiled_jacobian_refuses_bad_arrays() -> None:
+    problem = make_planar_problem()
+    constant, where, rates = problem._jacobian_map
+    x, out = problem.x1[None], np.empty((1, 17, 19))
+    with pytest.raises(TypeError, match="int64"):
+        jacobian(x, constant, where.astype(np.int32), DEFAULT_HAND.radii, rates, out)
+    with pytest.raises(ValueError, match="needs"):
+        jacobian(x, constant, where, DEFAULT_HAND.radii, rates, np.empty((1, 16, 19)))
+    with pytest.raises(ValueError, match="outside"):
+        jacobian(x, constant, where + 1000, DEFAULT_HAND.radii, rates, out)
 
 
 def test_batched_evaluation_matches_single() -> None:

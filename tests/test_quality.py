@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 
 from sahgrasp.atlas import AtlasSettings, build_atlas
+from sahgrasp.atlas._quality import orthogonal_tail
+from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
 from sahgrasp.errors import QualityError
 from sahgrasp.quality import (
     INDICES,
     SINGULAR_THRESHOLDS,
     ellipsoid_indices,
     evaluate_index,
+    full_rank_null_space,
     manipulability,
     null_space,
     principal_projection,
@@ -85,6 +88,54 @@ def test_null_space_is_an_orthonormal_tangent_basis() -> None:
     assert N.shape == (4, 5, 3)
     assert np.allclose(jac @ N, 0.0, atol=1e-12)
     assert np.allclose(np.swapaxes(N, 1, 2) @ N, np.eye(3), atol=1e-12)
+
+
+def test_full_rank_null_space_spans_the_null_space_of_the_svd() -> None:
+    jac = np.random.default_rng(2).normal(size=(4, 3, 7))
+    N = full_rank_null_space(jac)
+    assert N.shape == (4, 7, 4)
+    assert np.allclose(jac @ N, 0.0, atol=1e-12)
+    assert np.allclose(np.swapaxes(N, 1, 2) @ N, np.eye(4), atol=1e-12)
+    reference = null_space(jac, 4)  # the same space: each basis is a rotation of the other
+    rotation = np.swapaxes(reference, 1, 2) @ N
+    assert np.allclose(np.swapaxes(rotation, 1, 2) @ rotation, np.eye(4), atol=1e-12)
+
+
+@pytest.mark.parametrize(("n", "m"), [(2, 1), (5, 3), (19, 16)])
+def test_compiled_orthogonal_tail_equals_numpys_complete_q(n: int, m: int) -> None:
+    a = np.random.default_rng(n).normal(size=(6, n, m))
+    h, tau = np.linalg.qr(a, mode="raw")
+    tail = np.empty((6, n, n - m))
+    orthogonal_tail(np.ascontiguousarray(h), tau, tail)
+    q = np.linalg.qr(a, mode="complete")[0]
+    assert np.allclose(tail, q[:, :, m:], rtol=0.0, atol=1e-14)
+    with pytest.raises(ValueError, match="needs"):
+        orthogonal_tail(np.ascontiguousarray(h), tau, np.empty((6, n, n)))
+
+
+def reference_semi_axes(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The semi-axes by numpy's SVDs (what ``atlas._quality.semi_axes`` compiles)."""
+    _, s, vt = np.linalg.svd(A, full_matrices=False)  # A = U S V^T
+    deficient = s[..., -1] <= 1e-12 * s[..., 0]
+    M = (B @ np.swapaxes(vt, -1, -2)) / np.where(deficient[..., None], 1.0, s)[..., None, :]
+    sigma = np.linalg.svd(M, compute_uv=False)
+    axes = np.zeros((*sigma.shape[:-1], B.shape[-2]))
+    axes[..., : min(B.shape[-2], sigma.shape[-1])] = sigma[..., : B.shape[-2]]
+    axes[deficient] = 0.0
+    return axes
+
+
+@pytest.mark.parametrize(("a", "t", "o"), [(6, 3, 3), (10, 4, 6), (2, 3, 3), (3, 3, 1), (1, 1, 1)])
+def test_compiled_semi_axes_equal_numpys_svds(a: int, t: int, o: int) -> None:
+    rng = np.random.default_rng(a + 10 * t + 100 * o)
+    A, B = rng.normal(size=(60, a, t)), rng.normal(size=(60, o, t))
+    A[0] = 0.0  # rank deficient: all semi-axes zero
+    A[1] *= np.logspace(0, -14, t)  # nearly so
+    assert np.allclose(semi_axes(A, B), reference_semi_axes(A, B), rtol=1e-12, atol=1e-14)
+    assert not semi_axes(A, B)[0].any()
+    assert semi_axes(A[:, None], B[None, :3]).shape == (60, 3, o)  # batch shapes broadcast
+    with pytest.raises(ValueError, match="needs"):
+        compiled_semi_axes(A, B, np.empty((60, o + 1)), 1e-12)
 
 
 def sphere_atlas():  # type: ignore[no-untyped-def]

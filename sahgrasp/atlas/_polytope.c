@@ -11,6 +11,7 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -714,11 +715,365 @@ static PyTypeObject PolytopeType = {
     .tp_as_sequence = &Polytope_as_sequence,
 };
 
+/* -- the compatibility test of a wave's tries (builder._Builder._compatible) ---------------- */
+
+/* A C-contiguous float64 buffer of ``ndim`` dimensions (writable if asked); its shape goes to
+ * ``shape``. */
+static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shape,
+                      const char *what, int writable) {
+    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
+    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
+    if (view->ndim != ndim || view->itemsize != sizeof(double) || view->format == NULL ||
+        strcmp(view->format, "d") != 0) {
+        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float64 array of %d dimensions",
+                     what, ndim);
+        PyBuffer_Release(view);
+        return -1;
+    }
+    memcpy(shape, view->shape, sizeof(Py_ssize_t) * (size_t)ndim);
+    return 0;
+}
+
+/* Smallest eigenvalue of the symmetric k x k matrix g (destroyed), by cyclic Jacobi sweeps. */
+static double min_eigenvalue(double *g, Py_ssize_t k) {
+    for (int sweep = 0; sweep < 64; sweep++) {
+        double off = 0.0;
+        for (Py_ssize_t i = 0; i < k; i++)
+            for (Py_ssize_t j = i + 1; j < k; j++) off += g[i * k + j] * g[i * k + j];
+        if (off == 0.0) break;
+        for (Py_ssize_t p = 0; p < k; p++) {
+            for (Py_ssize_t q = p + 1; q < k; q++) {
+                double gpq = g[p * k + q];
+                if (gpq == 0.0) continue;
+                double theta = (g[q * k + q] - g[p * k + p]) / (2.0 * gpq);
+                double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                double c = 1.0 / sqrt(t * t + 1.0), s = t * c;
+                for (Py_ssize_t m = 0; m < k; m++) { /* columns p and q */
+                    double gp = g[m * k + p], gq = g[m * k + q];
+                    g[m * k + p] = c * gp - s * gq;
+                    g[m * k + q] = s * gp + c * gq;
+                }
+                for (Py_ssize_t m = 0; m < k; m++) { /* rows p and q */
+                    double gp = g[p * k + m], gq = g[q * k + m];
+                    g[p * k + m] = c * gp - s * gq;
+                    g[q * k + m] = s * gp + c * gq;
+                }
+            }
+        }
+    }
+    double smallest = g[0];
+    for (Py_ssize_t i = 1; i < k; i++)
+        if (g[i * k + i] < smallest) smallest = g[i * k + i];
+    return smallest;
+}
+
+/* Whether the bases phi (n x k) and base (n x k) are alike: the smallest singular value of
+ * phi^T base squared is at least ``threshold`` (builder._Builder._similar). */
+static int alike(const double *phi, const double *base, Py_ssize_t n, int k, double threshold,
+                 double *m, double *g) {
+    double fro = 0.0;
+    for (int a = 0; a < k; a++) {
+        for (int b = 0; b < k; b++) {
+            double s = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++) s += phi[j * k + a] * base[j * k + b];
+            m[a * k + b] = s;
+            fro += s * s;
+        }
+    }
+    if (!(fro - (k - 1) < threshold)) return 1; /* |M|_F^2 - (k - 1) bounds sigma_min^2 below */
+    for (int a = 0; a < k; a++) {
+        for (int b = 0; b < k; b++) {
+            double s = 0.0;
+            for (int c = 0; c < k; c++) s += m[c * k + a] * m[c * k + b];
+            g[a * k + b] = s;
+        }
+    }
+    return !(min_eigenvalue(g, k) < threshold);
+}
+
+/* Chart ``poly`` cut by the planes ``a[h] . w <= b[h]`` (h in use) still expands ``vertex``. */
+static int still_picked(const Polytope *poly, const double *vertex, const double *a,
+                        const double *b, const Py_ssize_t *use, Py_ssize_t count, double tol,
+                        double r2) {
+    Polytope *p = (Polytope *)Polytope_copy((Polytope *)poly, NULL);
+    if (p == NULL) return -1;
+    int k = p->k;
+    for (Py_ssize_t h = 0; h < count; h++) {
+        Py_ssize_t at = use[h];
+        if (0.5 * b[at] < p->reach2 && poly_cut(p, a + at * k, b[at], tol) < 0) {
+            Py_DECREF(p);
+            return -1;
+        }
+    }
+    double best = INFINITY;
+    Py_ssize_t v = -1;
+    for (Py_ssize_t i = 0; i < p->n; i++) { /* Polytope.expandable */
+        double n2 = p->norm2[i];
+        if (r2 <= n2 && n2 < best && !p->blocked[i]) {
+            best = n2;
+            v = i;
+        }
+    }
+    int same = v >= 0;
+    for (int d = 0; same && d < k; d++) same = p->verts[v * k + d] == vertex[d];
+    Py_DECREF(p);
+    return same;
+}
+
+static PyObject *compatible(PyObject *mod, PyObject *args) {
+    PyObject *polys, *objs[5];
+    double r, r2, tol, threshold;
+    if (!PyArg_ParseTuple(args, "OOOOOOdddd", &polys, &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &r, &r2, &tol, &threshold))
+        return NULL;
+    static const char *names[5] = {"centres", "parent_centres", "phi", "parent_phi", "vertices"};
+    static const int dims[5] = {2, 2, 3, 3, 2};
+    Py_buffer views[5];
+    Py_ssize_t shapes[5][3];
+    int got = 0;
+    PyObject *result = NULL, *fast = NULL;
+    double *work = NULL;
+    for (; got < 5; got++)
+        if (read_array(objs[got], &views[got], dims[got], shapes[got], names[got], 0) < 0) goto done;
+    Py_ssize_t count = shapes[0][0], n = shapes[0][1];
+    int k = (int)shapes[2][2];
+    if (check_k(k) < 0) goto done;
+    for (int i = 1; i < 5; i++) {
+        if (shapes[i][0] != count || shapes[i][1] != (i == 4 ? k : n) ||
+            (dims[i] == 3 && shapes[i][2] != k)) {
+            PyErr_Format(PyExc_ValueError, "%s does not match %zd centres of %zd coordinates, k = %d",
+                         names[i], count, n, k);
+            goto done;
+        }
+    }
+    fast = PySequence_Fast(polys, "polys must be a sequence of polytopes");
+    if (fast == NULL) goto done;
+    if (PySequence_Fast_GET_SIZE(fast) != count) {
+        PyErr_Format(PyExc_ValueError, "%zd polytopes for %zd centres", PySequence_Fast_GET_SIZE(fast),
+                     count);
+        goto done;
+    }
+    for (Py_ssize_t q = 0; q < count; q++) {
+        PyObject *p = PySequence_Fast_GET_ITEM(fast, q);
+        if (!PyObject_TypeCheck(p, &PolytopeType) || ((Polytope *)p)->k != k) {
+            PyErr_Format(PyExc_TypeError, "polys[%zd] is not a polytope of dimension %d", q, k);
+            goto done;
+        }
+    }
+    const double *x = views[0].buf, *xp = views[1].buf, *phi = views[2].buf,
+                 *phip = views[3].buf, *verts = views[4].buf;
+    size_t pairs = (size_t)(count * count);
+    /* Per pair (p, q): the plane of new centre p in the chart of q's parent (u_pq . w <= b_pq),
+     * its state (0 none, 1 cuts off q's vertex, 2 nearer than it), then per q the planes nearer
+     * than its vertex (p ascending) and per p the tries whose vertex it cuts off. */
+    size_t doubles = pairs * (size_t)(k + 1) + (size_t)(2 * k * k);
+    work = PyMem_Malloc(sizeof(double) * doubles + sizeof(Py_ssize_t) * pairs +
+                        (size_t)(3 * count + pairs));
+    if (work == NULL) {
+        PyErr_NoMemory();
+        goto done;
+    }
+    double *u = work, *b = u + pairs * k, *m = b + pairs, *g = m + k * k;
+    Py_ssize_t *use = (Py_ssize_t *)(g + k * k);
+    char *state = (char *)(use + pairs), *gone = state + pairs, *taken = gone + count;
+    double small = tol * r, four_r2 = 4 * r * r;
+    for (Py_ssize_t p = 0; p < count; p++) {
+        for (Py_ssize_t q = 0; q < count; q++) {
+            size_t pq = (size_t)(p * count + q);
+            state[pq] = 0;
+            if (p == q) continue;
+            const double *base = phip + q * n * k;
+            double dist2 = 0.0, bc = 0.0, reach = 0.0, vv = 0.0;
+            double *uc = u + pq * k;
+            for (int d = 0; d < k; d++) uc[d] = 0.0;
+            for (Py_ssize_t j = 0; j < n; j++) {
+                double e = x[p * n + j] - xp[q * n + j];
+                dist2 += e * e;
+                for (int d = 0; d < k; d++) uc[d] += e * base[j * k + d];
+            }
+            for (int d = 0; d < k; d++) {
+                bc += uc[d] * uc[d];
+                reach += uc[d] * verts[q * k + d];
+                vv += verts[q * k + d] * verts[q * k + d];
+            }
+            bc *= 0.5;
+            b[pq] = bc;
+            if (!(dist2 < four_r2 && small < bc)) continue;
+            if (!alike(phi + p * n * k, base, n, k, threshold, m, g)) continue;
+            if (reach - bc > tol)
+                state[pq] = 1;
+            else if (0.5 * bc < vv) /* new vertices lie on the plane: only a nearer one can */
+                state[pq] = 2;
+        }
+    }
+    memset(gone, 0, (size_t)(2 * count));
+    result = PyList_New(0);
+    if (result == NULL) goto done;
+    for (Py_ssize_t q = 0; q < count; q++) {
+        if (gone[q]) continue;
+        Py_ssize_t planes = 0;
+        for (Py_ssize_t p = 0; p < count; p++)
+            if (taken[p] && state[p * count + q] == 2) use[planes++] = p * count + q;
+        if (planes) {
+            int keep = still_picked((Polytope *)PySequence_Fast_GET_ITEM(fast, q), verts + q * k,
+                                    u, b, use, planes, tol, r2);
+            if (keep < 0) {
+                Py_CLEAR(result);
+                goto done;
+            }
+            if (!keep) continue;
+        }
+        PyObject *index = PyLong_FromSsize_t(q);
+        if (index == NULL || PyList_Append(result, index) < 0) {
+            Py_XDECREF(index);
+            Py_CLEAR(result);
+            goto done;
+        }
+        Py_DECREF(index);
+        taken[q] = 1;
+        for (Py_ssize_t later = 0; later < count; later++)
+            if (state[q * count + later] == 1) gone[later] = 1;
+    }
+done:
+    PyMem_Free(work);
+    Py_XDECREF(fast);
+    for (int i = 0; i < got; i++) PyBuffer_Release(&views[i]);
+    return result;
+}
+
+
+/* -- signs and singular values of a wave's small matrices (projection.py) --------------------
+ *
+ * A wave asks these of a few dozen matrices of size k x k or n x n at a time; numpy.linalg
+ * costs 10-30 us per call for its LAPACK dispatch, several times the arithmetic. Only signs and
+ * a threshold test on a singular value are read, so LAPACK's own doubles are not needed. */
+
+/* The stack (B, rows, cols) and its output (B,), checked: 0, or -1 with an exception. */
+static int get_stack(PyObject *const *args, Py_ssize_t nargs, const char *name, int square,
+                     Py_buffer *in, Py_buffer *out) {
+    if (nargs != 2) {
+        PyErr_Format(PyExc_TypeError, "%s(a, out) takes 2 arguments", name);
+        return -1;
+    }
+    Py_ssize_t shape[3];
+    if (read_array(args[0], in, 3, shape, "a", 0) < 0) return -1;
+    if (read_array(args[1], out, 1, shape, "out", 1) < 0) {
+        PyBuffer_Release(in);
+        return -1;
+    }
+    if (out->shape[0] != in->shape[0] || (square && in->shape[1] != in->shape[2])) {
+        PyErr_Format(PyExc_ValueError, "%s: a must be (B, %s) and out (B,)", name,
+                     square ? "n, n" : "rows, cols");
+        PyBuffer_Release(in);
+        PyBuffer_Release(out);
+        return -1;
+    }
+    return 0;
+}
+
+/* Sign of det(a) (n x n, destroyed) by Gaussian elimination with partial pivoting: 1, -1, or 0
+ * when a pivot column is zero (numpy.linalg.slogdet's sign). */
+static double det_sign(double *a, Py_ssize_t n) {
+    double sign = 1.0;
+    for (Py_ssize_t c = 0; c < n; c++) {
+        Py_ssize_t pivot = c;
+        for (Py_ssize_t r = c + 1; r < n; r++)
+            if (fabs(a[r * n + c]) > fabs(a[pivot * n + c])) pivot = r;
+        double head = a[pivot * n + c];
+        if (head == 0.0) return 0.0;
+        if (pivot != c) {
+            for (Py_ssize_t j = c; j < n; j++) {
+                double t = a[c * n + j];
+                a[c * n + j] = a[pivot * n + j];
+                a[pivot * n + j] = t;
+            }
+            sign = -sign;
+        }
+        if (head < 0.0) sign = -sign;
+        for (Py_ssize_t r = c + 1; r < n; r++) {
+            double f = a[r * n + c] / head;
+            for (Py_ssize_t j = c + 1; j < n; j++) a[r * n + j] -= f * a[c * n + j];
+        }
+    }
+    return sign;
+}
+
+static PyObject *det_signs(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
+    Py_buffer in, out;
+    if (get_stack(args, nargs, "det_signs", 1, &in, &out) < 0) return NULL;
+    Py_ssize_t count = in.shape[0], n = in.shape[1];
+    double *work = PyMem_Malloc(sizeof(double) * (size_t)(n * n > 0 ? n * n : 1));
+    if (work == NULL) {
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return PyErr_NoMemory();
+    }
+    const double *a = in.buf;
+    double *sign = out.buf;
+    for (Py_ssize_t b = 0; b < count; b++) {
+        memcpy(work, a + b * n * n, sizeof(double) * (size_t)(n * n));
+        sign[b] = det_sign(work, n);
+    }
+    PyMem_Free(work);
+    PyBuffer_Release(&in);
+    PyBuffer_Release(&out);
+    Py_RETURN_NONE;
+}
+
+static PyObject *min_singular_values(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
+    Py_buffer in, out;
+    if (get_stack(args, nargs, "min_singular_values", 0, &in, &out) < 0) return NULL;
+    Py_ssize_t count = in.shape[0], rows = in.shape[1], k = in.shape[2];
+    if (rows < k || k < 1) {
+        PyErr_Format(PyExc_ValueError, "min_singular_values needs rows >= cols >= 1, got %zd x %zd",
+                     rows, k);
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return NULL;
+    }
+    double *g = PyMem_Malloc(sizeof(double) * (size_t)(k * k));
+    if (g == NULL) {
+        PyBuffer_Release(&in);
+        PyBuffer_Release(&out);
+        return PyErr_NoMemory();
+    }
+    const double *a = in.buf;
+    double *sigma = out.buf;
+    for (Py_ssize_t b = 0; b < count; b++) {
+        const double *m = a + b * rows * k;
+        for (Py_ssize_t i = 0; i < k; i++) { /* g = m^T m */
+            for (Py_ssize_t j = 0; j < k; j++) {
+                double s = 0.0;
+                for (Py_ssize_t r = 0; r < rows; r++) s += m[r * k + i] * m[r * k + j];
+                g[i * k + j] = s;
+            }
+        }
+        double lambda = min_eigenvalue(g, k);
+        sigma[b] = lambda > 0.0 ? sqrt(lambda) : 0.0;
+    }
+    PyMem_Free(g);
+    PyBuffer_Release(&in);
+    PyBuffer_Release(&out);
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef module_methods[] = {
+    {"compatible", compatible, METH_VARARGS,
+     "compatible(polys, centres, parent_centres, phi, parent_phi, vertices, r, r2, tol, "
+     "threshold): the tries a wave can add together, in order (see polytope.py)."},
+    {"det_signs", (PyCFunction)(void (*)(void))det_signs, METH_FASTCALL,
+     "det_signs(a, out): out[b] = sign(det(a[b])) (1, -1 or 0) for a stack a (B, n, n)."},
+    {"min_singular_values", (PyCFunction)(void (*)(void))min_singular_values, METH_FASTCALL,
+     "min_singular_values(a, out): out[b] = smallest singular value of a[b], a (B, rows, k)."},
+    {NULL, NULL, 0, NULL},
+};
+
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT,
     .m_name = "sahgrasp.atlas._polytope",
-    .m_doc = "Compiled chart polytopes of the atlas builder.",
+    .m_doc = "Compiled chart polytopes and small dense kernels of the atlas builder.",
     .m_size = -1,
+    .m_methods = module_methods,
 };
 
 PyMODINIT_FUNC PyInit__polytope(void) {

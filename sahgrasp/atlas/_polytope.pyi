@@ -2,7 +2,38 @@
 
 from collections.abc import Sequence
 
+import numpy as np
+from numpy.typing import NDArray
+
 MAX_FACES: int
+
+def det_signs(a: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """``out[b] = sign(det(a[b]))`` (1, -1, or 0 for a singular matrix) for a stack (B, n, n)."""
+
+def min_singular_values(a: NDArray[np.float64], out: NDArray[np.float64]) -> None:
+    """``out[b]``: the smallest singular value of ``a[b]`` for a stack (B, rows, k), rows >= k."""
+
+def compatible(
+    polys: Sequence[Polytope],
+    centres: NDArray[np.float64],
+    parent_centres: NDArray[np.float64],
+    phi: NDArray[np.float64],
+    parent_phi: NDArray[np.float64],
+    vertices: NDArray[np.float64],
+    r: float,
+    r2: float,
+    tol: float,
+    threshold: float,
+) -> list[int]:
+    """The tries of a wave that can be added together, in order (``_Builder._compatible``).
+
+    Try q (new centre ``centres[q]`` with tangent basis ``phi[q]``) comes from the picked vertex
+    ``vertices[q]`` of the chart with polytope ``polys[q]``, centre ``parent_centres[q]`` and
+    basis ``parent_phi[q]`` (C-contiguous float64 arrays (B, n), (B, n, k), (B, k)). It is kept
+    unless the plane of an earlier kept try whose chart is alike (branch test, ``threshold`` on
+    the squared smallest cosine) cuts off its vertex or makes another vertex the nearest one
+    outside the ball of squared radius ``r2``.
+    """
 
 class Polytope:
     """Convex polytope in a chart's parameter space, vertex/face incidence as bit masks."""

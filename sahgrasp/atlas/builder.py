@@ -5,7 +5,7 @@ from __future__ import annotations
 import operator
 import time
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.atlas.checks import check_bounds, start_point
 from sahgrasp.atlas.model import Atlas, AtlasSettings, FloatArray, Function, IndexArray
 from sahgrasp.atlas.neighbours import NeighbourIndex
-from sahgrasp.atlas.polytope import CUT_TOL, Polytope
+from sahgrasp.atlas.polytope import CUT_TOL, Polytope, compatible
 from sahgrasp.atlas.projection import (
     Point,
     crossing_sign,
@@ -75,7 +75,11 @@ class _Wave:
 
     Attributes:
         picks: ``(chart, vertex index)`` pairs, oldest chart first.
+        polys: The picked charts' polytopes.
         vertices: The picked vertices (a later cut may renumber them).
+        verts: The same as an array, shape (B, k).
+        parent_x: The picked charts' centres, shape (B, n).
+        parent_phi: Their tangent bases, shape (B, n, k).
         directions: Unit vectors towards the vertices, shape (B, k).
         x: Projected candidates, shape (B, n).
         outcome: Per pick one of the ``_OK``, ``_NEWTON``, ... codes below.
@@ -85,7 +89,11 @@ class _Wave:
     """
 
     picks: list[tuple[int, int]]
+    polys: list[Polytope]
     vertices: list[tuple[float, ...]]
+    verts: FloatArray
+    parent_x: FloatArray
+    parent_phi: FloatArray
     directions: FloatArray
     x: FloatArray
     outcome: IndexArray
@@ -157,6 +165,8 @@ class _Builder:
         self.bounded = bool((np.isfinite(self.lower) | np.isfinite(self.upper)).any())
         self.r = settings.radius
         self.tol = CUT_TOL * self.r
+        # cos(2 theta)^2 of the branch test (see _similar), theta = acos(1 - epsilon) of Eq. (18)
+        self.alike_threshold = max(2.0 * (1.0 - settings.epsilon) ** 2 - 1.0, 0.0) ** 2
         n = self.lower.size
         self.X = np.empty((1024, n))
         self.PHI = np.empty((1024, n, k))
@@ -180,28 +190,34 @@ class _Builder:
 
     def add_chart(self, point: Point, parent: int) -> None:
         """Add one chart (see :meth:`add_charts`)."""
-        self.add_charts([point], [parent])
+        # Contiguous copies: matmul may round a strided basis (a view of Q) differently.
+        self.add_charts(np.array([point.x]), np.array([point.phi]), [point.sign], [parent])
 
-    def add_charts(self, points: list[Point], parents: list[int]) -> None:
-        """Add charts at ``points``, in order; give each and each neighbour the other's plane.
+    def add_charts(
+        self, new: FloatArray, phis: FloatArray, signs: list[float], parents: list[int]
+    ) -> None:
+        """Add charts in order; give each and each neighbour the other's plane.
 
-        Neighbour search, the branch test and the planes (Fig. 6b) are computed for all new charts
-        at once; the planes then cut the neighbours' polytopes one by one, chart after chart.
+        The charts have centres ``new`` (B, n), bases ``phis`` (B, n, k), the signs of
+        ``det([J; phi^T])`` and the parents given. Neighbour search, the branch test and the
+        planes (Fig. 6b) are computed for all new charts at once; the planes then cut the
+        neighbours' polytopes one by one, chart after chart.
         """
-        while self.count + len(points) > self.X.shape[0]:
+        count = len(new)
+        while self.count + count > self.X.shape[0]:
             self._grow()
         j0 = self.count
-        new = np.array([p.x for p in points])
-        phis = np.array([p.phi for p in points])
         rows, cols = self.index.query(self.X, j0, new, 2 * self.r)
         gap = new[:, None] - new[None]  # charts of the same wave neighbour the later one
-        later, earlier = np.nonzero(np.tril((gap * gap).sum(axis=2) < 4 * self.r**2, -1))
+        later, earlier = np.nonzero((gap * gap).sum(axis=2) < 4 * self.r**2)
+        below = earlier < later  # the lower triangle, without np.tril's mask building
+        later, earlier = later[below], earlier[below]
         # Grouped by new chart: earlier charts (index tree, then its tail), then the same wave.
         owners = np.concatenate((rows, later))
         order = np.argsort(owners, kind="stable")
         owner = owners[order]
         nbrs = np.concatenate((cols, j0 + earlier)).astype(np.int64)[order]
-        self.X[j0 : j0 + len(points)], self.PHI[j0 : j0 + len(points)] = new, phis
+        self.X[j0 : j0 + count], self.PHI[j0 : j0 + count] = new, phis
         if self.new_charts is not None:
             self.new_charts(new)
         bases, own = self.PHI[nbrs], phis[owner]
@@ -219,16 +235,16 @@ class _Builder:
         # A closed chart ignores new planes for good: select only the rest (see _give_plane).
         theirs = similar & (small < Bc) & ~self.closed[nbrs]
         # Everything the per-chart loop needs as plain lists: one conversion per wave.
-        kept, own, give = (np.cumsum(np.bincount(owner[m], minlength=len(points))).tolist()
+        kept, own, give = (np.cumsum(np.bincount(owner[m], minlength=count)).tolist()
                            for m in (similar, mine, theirs))  # fmt: skip
         kept_nbrs = nbrs[similar]
         planes, offsets = U[mine].tolist(), B[mine].tolist()
         targets, normals, given = nbrs[theirs].tolist(), Uc[theirs].tolist(), Bc[theirs].tolist()
         start = [0, 0, 0]
-        for q, (point, parent) in enumerate(zip(points, parents, strict=True)):
+        for q, (sign, parent) in enumerate(zip(signs, parents, strict=True)):
             (k0, o0, g0), k1, o1, g1 = start, kept[q], own[q], give[q]
             self.charts.append(
-                _Chart(point.sign, parent, kept_nbrs[k0:k1], planes[o0:o1], offsets[o0:o1])
+                _Chart(sign, parent, kept_nbrs[k0:k1], planes[o0:o1], offsets[o0:o1])
             )
             self.count = j0 + q + 1
             for c, a, b in zip(targets[g0:g1], normals[g0:g1], given[g0:g1], strict=True):
@@ -246,7 +262,7 @@ class _Builder:
         through. ``|M|_F^2 - (k - 1)`` bounds the squared smallest singular value of M from below.
         """
         M = np.matmul(phis.transpose(0, 2, 1), bases)  # (q, k, k): phi^T Phi_c
-        threshold = max(2.0 * (1.0 - self.settings.epsilon) ** 2 - 1.0, 0.0) ** 2  # cos(2 theta)^2
+        threshold = self.alike_threshold
         unsure = (M * M).sum(axis=(1, 2)) - (self.k - 1) < threshold
         if unsure.any():
             sigma = np.linalg.svd(M[unsure], compute_uv=False)[:, -1]
@@ -380,15 +396,17 @@ class _Builder:
         whose wave front is narrow) this saves most of the projections that would be discarded.
         """
         s = self.settings
-        rows = np.array([i for i, _ in picks])
-        polys = [self._polytope(i) for i in rows.tolist()]
+        charts = [i for i, _ in picks]
+        rows = np.array(charts)
+        polys = [self._polytope(i) for i in charts]
         vertices = [p.vertex(v) for p, (_, v) in zip(polys, picks, strict=True)]
+        verts = np.array(vertices)
         norms = np.sqrt([p.vertex_norm2(v) for p, (_, v) in zip(polys, picks, strict=True)])
-        directions = np.array(vertices) / norms[:, None]
-        phi_all = self.PHI[rows]
-        x = self.X[rows] + np.matmul(phi_all, self.r * directions[:, :, None])[:, :, 0]
+        directions = verts / norms[:, None]
+        parent_x, phi_all = self.X[rows], self.PHI[rows]
+        x = parent_x + np.matmul(phi_all, self.r * directions[:, :, None])[:, :, 0]
         outcome = np.full(len(picks), _DEFERRED)
-        tried = np.array(self._compatible(rows, vertices, x, phi_all), dtype=np.int64)
+        tried = np.array(self._compatible(polys, parent_x, phi_all, verts, x, phi_all), np.int64)
         phi_i, x_tilde = phi_all[tried], x[tried]
         x_t, converged = project_many(
             self.F_many, self.J_many, x_tilde, phi_i, s.newton_tol, s.newton_max_iter
@@ -415,77 +433,43 @@ class _Builder:
         x[tried], outcome[tried] = x_t, result
         if self.rowwise is not None:
             self.rowwise.clear()
-        return _Wave(picks, vertices, directions, x, outcome, phi, sign, crossed)
+        return _Wave(
+            picks, polys, vertices, verts, parent_x, phi_all, directions, x, outcome, phi, sign,
+            crossed,
+        )  # fmt: skip
 
     def _compatible(
-        self, parents: IndexArray, vertices: list[tuple[float, ...]], x: FloatArray, phi: FloatArray
+        self,
+        polys: list[Polytope],
+        parent_x: FloatArray,
+        parent_phi: FloatArray,
+        verts: FloatArray,
+        x: FloatArray,
+        phi: FloatArray,
     ) -> list[int]:
         """Which of the new centres ``x`` (tangent bases ``phi``) can all be added, in order.
 
-        Centre q comes from the picked vertex ``vertices[q]`` of chart ``parents[q]``. Each must
-        be the try one-chart expansion would make after the earlier accepted ones: their planes
-        (as :meth:`add_charts` would cut its chart's polytope) must neither cut off its picked
-        vertex nor create a nearer exterior vertex. One that fails is left out; its chart stays
-        queued.
+        Centre q comes from the picked vertex ``verts[q]`` of the chart with polytope
+        ``polys[q]``, centre ``parent_x[q]`` and basis ``parent_phi[q]``. Each must be the try
+        one-chart expansion would make after the earlier accepted ones: their planes (as
+        :meth:`add_charts` would cut its chart's polytope, alike charts only) must neither cut
+        off its picked vertex nor create a nearer exterior vertex. One that fails is left out;
+        its chart stays queued. Compiled (``_polytope.compatible``): called twice a wave, its
+        pairs and sequential loop cost about 100 us a call in numpy and Python.
         """
-        if parents.size == 0:
+        if not polys:
             return []
-        parent_phi = self.PHI[parents]
-        diff = x[:, None] - self.X[parents][None]  # [p, q]: new centre p - parent of q
-        # [p, q] = diff[p, q] @ parent_phi[q]: matmul over q (einsum costs 10x more per call)
-        Uc = np.matmul(diff.transpose(1, 0, 2), parent_phi).transpose(1, 0, 2)
-        # Two-operand einsum: a third of the cost of product-then-sum on these (B, B, k) stacks.
-        Bc = 0.5 * np.einsum("pqk,pqk->pq", Uc, Uc)
-        verts = np.array(vertices)
-        near = np.einsum("pqn,pqn->pq", diff, diff) < 4 * self.r**2
-        near &= self.tol * self.r < Bc
-        np.fill_diagonal(near, False)
-        p_idx, q_idx = np.nonzero(near)
-        if p_idx.size:  # the branch test of add_charts: only alike charts cut each other
-            alike = self._similar(parent_phi[q_idx], phi[p_idx])
-            near[p_idx[~alike], q_idx[~alike]] = False
-        off = near & (np.einsum("pqk,qk->pq", Uc, verts) - Bc > self.tol)
-        # New vertices lie on the plane, at least sqrt(Bc / 2) from the centre: only a plane
-        # nearer than the picked vertex can create a nearer one.
-        closer = near & ~off & (0.5 * Bc < (verts * verts).sum(axis=1)[None])
-        # Plain lists for the sequential loop, from the few pairs it reads: cut_off[p], the tries
-        # p's plane cuts off; nearer[q], the (p, a, b) planes nearer than q's vertex.
-        n = len(parents)
-        cut_off: list[list[int]] = [[] for _ in range(n)]
-        for p, q in zip(*(i.tolist() for i in np.nonzero(off)), strict=True):
-            cut_off[p].append(q)
-        nearer: list[list[tuple[int, list[float], float]]] = [[] for _ in range(n)]
-        q_near, p_near = np.nonzero(closer.T)
-        pairs = (q_near.tolist(), p_near.tolist(), Uc[p_near, q_near].tolist())
-        for q, p, a, b in zip(*pairs, Bc[p_near, q_near].tolist(), strict=True):
-            nearer[q].append((p, a, b))
-        gone, taken = [False] * n, [False] * n
-        accepted: list[int] = []
-        for q, parent in enumerate(parents.tolist()):
-            if gone[q]:
-                continue
-            planes = [(a, b) for p, a, b in nearer[q] if taken[p]]
-            if not planes or self._still_picked(parent, vertices[q], planes) >= 0:
-                accepted.append(q)
-                taken[q] = True
-                for later in cut_off[q]:
-                    gone[later] = True
-        return accepted
+        return compatible(
+            polys, x, parent_x, phi, parent_phi, verts, self.r, self.r**2, self.tol,
+            self.alike_threshold,
+        )  # fmt: skip
 
-    def _still_picked(
-        self, i: int, vertex: tuple[float, ...], planes: Sequence[tuple[list[float], float]] = ()
-    ) -> int:
+    def _still_picked(self, i: int, vertex: tuple[float, ...]) -> int:
         """Index of ``vertex`` if chart ``i`` would still expand it (-1 if not).
 
-        A new chart's plane may have cut it off or created a nearer exterior vertex. ``planes``
-        (``a . w <= b`` pairs) are planes still to come: the test is made on a copy cut by them.
+        A new chart's plane may have cut it off or created a nearer exterior vertex.
         """
         poly = self._polytope(i)
-        if planes:
-            poly = poly.copy()
-            for a, b in planes:
-                if 0.5 * b < poly.reach2:
-                    poly.cut(a, b, self.tol)
         v = poly.expandable(self.r**2)
         return v if v >= 0 and poly.vertex(v) == vertex else -1
 
@@ -503,15 +487,16 @@ class _Builder:
             return
         wave = self._first_try(picks)
         ok = np.flatnonzero(wave.outcome == _OK)
-        parents = np.array([picks[p][0] for p in ok.tolist()], dtype=np.int64)
-        vertices = [wave.vertices[p] for p in ok.tolist()]
-        added = ok[self._compatible(parents, vertices, wave.x[ok], wave.phi[ok])].tolist()
+        polys = [wave.polys[p] for p in ok.tolist()]
+        parent_x, parent_phi, verts = wave.parent_x[ok], wave.parent_phi[ok], wave.verts[ok]
+        tries = self._compatible(polys, parent_x, parent_phi, verts, wave.x[ok], wave.phi[ok])
+        added = ok[tries].tolist()
         for p in added:
             if wave.crossed[p]:
                 self._locate_crossing(picks[p][0], wave.directions[p], self.r)
         if added:
-            points = [Point(wave.x[p], wave.phi[p], float(wave.sign[p])) for p in added]
-            self.add_charts(points, [picks[p][0] for p in added])
+            parents = [picks[p][0] for p in added]
+            self.add_charts(wave.x[added], wave.phi[added], wave.sign[added].tolist(), parents)
         c = self.counters
         for p in np.flatnonzero((wave.outcome != _OK) & (wave.outcome != _DEFERRED)).tolist():
             i = picks[p][0]

@@ -11,9 +11,9 @@ k it is the cube cut by one plane after the other.
 
 from __future__ import annotations
 
-from sahgrasp.atlas._polytope import MAX_FACES, Polytope
+from sahgrasp.atlas._polytope import MAX_FACES, Polytope, compatible
 
-__all__ = ["CUT_TOL", "MAX_FACES", "Polytope"]
+__all__ = ["CUT_TOL", "MAX_FACES", "Polytope", "compatible"]
 
 CUT_TOL = 1e-9
 """A vertex closer than this (times the chart radius r) to a plane lies on it."""

@@ -12,6 +12,7 @@ from scipy.linalg.lapack import dgesv as _dgesv
 from scipy.linalg.lapack import dgetrf as _dgetrf
 from scipy.linalg.lapack import dorgqr as _dorgqr
 
+from sahgrasp.atlas._polytope import det_signs, min_singular_values
 from sahgrasp.atlas.model import FloatArray, Function
 
 __all__ = [
@@ -166,29 +167,35 @@ def project_many(
     m = n - k
     x = x_tilde.copy()
     done = np.zeros(B, dtype=bool)
-    active = np.flatnonzero(np.isfinite(x).all(axis=1))
+    # The points still moving, kept compact (their rows of x, of the Newton matrices [J; phi^T]
+    # and their indices) and written back to x when they leave: fewer array calls per iteration.
+    idx = np.flatnonzero(np.isfinite(x).all(axis=1))
+    xa = x[idx]
+    A = np.empty((idx.size, n, n))
+    A[:, m:] = phi[idx].transpose(0, 2, 1)
     tol2 = tol * tol
-    A = np.empty((B, n, n))
-    A[:, m:] = phi.transpose(0, 2, 1)
-    rhs = np.zeros((B, n))
     for _ in range(max_iter):
-        if active.size == 0:
+        if idx.size == 0:
             break
-        xa = x[active]
         f = F(xa)
         converged = (f * f).sum(axis=1) <= tol2
-        done[active[converged]] = True
-        step = ~converged
-        active, xa, f = active[step], xa[step], f[step]
-        if active.size == 0:
-            break
-        Aa = A[active]
-        Aa[:, :m] = J(xa)
-        rhs_a = rhs[active]
-        rhs_a[:, :m] = -f
-        dx, solved = _solve_stack(Aa, rhs_a)  # Eq. (15), linearised
-        x[active] = xa + dx
-        active = active[solved & np.isfinite(x[active]).all(axis=1)]
+        if converged.any():
+            done[idx[converged]] = True
+            x[idx[converged]] = xa[converged]
+            step = ~converged
+            idx, xa, f, A = idx[step], xa[step], f[step], A[step]
+            if idx.size == 0:
+                break
+        A[:, :m] = J(xa)
+        rhs = np.zeros((idx.size, n))
+        rhs[:, :m] = -f
+        dx, solved = _solve_stack(A, rhs)  # Eq. (15), linearised
+        xa = xa + dx
+        moving = solved & np.isfinite(xa).all(axis=1)
+        if not moving.all():
+            x[idx[~moving]] = xa[~moving]
+            idx, xa, A = idx[moving], xa[moving], A[moving]
+    x[idx] = xa  # the last iterates of points that did not converge
     return x, done
 
 
@@ -206,17 +213,27 @@ def tangent_many(
     phi = q[:, :, m:]
     size = np.abs(np.diagonal(r[:, :m, :m], axis1=1, axis2=2))
     regular = size.min(axis=1) > RANK_TOL * np.maximum(size.max(axis=1), scale)
-    sign = np.linalg.slogdet(np.concatenate((jac, phi.transpose(0, 2, 1)), axis=1))[0]
+    sign = np.empty(len(jac))
+    square = np.ascontiguousarray(np.concatenate((jac, phi.transpose(0, 2, 1)), axis=1))
+    det_signs(square, sign)  # compiled: see crossing_signs
     return phi, np.where(sign < 0, -1.0, 1.0), regular
+
+
+# The stacked signs and cosines below are compiled (``_polytope.det_signs``,
+# ``min_singular_values``): numpy.linalg's slogdet and svd cost 10-30 us a call on a wave's few
+# dozen small matrices, several times their arithmetic, and only signs and the threshold test of
+# Eq. (18) read the results.
 
 
 def crossing_signs(phi_i: FloatArray, phi_j: FloatArray, sign_j: FloatArray) -> FloatArray:
     """:func:`crossing_sign` for stacks of bases (B, n, k) and signs (B,)."""
-    det_sign = np.linalg.slogdet(np.matmul(phi_i.transpose(0, 2, 1), phi_j))[0]
+    det_sign = np.empty(len(phi_i))
+    det_signs(np.matmul(phi_i.transpose(0, 2, 1), phi_j), det_sign)
     return np.where(det_sign < 0, -sign_j, sign_j)
 
 
 def min_cosines(phi_i: FloatArray, phi_j: FloatArray) -> FloatArray:
     """:func:`min_cosine` for stacks of bases (B, n, k)."""
-    M = np.matmul(phi_i.transpose(0, 2, 1), phi_j)
-    return np.linalg.svd(M, compute_uv=False)[:, -1]
+    cosines = np.empty(len(phi_i))
+    min_singular_values(np.matmul(phi_i.transpose(0, 2, 1), phi_j), cosines)
+    return cosines

@@ -2,17 +2,17 @@
 
 The sphere references are CuikSuite's (the authors' C code, with a k-d tree neighbour index) chart
 counts and times, measured on an idle 2-core machine in the same run as this engine: the targets
-are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` (S^2 <= 0.06 s,
-S^3 <= 5 s). For the planar hand the targets are an atlas in <= 0.1 s and the three indices over
-all charts in <= 0.1 s. The SAH cases (can and oil bottle, Section V)
-compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target, for the can with
-k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are the paper's
-sizes in scaled coordinates. Each case reports its best wall time over ``repeats`` builds and the
-CPU time of that build (steadier on a shared machine). The paper's largest atlas, the bottle with
-k = 3 (:data:`PAPER_SCALE_CASES`), is timed once as a whole optimization with the collision checks
-on a worker process beside the build, against the target of 300 s on 2 cores. The S2, S3 and
-planar cases time the wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside it in
-the same run, the one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile`
+are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` (S^2 <= 0.06 s, S^3
+<= 5 s). For the planar hand the targets are an atlas in <= 0.1 s, the three indices over all
+charts in <= 0.1 s and both together (``whole_seconds``) in <= 0.1 s. The SAH cases (can and oil
+bottle, Section V) compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target,
+for the can with k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are
+the paper's sizes in scaled coordinates. Each case reports its best wall time over ``repeats``
+builds and the CPU time of that build (steadier on a shared machine). The paper's largest atlas,
+the bottle with k = 3 (:data:`PAPER_SCALE_CASES`), is timed once as a whole optimization with the
+collision checks on a worker process beside the build, against the target of 300 s on 2 cores. The
+S2, S3 and planar cases time the wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside
+it in the same run, the one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile`
 tells where one build's time goes.
 """
 
@@ -52,10 +52,11 @@ __all__ = [
 BASELINES: dict[str, dict[str, float]] = {
     "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
     "S3": {"charts": 18802, "fastest": 4.2, "slowest": 5.5, "seconds": 5.0},
-    "planar": {"charts": 750, "seconds": 0.1, "quality_seconds": 0.1},
+    "planar": {"charts": 750, "seconds": 0.1, "quality_seconds": 0.1, "whole_seconds": 0.1},
 }
 """References and target times [s], r = 0.1 (spheres): CuikSuite's charts and its fastest and
-slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's."""
+slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's,
+and ``whole_seconds`` the target of the atlas and the three indices together (issue 13)."""
 
 SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
     ("can", 2): {"t": 8, "charts": 4800, "seconds": 140.0},
@@ -261,9 +262,11 @@ def _planar_row(repeats: int) -> dict[str, Any]:
         "cpu_seconds": cpu,
         "charts_per_second": atlas.n_charts / seconds,
         "quality_seconds": quality_seconds,
+        "whole_seconds": seconds + quality_seconds,
         "baseline_charts": baseline["charts"],
         "time_ok": seconds <= baseline["seconds"],
         "quality_time_ok": quality_seconds <= baseline["quality_seconds"],
+        "whole_time_ok": seconds + quality_seconds <= baseline["whole_seconds"],
         **engines,
     }
 
