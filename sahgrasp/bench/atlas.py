@@ -263,6 +263,7 @@ def _planar_row(repeats: int) -> dict[str, Any]:
         "charts_per_second": atlas.n_charts / seconds,
         "quality_seconds": quality_seconds,
         "whole_seconds": seconds + quality_seconds,
+        "whole_target_seconds": baseline["whole_seconds"],
         "baseline_charts": baseline["charts"],
         "time_ok": seconds <= baseline["seconds"],
         "quality_time_ok": quality_seconds <= baseline["quality_seconds"],
