@@ -70,10 +70,11 @@ class Obstacle:
 
     One definition decides whether a configuration is inside the object, for the solver's
     acceptance test and for the clearance it reports: :meth:`HandObjectClearance.clearance`
-    with the contact fingers and the allowance. :meth:`penetrated` is that clearance below zero,
-    asked to stop at the first link found inside; a clear configuration's clearance is then
-    exact and kept, so the result's clearance of an accepted start costs no second query, and
-    a rejected start's is measured only if the result reports it.
+    with the contact fingers and the allowance. :meth:`penetrated` asks
+    :meth:`HandObjectClearance.clearance_if_clear`, which gives a clear configuration's exact
+    clearance and only the verdict for one inside; the clearance is kept, so the result's
+    clearance of an accepted start costs no second query, and a rejected start's is measured
+    only if the result reports it.
 
     Args:
         hand: The hand.
@@ -110,21 +111,15 @@ class Obstacle:
         key = q.tobytes()
         if self._last[0] == key:
             return self._last[1] is None or not self._last[1].clear()
-        found = self._query(q, until_inside=True)
-        # Inside: the distance found is not the smallest; only the verdict is kept.
-        self._last = (key, found if found.clear() else None)
-        return not found.clear()
+        found = self.checker.clearance_if_clear(q, self.contacts, self.allowance_m)
+        self._last = (key, found)
+        return found is None
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link (kept for ``q``)."""
         key = q.tobytes()
         last = self._last[1]
         if self._last[0] != key or last is None:
-            last = self._query(q, until_inside=False)
+            last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
             self._last = (key, last)
         return last
-
-    def _query(self, q: NDArray[np.float64], until_inside: bool) -> Clearance:
-        return self.checker.clearance(
-            q, self.contacts, self.allowance_m, all_links=False, until_inside=until_inside
-        )
