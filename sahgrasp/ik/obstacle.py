@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 __all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of"]
 
-REPAIR_PAIRS_PER_LINK = 4
+REPAIR_PAIRS_PER_LINK = 1
 """Most (link, piece) pairs one link adds to a collision-repair step (its first ones found).
 
 A link deep in a finely cut object overlaps hundreds of pieces (the coffee cup's revolved

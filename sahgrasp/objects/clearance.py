@@ -273,10 +273,12 @@ class HandObjectClearance:
         how far the link must move along ``normal`` to reach its required distance.
 
         ``per_link``: at most this many pairs per link shape, the first ones found closer than
-        required, pieces taken by increasing lower bound of their distance (None: all). The
-        IK's repair asks for a few: a link deep in a finely cut object overlaps hundreds of
-        pieces, and a row per pair costs a GJK call and a Jacobian each, for normals that
-        mostly agree (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
+        required, pieces taken by increasing lower bound of their distance (None: all); with 1,
+        the first pair coal's collision test finds in the piece tree, one C++ query per link
+        (:meth:`PieceTree.first_pair`). The IK's repair asks for one: a link deep in a finely
+        cut object overlaps hundreds of pieces, and a row per pair costs a GJK call and a
+        Jacobian each, for normals that mostly agree
+        (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
@@ -285,7 +287,10 @@ class HandObjectClearance:
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs: list[_Pair] = []
         for g, bounds, upper in self._near_links(T, thresholds, None):
-            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
+            if per_link == 1:  # the first pair the piece tree finds: one C++ query
+                pairs += self._first_pair(T, g, float(thresholds[g]))
+            else:
+                self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
         return [
             Penetration(
                 0,
@@ -818,6 +823,22 @@ class HandObjectClearance:
                     break
         return out
 
+    def _first_pair(self, T: FloatArray, g: int, threshold_m: float) -> list[_Pair]:
+        """Geometry ``g``'s first pair closer than ``threshold_m`` [m] in the piece tree (or none).
+
+        The tree answers in the object frame; the pair is returned in the world (object at
+        ``T``).
+        """
+        self._pose_links((g,))
+        found = self._tree.first_pair(self._link_objects[g], threshold_m)
+        if found is None:
+            return []
+        distance_m, on_piece, on_link, normal = found
+        if not self._object_at_origin:
+            R, t = T[:3, :3], T[:3, 3]
+            on_piece, on_link, normal = R @ on_piece + t, R @ on_link + t, R @ normal
+        return [_Pair(g, distance_m, on_piece, on_link, normal)]
+
     def _tree_says_clear(self, g: int, cell_bounds: FloatArray, limit_m: float) -> bool:
         """True if the piece tree finds no piece closer than ``limit_m`` [m] to geometry ``g``.
 
@@ -852,9 +873,8 @@ class HandObjectClearance:
     def _at_link(self, g: int) -> coal.Transform3s:
         """Geometry ``g``'s world placement as a coal transform (built once per placement)."""
         at_link = self._link_transforms[g]
-        if at_link is None:
-            M = self._geometry_data.oMg[g]
-            at_link = self._link_transforms[g] = coal.Transform3s(M.rotation, M.translation)
+        if at_link is None:  # from the placement views: no Pinocchio SE3 built (1 instead of 2 us)
+            at_link = self._link_transforms[g] = coal.Transform3s(self._link_R[g], self._link_t[g])
         return at_link
 
     def _piece_bounds(

@@ -159,17 +159,50 @@ class PieceTree:
             and self._closer(self._fine, link, threshold_m)
         )
 
+    def first_pair(
+        self, link: coal.CollisionObject, threshold_m: float
+    ) -> tuple[float, FloatArray, FloatArray, FloatArray] | None:
+        """A (piece, ``link``) pair closer than ``threshold_m`` [m], None if there is none.
+
+        The first pair coal's collision test finds in the pieces' AABB tree (one C++ query, the
+        link posed in the object frame): its signed distance [m], witness points on the piece
+        and on the link and normal from the piece towards the link, in the object frame; the
+        values GJK/EPA gives that pair's distance query.
+        """
+        if not self._closer(self._fine, link, threshold_m):
+            return None
+        contact = self._callback.data.result.getContact(0)  # the piece is o1, the link o2
+        return (
+            float(contact.penetration_depth),  # coal stores the signed distance there
+            np.array(contact.getNearestPoint1(), dtype=np.float64),
+            np.array(contact.getNearestPoint2(), dtype=np.float64),
+            np.array(contact.normal, dtype=np.float64),
+        )
+
     def overlapped_by(self, links: coal.BroadPhaseCollisionManager, depth_m: float) -> bool:
         """True if a link of ``links`` enters a piece deeper than ``depth_m`` >= 0 [m].
 
-        One C++ query of both AABB trees (coal's collision test with the security margin
+        A C++ query of two AABB trees (coal's collision test with the security margin
         ``-depth_m``, per pair of overlapping boxes), whatever the number of links: the verdict
         :meth:`clear_of` gives link by link at the threshold ``-depth_m``, the links posed in
-        the object frame and the manager updated.
+        the object frame and the manager updated. The coarse hulls first, as there: a link no
+        deeper than ``depth_m`` in a hull is no deeper in its pieces (on the contact tips of
+        the IK's acceptance tests, 31 instead of 52 us on the coffee cup).
         """
+        return self._entered(self._coarse, links, depth_m) and self._entered(
+            self._fine, links, depth_m
+        )
+
+    def _entered(
+        self,
+        manager: coal.BroadPhaseCollisionManager,
+        links: coal.BroadPhaseCollisionManager,
+        depth_m: float,
+    ) -> bool:
+        """True if a link of ``links`` enters a shape of ``manager`` deeper than ``depth_m``."""
         self._callback.init()
         self._callback.data.request.security_margin = -depth_m
-        self._fine.collide(links, self._callback)
+        manager.collide(links, self._callback)
         return bool(self._callback.data.result.isCollision())
 
     def nearest(
