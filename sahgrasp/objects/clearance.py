@@ -286,10 +286,11 @@ class HandObjectClearance:
         """
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs: list[_Pair] = []
-        for g, bounds, upper in self._near_links(T, thresholds, None):
-            if per_link == 1:  # the first pair the piece tree finds: one C++ query
+        if per_link == 1:  # a C++ query per link costs less than bounding all links in numpy
+            for g in self._every.tolist():
                 pairs += self._first_pair(T, g, float(thresholds[g]))
-            else:
+        else:
+            for g, bounds, upper in self._near_links(T, thresholds, None):
                 self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
         return [
             Penetration(
