@@ -398,7 +398,7 @@ class HandObjectClearance:
         # sphere; a cylinder's box, another shape's ball) comes within _ON_SURFACE_M of it.
         # A lone such link is the pair's; several are measured (ties go as in clearance).
         world_m = T[:3, :3] @ point_m + T[:3, 3]
-        gaps = self._shape_gaps(members, world_m[None])[:, 0]
+        gaps = self._shape_gaps(None, world_m[None])[members, 0]  # no gathers of placements
         holders = members[gaps <= _ON_SURFACE_M].tolist()
         if len(holders) == 1:
             measured = {holders[0]: distance_m}
