@@ -24,7 +24,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
   count, for comparing versions in separate processes (``PYTHONPATH`` selecting the code);
 * ``verdicts``: for the acceptance tests the IK made, the exact clearance against
   ``clearance_if_clear`` (the verdict, and the clearance of a clear configuration), split by
-  verdict;
+  verdict, and how many answers differ (verdict; distance and link when clear);
 * ``finer``: every solution claimed with the object, re-checked as the grasp benchmark does
   (``ObjectPenetration``, links other than the contact tips deeper than 0.2 mm) against the
   finer pieces the joined ones replaced (one per band sector of a revolved solid, one prism per
@@ -324,22 +324,36 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
     tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
     checker = HandObjectClearance(hand, obj)
     rows: dict[bool, list[list[float]]] = {True: [], False: []}
+    differ = 0
     for _, q, contacts, _ in tests:
         best = [np.inf, np.inf]
         for _ in range(repeats):
-            spent, _ = _cpu(checker.clearance, q, contacts, ALLOWANCE_M, all_links=False)
+            spent, exact = _cpu(checker.clearance, q, contacts, ALLOWANCE_M, all_links=False)
             best[0] = min(best[0], spent)
             spent, found = _cpu(checker.clearance_if_clear, q, contacts, ALLOWANCE_M)
             best[1] = min(best[1], spent)
         rows[found is None].append(best)
+        # The same verdict, and for a clear configuration the same distance and link.
+        same = (
+            found is None
+            if not exact.clear()
+            else found is not None
+            and (
+                found.distance_m,
+                found.link,
+            )
+            == (exact.distance_m, exact.link)
+        )
+        differ += not same
     for inside, times in rows.items():
         if times:
-            exact, verdict = np.mean(times, axis=0) * 1e6
+            exact_us, verdict_us = np.mean(times, axis=0) * 1e6
             label = "inside" if inside else "clear"
             print(
-                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact:6.0f} "
-                f"us, clearance_if_clear {verdict:6.0f} us"
+                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact_us:6.0f} "
+                f"us, clearance_if_clear {verdict_us:6.0f} us"
             )
+    print(f"{obj.name:16s} answers differing from the exact clearance: {differ}")
 
 
 def _finer_pieces(obj: GraspObject) -> list[CollisionShape]:
