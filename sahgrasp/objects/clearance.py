@@ -25,6 +25,9 @@ piece's ball, and their boxes) and measured with bare ``coal.distance`` calls (G
 2 us each); up to :data:`_FEW_PIECES` candidates are measured directly, more are bounded first
 and the piece tree (C++, object frame, built once) is asked whether any is closer at all. The
 results are those of measuring every pair (docs/objects.md, "Cost of the hand-object queries").
+The IK's acceptance test (:meth:`HandObjectClearance.clearance_if_clear`) and repair query
+(:meth:`HandObjectClearance.penetrations` with ``per_link=1``) go to the piece tree's C++ queries
+instead: collision tests and one broad-phase distance, whatever the number of links.
 
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
@@ -70,8 +73,8 @@ _TIE_M = 1e-12
 the pair coal's broad phase found is measured with the same arguments, so equal up to rounding."""
 
 _ON_SURFACE_M = 1e-5
-"""How far [m] from a link's shape the witness point of its nearest pair may be found (GJK's
-witnesses are exact to about 1e-9 m): the links within it of a pair's witness are its candidates."""
+"""How far [m] outside a link's shape the witness point of its nearest pair may be found (a
+margin far above GJK's tolerance): the links within it of a pair's witness are its candidates."""
 
 _FEW_PIECES = 12
 """Up to this many candidate pieces, a link is measured against each (about 2 us per GJK call)
@@ -370,10 +373,12 @@ class HandObjectClearance:
         The IK's acceptance test: the verdict, and the exact clearance of a configuration it
         accepts (what ``clearance(q, contacts, allowance_m, all_links=False)`` gives, up to the
         rounding of the object frame: ``links_m`` holds the links at the smallest distance),
-        without measuring where a configuration inside is deepest. Three C++ queries of the
+        without measuring where a configuration inside is deepest. Two C++ queries of the
         piece tree answer it, whatever the number of links: are the contact tips deeper than
-        ``allowance_m`` (one collision test), the smallest distance of the other links (one
-        broad-phase distance), and then, link by link, which one is at that distance.
+        ``allowance_m`` (one collision test), and the smallest distance of the other links (one
+        broad-phase distance). Its link is the one whose shape holds the pair's witness point;
+        when several do, each is measured alone, and when none does, the search of
+        :meth:`clearance` finds it.
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
