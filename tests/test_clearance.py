@@ -380,6 +380,41 @@ def test_a_few_penetrations_per_link_name_the_same_links(
     assert any(n < m for n, m in counts)  # some link overlapped more pieces than asked for
 
 
+def test_one_pair_per_link_is_one_of_every_pair_wherever_the_object_is(sah: Hand) -> None:
+    """The piece tree's pair (``per_link=1``) is a pair of the full query, witnesses included.
+
+    The tree answers in the object frame: with the object turned and moved, its points and
+    normal must still be the world's.
+    """
+    from sahgrasp.objects import paper_grasp
+
+    obj = load_object("can")
+    q0 = solve_ik(sah, paper_grasp("can")).q  # without the object: links inside it
+    turned = np.eye(4)
+    turned[:3, :3] = pin.utils.rotate("z", 0.3)
+    turned[:3, 3] = (2e-3, -1e-3, 0.0)
+    checker = HandObjectClearance(sah, obj)
+    rng = np.random.default_rng(3)
+    checked = 0
+    for k in range(6):
+        q = pin.normalize(sah.model, q0 + rng.normal(0.0, 0.05, q0.shape) * (k > 0))
+        for T in (obj.T_world_object, obj.T_world_object @ turned):
+            every = checker.penetrations(q, 1e-3, ("thumb",), 1.5e-3, T)
+            one = checker.penetrations(q, 1e-3, ("thumb",), 1.5e-3, T, per_link=1)
+            assert {p.joint_b for p in one} == {p.joint_b for p in every}
+            for p in one:
+                assert any(
+                    e.joint_b == p.joint_b
+                    and e.depth_m == pytest.approx(p.depth_m, abs=1e-9)
+                    and np.allclose(e.point_a, p.point_a, atol=1e-7)
+                    and np.allclose(e.point_b, p.point_b, atol=1e-7)
+                    and np.allclose(e.normal, p.normal, atol=1e-6)
+                    for e in every
+                )
+                checked += 1
+    assert checked > 0
+
+
 @pytest.mark.parametrize("name", GRASP_NAMES)
 def test_closest_link_matches_every_pair_about_the_paper_grasps(sah: Hand, name: str) -> None:
     """The closest link and its distance equal a search over every (link, piece) pair.
