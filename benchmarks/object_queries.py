@@ -13,7 +13,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
   alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
   (pairs, clearance, link) is the same;
 * ``solves OLD_CLEARANCE_PY``: the solves themselves, per set alternating the old checker with
-  the old acceptance test (the exact clearance, as before ``until_inside``) and this code, best
+  the old acceptance test (the exact clearance, as before the fourth round) and this code, best
   of ``--repeats`` (``--new-first``: this code before the old in each pair); prints the CPU
   without the object, with old and with new, and whether every
   result (success, starts, reason, clearance, closest link, ``q``) is identical;
@@ -22,8 +22,9 @@ with the benchmark's per-object seed), solves each without and then with the obj
   and their CPU, and the iterations of each solve: what the same-start ratio is made of;
 * ``alone``: the sets solved with the object only, one after the other: the CPU and the solved
   count, for comparing versions in separate processes (``PYTHONPATH`` selecting the code);
-* ``verdicts``: for the acceptance tests the IK made, the exact clearance against the search
-  that stops at the first link inside (``until_inside=True``), split by verdict;
+* ``verdicts``: for the acceptance tests the IK made, the exact clearance against
+  ``clearance_if_clear`` (the verdict, and the clearance of a clear configuration), split by
+  verdict, and how many answers differ (verdict; distance and link when clear);
 * ``finer``: every solution claimed with the object, re-checked as the grasp benchmark does
   (``ObjectPenetration``, links other than the contact tips deeper than 0.2 mm) against the
   finer pieces the joined ones replaced (one per band sector of a revolved solid, one prism per
@@ -149,24 +150,39 @@ def profile(hand: Hand, obj: GraspObject, targets: list[GraspTarget]) -> None:
 def _queries(
     hand: Hand, obj: GraspObject, targets: list[GraspTarget]
 ) -> list[tuple[str, np.ndarray, tuple[str, ...], Any]]:
-    """Every query the IK's obstacle made while solving ``targets`` (kind, q, contacts, arg)."""
+    """Every query the IK's obstacle made while solving ``targets`` (kind, q, contacts, arg).
+
+    ``arg``: the margin of a repair query; for a clearance, True for the acceptance test
+    (``clearance_if_clear``), False for the exact clearance.
+    """
     log: list[tuple[str, np.ndarray, tuple[str, ...], Any]] = []
-    penetrations, query = Obstacle.penetrations, Obstacle._query
+    originals = {
+        n: getattr(HandObjectClearance, n)
+        for n in ("penetrations", "clearance", "clearance_if_clear")
+    }
 
-    def logged_penetrations(self: Obstacle, q: np.ndarray, margin_m: float) -> Any:
-        log.append(("penetrations", q.copy(), self.contacts, margin_m))
-        return penetrations(self, q, margin_m)
+    def logged_penetrations(
+        self: Any, q: np.ndarray, margin_m: float, contacts: Any, *a: Any, **kw: Any
+    ) -> Any:
+        log.append(("penetrations", q.copy(), tuple(contacts), margin_m))
+        return originals["penetrations"](self, q, margin_m, contacts, *a, **kw)
 
-    def logged_query(self: Obstacle, q: np.ndarray, until_inside: bool) -> Any:
-        log.append(("clearance", q.copy(), self.contacts, until_inside))
-        return query(self, q, until_inside)
+    def logged(name: str, accepting: bool) -> Any:
+        def query(self: Any, q: np.ndarray, contacts: Any, *a: Any, **kw: Any) -> Any:
+            log.append(("clearance", q.copy(), tuple(contacts), accepting))
+            return originals[name](self, q, contacts, *a, **kw)
 
-    Obstacle.penetrations, Obstacle._query = logged_penetrations, logged_query  # type: ignore[method-assign]
+        return query
+
+    HandObjectClearance.penetrations = logged_penetrations  # type: ignore[method-assign]
+    HandObjectClearance.clearance = logged("clearance", False)  # type: ignore[method-assign]
+    HandObjectClearance.clearance_if_clear = logged("clearance_if_clear", True)  # type: ignore[method-assign]
     try:
         for t in targets:
             solve_ik(hand, t, IKSettings(), obstacle=obj)
     finally:
-        Obstacle.penetrations, Obstacle._query = penetrations, query  # type: ignore[method-assign]
+        for name, method in originals.items():
+            setattr(HandObjectClearance, name, method)
     return log
 
 
@@ -213,7 +229,7 @@ def compare(
 
 
 def _exact_clearance(self: Obstacle, q: np.ndarray) -> Any:
-    """The acceptance test before ``until_inside``: the exact clearance, kept for ``q``."""
+    """The acceptance test before the fourth round: the exact clearance, kept for ``q``."""
     key, last = q.tobytes(), self._last[1]
     if self._last[0] != key or last is None:
         last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
@@ -308,23 +324,36 @@ def verdicts(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: 
     tests = [e for e in _queries(hand, obj, targets) if e[0] == "clearance" and e[3]]
     checker = HandObjectClearance(hand, obj)
     rows: dict[bool, list[list[float]]] = {True: [], False: []}
+    differ = 0
     for _, q, contacts, _ in tests:
         best = [np.inf, np.inf]
         for _ in range(repeats):
-            for j, until in enumerate((False, True)):
-                spent, found = _cpu(
-                    checker.clearance, q, contacts, ALLOWANCE_M, all_links=False, until_inside=until
-                )
-                best[j] = min(best[j], spent)
-        rows[not found.clear()].append(best)
+            spent, exact = _cpu(checker.clearance, q, contacts, ALLOWANCE_M, all_links=False)
+            best[0] = min(best[0], spent)
+            spent, found = _cpu(checker.clearance_if_clear, q, contacts, ALLOWANCE_M)
+            best[1] = min(best[1], spent)
+        rows[found is None].append(best)
+        # The same verdict, and for a clear configuration the same distance and link.
+        same = (
+            found is None
+            if not exact.clear()
+            else found is not None
+            and (
+                found.distance_m,
+                found.link,
+            )
+            == (exact.distance_m, exact.link)
+        )
+        differ += not same
     for inside, times in rows.items():
         if times:
-            exact, early = np.mean(times, axis=0) * 1e6
+            exact_us, verdict_us = np.mean(times, axis=0) * 1e6
             label = "inside" if inside else "clear"
             print(
-                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact:6.0f} "
-                f"us, stopping at the first link inside {early:6.0f} us"
+                f"{obj.name:16s} {label:6s} {len(times):4d} tests: exact clearance {exact_us:6.0f} "
+                f"us, clearance_if_clear {verdict_us:6.0f} us"
             )
+    print(f"{obj.name:16s} answers differing from the exact clearance: {differ}")
 
 
 def _finer_pieces(obj: GraspObject) -> list[CollisionShape]:

@@ -329,18 +329,18 @@ def test_solver_and_clearance_share_one_definition(
         inside = not closest.clear()
         assert bool(checker.penetrations(q, 0.0, contacts)) == inside
         assert checker.penetrated(q, contacts) == inside
-        # Stopping at the first link inside keeps the verdict, and a clear clearance exactly.
-        early = checker.clearance(q, contacts, all_links=False, until_inside=True)
-        assert early.clear() != inside
-        if not inside:
-            assert (early.distance_m, early.link) == (closest.distance_m, closest.link)
+        # The broad-phase verdict is the search's, and a clear configuration's clearance too.
+        found = checker.clearance_if_clear(q, contacts)
+        assert (found is None) == inside
+        if found is not None:
+            assert found.link == closest.link
+            assert found.distance_m == pytest.approx(closest.distance_m, abs=1e-12)
         obstacle = Obstacle(sah, obj, contacts, 1.5e-3)
         assert obstacle.penetrated(q) == inside
-        # The reported clearance is exact whether or not the verdict stopped early.
-        assert (obstacle.clearance(q).distance_m, obstacle.clearance(q).link) == (
-            closest.distance_m,
-            closest.link,
-        )
+        # The reported clearance is exact whether the verdict was inside or clear (measured in
+        # the object's frame when clear: equal up to rounding for an object placed elsewhere).
+        assert obstacle.clearance(q).link == closest.link
+        assert obstacle.clearance(q).distance_m == pytest.approx(closest.distance_m, abs=1e-12)
         assert obstacle.penetrated(q) == inside  # kept, and unchanged by the exact query
         verdicts.append(inside)
     assert True in verdicts and False in verdicts  # both sides of the boundary were tried
@@ -378,6 +378,41 @@ def test_a_few_penetrations_per_link_name_the_same_links(
             assert all((p.joint_b, round(p.depth_m, 9)) in found for p in few)
             counts.append((len(few), len(every)))
     assert any(n < m for n, m in counts)  # some link overlapped more pieces than asked for
+
+
+def test_one_pair_per_link_is_one_of_every_pair_wherever_the_object_is(sah: Hand) -> None:
+    """The piece tree's pair (``per_link=1``) is a pair of the full query, witnesses included.
+
+    The tree answers in the object frame: with the object turned and moved, its points and
+    normal must still be the world's.
+    """
+    from sahgrasp.objects import paper_grasp
+
+    obj = load_object("can")
+    q0 = solve_ik(sah, paper_grasp("can")).q  # without the object: links inside it
+    turned = np.eye(4)
+    turned[:3, :3] = pin.utils.rotate("z", 0.3)
+    turned[:3, 3] = (2e-3, -1e-3, 0.0)
+    checker = HandObjectClearance(sah, obj)
+    rng = np.random.default_rng(3)
+    checked = 0
+    for k in range(6):
+        q = pin.normalize(sah.model, q0 + rng.normal(0.0, 0.05, q0.shape) * (k > 0))
+        for T in (obj.T_world_object, obj.T_world_object @ turned):
+            every = checker.penetrations(q, 1e-3, ("thumb",), 1.5e-3, T)
+            one = checker.penetrations(q, 1e-3, ("thumb",), 1.5e-3, T, per_link=1)
+            assert {p.joint_b for p in one} == {p.joint_b for p in every}
+            for p in one:
+                assert any(
+                    e.joint_b == p.joint_b
+                    and e.depth_m == pytest.approx(p.depth_m, abs=1e-9)
+                    and np.allclose(e.point_a, p.point_a, atol=1e-7)
+                    and np.allclose(e.point_b, p.point_b, atol=1e-7)
+                    and np.allclose(e.normal, p.normal, atol=1e-6)
+                    for e in every
+                )
+                checked += 1
+    assert checked > 0
 
 
 @pytest.mark.parametrize("name", GRASP_NAMES)

@@ -28,15 +28,20 @@ if TYPE_CHECKING:
 
 __all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of"]
 
-REPAIR_PAIRS_PER_LINK = 4
-"""Most (link, piece) pairs one link adds to a collision-repair step (its first ones found).
+REPAIR_PAIRS_PER_LINK = 1
+"""Most (link, piece) pairs one link adds to a collision-repair step.
 
-A link deep in a finely cut object overlaps hundreds of pieces (the coffee cup's revolved
-sectors, a mesh's prisms); a row per pair costs a GJK call and a Jacobian each, for normals that
-mostly agree. Measured on 10 sampled sets each of the coffee cup, the mug mesh, the can and the
-bottle (``sahgrasp bench grasps`` contact sets), solved with the object: 22 solved with 4 or 8
-pairs per link, 23 with every pair, in 16.8 s, 20.1 s and 47.3 s of CPU; with 1 or 2 pairs per
-link the can's three-finger paper grasp (ring free) needs 6 starts instead of 1.
+A link deep in a finely cut object overlaps many pieces (the coffee cup's revolved sectors, a
+mesh's joined prisms); a row per pair costs a GJK call and a Jacobian each, for normals that
+mostly agree. With one pair per link the repair query is one coal collision test per link in
+the piece tree (``HandObjectClearance.penetrations`` with ``per_link=1``), the first pair that
+test finds. Measured with ``sahgrasp bench grasps`` (200 sets each of the coffee cup and the mug
+mesh, ``--workers 1``): 87 and 74 solved with one pair per link against 88 and 70 with four
+pairs (taken by increasing lower bound), 0 claimed solutions penetrating either way; the repair
+query took 298 instead of 1099 us on the coffee cup and 229 instead of 788 us on the mug
+(docs/benchmarks.md, "Sixth round"). Four pairs per link had been measured against every pair
+(22 against 23 solved on 40 sets, 16.8 s against 47.3 s of CPU) when the objects had one piece
+per band sector or mesh triangle.
 """
 
 
@@ -70,10 +75,11 @@ class Obstacle:
 
     One definition decides whether a configuration is inside the object, for the solver's
     acceptance test and for the clearance it reports: :meth:`HandObjectClearance.clearance`
-    with the contact fingers and the allowance. :meth:`penetrated` is that clearance below zero,
-    asked to stop at the first link found inside; a clear configuration's clearance is then
-    exact and kept, so the result's clearance of an accepted start costs no second query, and
-    a rejected start's is measured only if the result reports it.
+    with the contact fingers and the allowance. :meth:`penetrated` asks
+    :meth:`HandObjectClearance.clearance_if_clear`, which gives a clear configuration's exact
+    clearance and only the verdict for one inside; the clearance is kept, so the result's
+    clearance of an accepted start costs no second query, and a rejected start's is measured
+    only if the result reports it.
 
     Args:
         hand: The hand.
@@ -110,21 +116,15 @@ class Obstacle:
         key = q.tobytes()
         if self._last[0] == key:
             return self._last[1] is None or not self._last[1].clear()
-        found = self._query(q, until_inside=True)
-        # Inside: the distance found is not the smallest; only the verdict is kept.
-        self._last = (key, found if found.clear() else None)
-        return not found.clear()
+        found = self.checker.clearance_if_clear(q, self.contacts, self.allowance_m)
+        self._last = (key, found)
+        return found is None
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link (kept for ``q``)."""
         key = q.tobytes()
         last = self._last[1]
         if self._last[0] != key or last is None:
-            last = self._query(q, until_inside=False)
+            last = self.checker.clearance(q, self.contacts, self.allowance_m, all_links=False)
             self._last = (key, last)
         return last
-
-    def _query(self, q: NDArray[np.float64], until_inside: bool) -> Clearance:
-        return self.checker.clearance(
-            q, self.contacts, self.allowance_m, all_links=False, until_inside=until_inside
-        )

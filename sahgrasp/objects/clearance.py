@@ -25,6 +25,9 @@ piece's ball, and their boxes) and measured with bare ``coal.distance`` calls (G
 2 us each); up to :data:`_FEW_PIECES` candidates are measured directly, more are bounded first
 and the piece tree (C++, object frame, built once) is asked whether any is closer at all. The
 results are those of measuring every pair (docs/objects.md, "Cost of the hand-object queries").
+The IK's acceptance test (:meth:`HandObjectClearance.clearance_if_clear`) and repair query
+(:meth:`HandObjectClearance.penetrations` with ``per_link=1``) go to the piece tree's C++ queries
+instead: collision tests and one broad-phase distance, whatever the number of links.
 
 The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
 not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
@@ -64,6 +67,14 @@ FREE_FINGER_MARGIN_M = 2e-3
 
 _GRID_STEPS = 6
 """Values per joint of a free finger tried by :meth:`HandObjectClearance.place_free_fingers`."""
+
+_TIE_M = 1e-12
+"""Distances [m] within this of the smallest are measured again link by link to find its link:
+the pair coal's broad phase found is measured with the same arguments, so equal up to rounding."""
+
+_ON_SURFACE_M = 1e-5
+"""How far [m] outside a link's shape the witness point of its nearest pair may be found (a
+margin far above GJK's tolerance): the links within it of a pair's witness are its candidates."""
 
 _FEW_PIECES = 12
 """Up to this many candidate pieces, a link is measured against each (about 2 us per GJK call)
@@ -204,6 +215,12 @@ class HandObjectClearance:
         self._free: dict[str, _FreeFinger] = {}
         self._transforms_key = b""
         self._thresholds_cache: dict[tuple[frozenset[str], float, float], FloatArray] = {}
+        self._link_trees: dict[
+            bytes,
+            tuple[
+                coal.BroadPhaseCollisionManager, coal.BroadPhaseCollisionManager, NDArray[np.intp]
+            ],
+        ] = {}
         self._placement_key = b""
         self._object_world = pin.SE3.Identity()  # T^-1 of the last _place
         self._object_at_origin = True  # whether that T is the identity
@@ -259,10 +276,12 @@ class HandObjectClearance:
         how far the link must move along ``normal`` to reach its required distance.
 
         ``per_link``: at most this many pairs per link shape, the first ones found closer than
-        required, pieces taken by increasing lower bound of their distance (None: all). The
-        IK's repair asks for a few: a link deep in a finely cut object overlaps hundreds of
-        pieces, and a row per pair costs a GJK call and a Jacobian each, for normals that
-        mostly agree (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
+        required, pieces taken by increasing lower bound of their distance (None: all); with 1,
+        the first pair coal's collision test finds in the piece tree, one C++ query per link
+        (:meth:`PieceTree.first_pair`). The IK's repair asks for one: a link deep in a finely
+        cut object overlaps hundreds of pieces, and a row per pair costs a GJK call and a
+        Jacobian each, for normals that mostly agree
+        (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
@@ -270,8 +289,12 @@ class HandObjectClearance:
         """
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs: list[_Pair] = []
-        for g, bounds, upper in self._near_links(T, thresholds, None):
-            self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
+        if per_link == 1:  # a C++ query per link costs less than bounding all links in numpy
+            for g in self._every.tolist():
+                pairs += self._first_pair(T, g, float(thresholds[g]))
+        else:
+            for g, bounds, upper in self._near_links(T, thresholds, None):
+                self._link_pieces(T, g, bounds, thresholds[g], per_link, pairs, upper)
         return [
             Penetration(
                 0,
@@ -315,7 +338,6 @@ class HandObjectClearance:
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
         all_links: bool = True,
-        until_inside: bool = False,
     ) -> Clearance:
         """Signed distance of every link to the object and the smallest one at ``q``.
 
@@ -330,30 +352,69 @@ class HandObjectClearance:
             all_links: False: find the smallest distance and its link only, measuring just the
                 links whose lower bound is below it (``links_m`` holds those); a far link then
                 costs one coarse query instead of an exact distance.
-            until_inside: With ``all_links`` False, stop at the first link found inside the
-                object (a contact tip: deeper than ``allowance_m``). A clear configuration
-                gets its exact clearance; one inside gets a negative distance of a link inside,
-                not necessarily the deepest one: the verdict at the cost of
-                :meth:`penetrated`, and the clearance when there is no penetration.
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
             InvalidSettingsError: ``allowance_m`` is negative or not finite.
         """
         thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
-        if all_links:
-            measured = self._every_link(T)
-        else:
-            measured = self._closest_links(T, thresholds, 0.0 if until_inside else -math.inf)
-        links: dict[str, float] = {}
-        distance, closest = math.inf, ""
-        for g in sorted(measured):  # in geometry order: a tie goes to the first link
-            link, d = self._links[g], measured[g]
-            links[link] = min(links.get(link, math.inf), d)
-            excepted = thresholds[g] < 0.0 and d >= thresholds[g]
-            if not excepted and d < distance:
-                distance, closest = d, link
-        return Clearance(float(distance), closest, links)
+        measured = self._every_link(T) if all_links else self._closest_links(T, thresholds)
+        return self._summary(measured, thresholds)
+
+    def clearance_if_clear(
+        self,
+        q: NDArray[np.float64],
+        contacts: Iterable[str] = (),
+        allowance_m: float = CONTACT_ALLOWANCE_M,
+        T_world_object: FloatArray | None = None,
+    ) -> Clearance | None:
+        """The clearance at ``q`` if no link is inside the object, None if one is.
+
+        The IK's acceptance test: the verdict, and the exact clearance of a configuration it
+        accepts (what ``clearance(q, contacts, allowance_m, all_links=False)`` gives, up to the
+        rounding of the object frame: ``links_m`` holds the links at the smallest distance),
+        without measuring where a configuration inside is deepest. Two C++ queries of the
+        piece tree answer it, whatever the number of links: are the contact tips deeper than
+        ``allowance_m`` (one collision test), and the smallest distance of the other links (one
+        broad-phase distance). Its link is the one whose shape holds the pair's witness point;
+        when several do, each is measured alone, and when none does, the search of
+        :meth:`clearance` finds it.
+
+        Raises:
+            InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
+            InvalidSettingsError: ``allowance_m`` is negative or not finite.
+        """
+        thresholds, T = self._query(q, contacts, 0.0, allowance_m, T_world_object)
+        if not self._shapes:
+            return Clearance(math.inf, "", {})
+        counted, tips, members = self._managers(thresholds)
+        self._pose_links(self._every.tolist())
+        tips.update()
+        counted.update()
+        if tips.size() and self._tree.overlapped_by(tips, allowance_m):
+            return None
+        distance_m, point_m = self._tree.nearest(counted)
+        if distance_m < 0.0:
+            return None
+        if distance_m == 0.0:  # coal stops at a touching pair: another may be inside
+            found = self._summary(self._closest_links(T, thresholds, 0.0), thresholds)
+            return found if found.clear() else None
+        # The pair's link holds its witness point: it is among the links whose shape (box,
+        # sphere; a cylinder's box, another shape's ball) comes within _ON_SURFACE_M of it.
+        # A lone such link is the pair's; several are measured (ties go as in clearance).
+        world_m = T[:3, :3] @ point_m + T[:3, 3]
+        gaps = self._shape_gaps(None, world_m[None])[members, 0]  # no gathers of placements
+        holders = members[gaps <= _ON_SURFACE_M].tolist()
+        if len(holders) == 1:
+            measured = {holders[0]: distance_m}
+        else:  # the ceiling lets a last-bit difference through
+            ceiling_m = distance_m + _TIE_M
+            distances = {
+                g: self._tree.nearest(self._link_objects[g], ceiling_m)[0] for g in holders
+            }
+            measured = {g: d for g, d in distances.items() if d < ceiling_m}
+        # None found (a witness off its shape): the search measures them as clearance does.
+        return self._summary(measured or self._closest_links(T, thresholds), thresholds)
 
     def place_free_fingers(
         self,
@@ -386,6 +447,38 @@ class HandObjectClearance:
         return FreeFingerPlacement(q, distance, distance >= margin_m)
 
     # ----- internals ------------------------------------------------------------------------
+    def _summary(self, measured: Mapping[int, float], thresholds: FloatArray) -> Clearance:
+        """The clearance of the hand geometries' ``measured`` signed distances [m]."""
+        links: dict[str, float] = {}
+        distance, closest = math.inf, ""
+        for g in sorted(measured):  # in geometry order: a tie goes to the first link
+            link, d = self._links[g], measured[g]
+            links[link] = min(links.get(link, math.inf), d)
+            excepted = thresholds[g] < 0.0 and d >= thresholds[g]
+            if not excepted and d < distance:
+                distance, closest = d, link
+        return Clearance(float(distance), closest, links)
+
+    def _managers(
+        self, thresholds: FloatArray
+    ) -> tuple[coal.BroadPhaseCollisionManager, coal.BroadPhaseCollisionManager, NDArray[np.intp]]:
+        """The link objects in two AABB trees: counted links and excepted contact tips.
+
+        Built once per set of contact tips (the trees hold the same link objects, posed by
+        :meth:`_pose_links`; ``update`` refits them). Also the counted geometries, in order.
+        """
+        tips = thresholds < 0.0
+        key = tips.tobytes()
+        if key not in self._link_trees:
+            trees = coal.DynamicAABBTreeCollisionManager(), coal.DynamicAABBTreeCollisionManager()
+            for g, tip in enumerate(tips.tolist()):
+                self._link_objects[g].computeAABB()
+                trees[tip].registerObject(self._link_objects[g])
+            for tree in trees:
+                tree.setup()
+            self._link_trees[key] = (*trees, np.flatnonzero(~tips))
+        return self._link_trees[key]
+
     def _place_finger(
         self, q: NDArray[np.float64], finger: _FreeFinger, margin_m: float, T: FloatArray
     ) -> tuple[NDArray[np.float64], float]:
@@ -736,6 +829,22 @@ class HandObjectClearance:
                     break
         return out
 
+    def _first_pair(self, T: FloatArray, g: int, threshold_m: float) -> list[_Pair]:
+        """Geometry ``g``'s first pair closer than ``threshold_m`` [m] in the piece tree (or none).
+
+        The tree answers in the object frame; the pair is returned in the world (object at
+        ``T``).
+        """
+        self._pose_links((g,))
+        found = self._tree.first_pair(self._link_objects[g], threshold_m)
+        if found is None:
+            return []
+        distance_m, on_piece, on_link, normal = found
+        if not self._object_at_origin:
+            R, t = T[:3, :3], T[:3, 3]
+            on_piece, on_link, normal = R @ on_piece + t, R @ on_link + t, R @ normal
+        return [_Pair(g, distance_m, on_piece, on_link, normal)]
+
     def _tree_says_clear(self, g: int, cell_bounds: FloatArray, limit_m: float) -> bool:
         """True if the piece tree finds no piece closer than ``limit_m`` [m] to geometry ``g``.
 
@@ -770,9 +879,8 @@ class HandObjectClearance:
     def _at_link(self, g: int) -> coal.Transform3s:
         """Geometry ``g``'s world placement as a coal transform (built once per placement)."""
         at_link = self._link_transforms[g]
-        if at_link is None:
-            M = self._geometry_data.oMg[g]
-            at_link = self._link_transforms[g] = coal.Transform3s(M.rotation, M.translation)
+        if at_link is None:  # from the placement views: no Pinocchio SE3 built (1 instead of 2 us)
+            at_link = self._link_transforms[g] = coal.Transform3s(self._link_R[g], self._link_t[g])
         return at_link
 
     def _piece_bounds(
