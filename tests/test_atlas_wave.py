@@ -243,45 +243,25 @@ def test_compiled_compatibility_test_equals_the_reference(k: int) -> None:
     assert 0 < kept < 40 * count  # both outcomes occur
 
 
-def test_compiled_compatibility_test_refuses_bad_arrays() -> None:
-    poly = Polytope.cube(2, 0.1)
-    ones = np.ones((1, 3))
-    with pytest.raises(TypeError, match="float64"):
-        compatible(
-            [poly],
-            ones.astype(np.float32),
-            ones,
-            np.ones((1, 3, 2)),
-            np.ones((1, 3, 2)),
-            np.ones((1, 2)),
-            0.1,
-            0.01,
-            1e-10,
-            0.5,
-        )
-    with pytest.raises(ValueError, match="does not match"):
-        compatible(
-            [poly],
-            ones,
-            ones,
-            np.ones((1, 3, 2)),
-            np.ones((1, 3, 2)),
-            np.ones((1, 3)),
-            0.1,
-            0.01,
-            1e-10,
-            0.5,
-        )
-    with pytest.raises(TypeError, match="polytope"):
-        compatible(
-            [None],
-            ones,
-            ones,
-            np.ones((1, 3, 2)),
-            np.ones((1, 3, 2)),
-            np.ones((1, 2)),
-            0.1,
-            0.01,
-            1e-10,
-            0.5,
-        )
+@pytest.mark.parametrize(
+    ("bad", "error", "message"),
+    [
+        ({"centres": np.ones((1, 3), dtype=np.float32)}, TypeError, "float64"),
+        ({"vertices": np.ones((1, 3))}, ValueError, "does not match"),
+        ({"polys": [None]}, TypeError, "polytope"),
+    ],
+)
+def test_compiled_compatibility_test_refuses_bad_arrays(
+    bad: dict[str, object], error: type[Exception], message: str
+) -> None:
+    arguments: dict[str, object] = {
+        "polys": [Polytope.cube(2, 0.1)],
+        "centres": np.ones((1, 3)),
+        "parent_centres": np.ones((1, 3)),
+        "phi": np.ones((1, 3, 2)),
+        "parent_phi": np.ones((1, 3, 2)),
+        "vertices": np.ones((1, 2)),
+    }
+    arguments.update(bad)
+    with pytest.raises(error, match=message):
+        compatible(*arguments.values(), 0.1, 0.01, 1e-10, 0.5)

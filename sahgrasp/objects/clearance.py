@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.collision import Penetration
+from sahgrasp.collision import Penetration, geometry_placement_views
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.objects.body import GraspObject
@@ -179,7 +179,7 @@ class HandObjectClearance:
         self._link_radii = np.array(radii)
         self._link_halves = np.array(halves)  # local box half extents [m]
         # The placements at the last _place: views of oMg, which Pinocchio writes in place.
-        views = _placement_views(self._geometry_data)
+        views = geometry_placement_views(self._geometry_data)
         self._copy_placements = views is None
         self._link_R, self._link_t = views or (
             np.zeros((len(geometries), 3, 3)),
@@ -1025,31 +1025,3 @@ def _box_distances(*excess_m: FloatArray) -> FloatArray:
         outside += np.square(np.maximum(excess, 0.0))
         largest = np.maximum(largest, excess)
     return np.sqrt(outside) + np.minimum(largest, 0.0)
-
-
-def _placement_views(data: pin.GeometryData) -> tuple[FloatArray, FloatArray] | None:
-    """Read-only views (G, 3, 3) and (G, 3) of the rotations and translations in ``data.oMg``.
-
-    Pinocchio keeps ``oMg`` as one ``std::vector`` of SE3 (a column-major rotation, then the
-    translation: 12 doubles each), written in place by ``updateGeometryPlacements``: strided
-    views read every placement without a call per geometry (about 40 us for the SAH's 22).
-    Checked address by address; None if the layout differs (then
-    :meth:`HandObjectClearance._place` copies the placements every time).
-    """
-    placements = data.oMg
-    first = placements[0]
-    size = first.rotation.itemsize
-    step = 12 * size
-    start = first.rotation.__array_interface__["data"][0]
-    adjacent = all(
-        M.rotation.__array_interface__["data"][0] == start + k * step
-        and M.translation.__array_interface__["data"][0] == start + k * step + 9 * size
-        and M.rotation.flags.f_contiguous
-        for k, M in enumerate(placements)
-    )
-    if not adjacent:
-        return None
-    as_strided = np.lib.stride_tricks.as_strided
-    R = as_strided(first.rotation, (len(placements), 3, 3), (step, size, 3 * size), writeable=False)
-    t = as_strided(first.translation, (len(placements), 3), (step, size), writeable=False)
-    return R, t
