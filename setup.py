@@ -15,6 +15,7 @@ setup(
         Extension(
             "sahgrasp." + module.replace("/", "."),
             sources=[f"sahgrasp/{module}.c"],
+            depends=["sahgrasp/_arrays.h"],
             extra_compile_args=FLAGS,
         )
         for module in MODULES

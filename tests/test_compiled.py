@@ -161,7 +161,7 @@ def test_history_holds_every_accepted_step(sah: Hand) -> None:
     assert all(not np.array_equal(a, b) for a, b in itertools.pairwise(history))
 
 
-def test_bad_input_is_a_value_error(sah: Hand) -> None:
+def test_bad_input_is_a_typed_error(sah: Hand) -> None:
     tree, q = compiled_tree(sah), np.array(sah.configuration())
     stack, target = np.empty(24), np.zeros(24)
     with pytest.raises(ValueError, match="q: expected 28"):
@@ -170,8 +170,10 @@ def test_bad_input_is_a_value_error(sah: Hand) -> None:
         tree.stack(q, np.array([0, 4]), np.empty(12), None)
     with pytest.raises(ValueError, match="stack"):
         tree.stack(q, np.arange(4), np.empty(12), None)
-    with pytest.raises(ValueError, match="fingers"):
+    with pytest.raises(TypeError, match="fingers must be a C-contiguous int64 array"):
         tree.stack(q, np.arange(4.0), stack, None)
+    with pytest.raises(TypeError, match="q must be a C-contiguous float64 array"):
+        tree.stack(q.astype(np.float32), np.arange(4), stack, None)
     with pytest.raises(ValueError, match="max_iterations"):
         tree.solve(q, target, np.arange(4), -1, 1e-5, 1.5e-3, 10, None)
     with pytest.raises(ValueError, match="fingers must not be empty"):

@@ -17,28 +17,11 @@
 #include <stdint.h>
 #include <string.h>
 
+#include "../_arrays.h"
+
 #define N_VARS 19 /* 12 phalanx vectors, t_o (2), v_o (2), u (3) */
 #define GRASP_VALUES 29 /* variable entries of the grasp equations' Jacobian */
 #define FEATURES 56     /* the terms F is linear in (planar.py, PlanarGraspProblem.F) */
-
-/* A C-contiguous buffer of ``ndim`` dimensions whose items are float64 (or int64 when
- * ``integer``), writable when asked: 0, or -1 with an exception. */
-static int get_array(PyObject *obj, Py_buffer *view, int ndim, int integer, int writable,
-                     const char *what) {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
-    const char *format = view->format == NULL ? "" : view->format;
-    int ok = view->ndim == ndim && view->itemsize == 8 &&
-             (integer ? strcmp(format, "l") == 0 || strcmp(format, "q") == 0
-                      : strcmp(format, "d") == 0);
-    if (!ok) {
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous %s array of %d dimensions", what,
-                     integer ? "int64" : "float64", ndim);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
 
 /* jacobian(x, constant, where, radii, rates, out): see _planar.pyi. */
 static PyObject *jacobian(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {

@@ -16,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../_arrays.h"
+
 #define WORDS 2
 #define MAX_FACES (64 * WORDS)
 
@@ -721,15 +723,7 @@ static PyTypeObject PolytopeType = {
  * ``shape``. */
 static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shape,
                       const char *what, int writable) {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
-    if (view->ndim != ndim || view->itemsize != sizeof(double) || view->format == NULL ||
-        strcmp(view->format, "d") != 0) {
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float64 array of %d dimensions",
-                     what, ndim);
-        PyBuffer_Release(view);
-        return -1;
-    }
+    if (get_array(obj, view, ndim, 0, writable, what) < 0) return -1;
     memcpy(shape, view->shape, sizeof(Py_ssize_t) * (size_t)ndim);
     return 0;
 }

@@ -18,20 +18,8 @@
 #include <math.h>
 #include <string.h>
 
-/* A C-contiguous float64 buffer of ``ndim`` dimensions (writable if asked): 0, or -1 with an
- * exception. */
-static int get_array(PyObject *obj, Py_buffer *view, int ndim, int writable, const char *what) {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
-    if (view->ndim != ndim || view->itemsize != sizeof(double) || view->format == NULL ||
-        strcmp(view->format, "d") != 0) {
-        PyErr_Format(PyExc_TypeError, "%s must be a C-contiguous float64 array of %d dimensions",
-                     what, ndim);
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
-}
+#include "../_arrays.h"
+
 
 /* orthogonal_tail(h, tau, out): see _quality.pyi. */
 static PyObject *orthogonal_tail(PyObject *mod, PyObject *const *args, Py_ssize_t nargs) {
@@ -45,7 +33,7 @@ static PyObject *orthogonal_tail(PyObject *mod, PyObject *const *args, Py_ssize_
     int got = 0;
     PyObject *result = NULL;
     for (; got < 3; got++)
-        if (get_array(args[got], &views[got], dims[got], got == 2, names[got]) < 0) goto done;
+        if (get_array(args[got], &views[got], dims[got], 0, got == 2, names[got]) < 0) goto done;
     Py_ssize_t count = views[0].shape[0], m = views[0].shape[1], n = views[0].shape[2];
     Py_ssize_t rest = n - m;
     if (m < 1 || rest < 1 || views[1].shape[0] != count || views[1].shape[1] != m ||
@@ -156,7 +144,7 @@ static PyObject *semi_axes(PyObject *mod, PyObject *const *args, Py_ssize_t narg
     double *work = NULL;
     Py_ssize_t *order = NULL;
     for (; got < 3; got++)
-        if (get_array(args[got], &views[got], dims[got], got == 2, names[got]) < 0) goto done;
+        if (get_array(args[got], &views[got], dims[got], 0, got == 2, names[got]) < 0) goto done;
     Py_ssize_t count = views[0].shape[0], na = views[0].shape[1], t = views[0].shape[2];
     Py_ssize_t no = views[1].shape[1];
     if (t < 1 || na < 1 || no < 1 || views[1].shape[0] != count || views[1].shape[2] != t ||

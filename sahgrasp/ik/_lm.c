@@ -16,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../_arrays.h"
+
 typedef struct {
     double R[9];
     double t[3];
@@ -412,16 +414,14 @@ done:
 
 /* ------------------------------------------------------------------- Python interface -- */
 
+/* get_array of any shape holding ``n`` items (any number if ``n`` < 0): 0, or -1 with a
+ * TypeError (type) or a ValueError (size). */
 static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t n, int writable,
                       const char *format, const char *what) {
-    int flags = PyBUF_C_CONTIGUOUS | PyBUF_FORMAT | (writable ? PyBUF_WRITABLE : 0);
-    if (PyObject_GetBuffer(obj, view, flags) < 0) return -1;
-    /* numpy's int64 is 'l' where C long has 64 bits and 'q' elsewhere. */
-    int same = strcmp(view->format, format) == 0 ||
-               (format[0] == 'q' && view->format[0] == 'l' && view->itemsize == 8);
-    if (!same || (n >= 0 && view->len != n * view->itemsize)) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd contiguous values of format '%s'", what,
-                     n, format);
+    if (get_array(obj, view, -1, format[0] == 'q', writable, what) < 0) return -1;
+    if (n >= 0 && view->len != n * view->itemsize) {
+        PyErr_Format(PyExc_ValueError, "%s: expected %zd values, got %zd", what, n,
+                     view->len / view->itemsize);
         PyBuffer_Release(view);
         return -1;
     }
