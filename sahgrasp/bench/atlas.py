@@ -71,7 +71,7 @@ SAH_CASES: tuple[tuple[str, int, float, bool, float | None], ...] = (
     ("bottle", 2, 0.1, True, None),
     ("bottle", 2, 0.03, True, None),
     ("bottle", 3, 0.05, False, None),
-    ("can", 2, 0.0155, False, 0.1),
+    ("can", 2, 0.015, False, 0.1),
     ("bottle", 2, 0.0088, False, 0.1),
 )
 """SAH cases: experiment, k, chart radius r, whether to repeat the build (else once) and the
