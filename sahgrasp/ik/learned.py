@@ -37,6 +37,7 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
+from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.ik.initial import cross_floats
 
 __all__ = [
@@ -196,16 +197,17 @@ class GraspDatabase:
         if count <= 0 or key is None:
             return
         _, index = self.tree.query(key, k=min(count, len(self.features)), eps=QUERY_EPS)
-        points = np.array([target.contact(f).point for f in hand.fingers])
-        centres = np.array([target.contact(f).centre(hand.radius_m) for f in hand.fingers])
         # Rows (p_i, r_i) per finger, the order of Hand.contact_stack.
-        goal = np.concatenate([points, centres], axis=1).reshape(-1, 3)
+        contacts = [target.contact(f) for f in hand.fingers]
+        goal = np.array([row for c in contacts for row in (c.point, c.centre(hand.radius_m))])
         for i in np.atleast_1d(index).tolist():
             yield self._moved(hand, i, goal)
 
     def _moved(self, hand: Hand, i: int, goal: NDArray[np.float64]) -> NDArray[np.float64]:
         q = self.configurations[i].astype(np.float64)
-        source = hand.contact_stack(q).reshape(-1, 3)
+        # The compiled tree's stack: a quarter of Hand.contact_stack's cost, equal to 1e-12.
+        source = np.empty((2 * len(hand.fingers), 3))
+        compiled_tree(hand).stack(q, np.arange(len(hand.fingers)), source, None)
         wrist = kabsch(source, goal) * hand.wrist_pose(q)
         hand.wrist_part(q)[:] = pin.SE3ToXYZQUAT(wrist)
         return q
