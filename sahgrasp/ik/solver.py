@@ -436,11 +436,6 @@ def _lm_loop(
     below ``d_min_m``, else ``no_progress``).
     """
     q = np.array(q, dtype=np.float64)  # the compiled loop updates it in place
-
-    def record() -> None:
-        assert history is not None
-        history.append(q.copy())
-
     code, iterations, error = compiled_tree(hand).solve(
         q,
         problem.target_stack,
@@ -449,9 +444,14 @@ def _lm_loop(
         s.refine_m,
         s.d_min_m,
         s.stall_iterations,
-        None if history is None else record,
+        None if history is None else _recorder(history, q),
     )
     return Attempt(q, OUTCOMES[code], iterations, error, history)
+
+
+def _recorder(history: list[NDArray[np.float64]], q: NDArray[np.float64]) -> Callable[[], None]:
+    """A callback that appends a copy of ``q`` (which the compiled loop updates) to ``history``."""
+    return lambda: history.append(q.copy())
 
 
 def _free_coordinates(
