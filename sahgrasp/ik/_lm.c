@@ -1,6 +1,6 @@
 /* The auto method's Levenberg-Marquardt loop in one native call (docs/ik.md, "Compiled loop").
  *
- * A Tree holds a hand's kinematic tree as exported from its Pinocchio model by sahgrasp/ik/lm.py:
+ * A Tree holds a hand's kinematic tree as exported from its Pinocchio model by sahgrasp/ik/compiled.py:
  * a free-flyer root (the wrist) and 1-DoF revolute or prismatic joints, mimic joints included
  * (a joint's value is scale * q[q_index] + offset). It evaluates the contact stack (p_i, r_i) of
  * the IK, its Jacobian with respect to v, Pinocchio's integration q (+) v, and the whole loop of
@@ -369,7 +369,8 @@ typedef struct {
 
 /* sahgrasp/ik/solver.py's loop: Levenberg-Marquardt on the stacked contacts, free wrist, bounds
  * as an active set, early abandonment, refinement to refine_m. q is updated in place; `history`
- * (or NULL) is called after every accepted step. Returns -1 on a Python error (from history). */
+ * (or NULL) is called after every accepted step. Returns 0, or -1 on a Python error (from
+ * history). */
 static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, double d_min_m,
                    int stall, PyObject *history, Outcome *out) {
     int m = w->m, nq = w->T->nq;
@@ -378,28 +379,24 @@ static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, doub
     costs[ncosts++] = residual_of(w, q, w->stack, w->r);
     jacobian_of(w->T, w->M, w->fingers, w->nf, w->stack, w->J);
     double refine_cost = (double)(m / 3) * refine_m * refine_m;
-    int status = 0;
     for (int k = 0; k < max_iterations; k++) {
         double cost = costs[ncosts - 1], error;
         if (cost < refine_cost && (error = max_error(w->r, m)) < refine_m) {
             *out = (Outcome){CONVERGED, k, error};
-            goto done;
+            return 0;
         }
         int stalled = ncosts > stall && cost > 0.5 * costs[ncosts - 1 - stall];
         if (stalled || damping > 1e4) {
             error = max_error(w->r, m);
             *out = (Outcome){error < d_min_m ? CONVERGED : NO_PROGRESS, k, error};
-            goto done;
+            return 0;
         }
         if (!damped_step(w, q, cost, &damping)) continue;
         memcpy(q, w->cand, (size_t)nq * sizeof(double));
         memcpy(w->r, w->r_new, (size_t)m * sizeof(double));
         if (history != NULL) {
             PyObject *res = PyObject_CallNoArgs(history);
-            if (res == NULL) {
-                status = -1;
-                goto done;
-            }
+            if (res == NULL) return -1;
             Py_DECREF(res);
         }
         /* The candidate's placements are still in w->M: only the Jacobian is new. */
@@ -408,8 +405,7 @@ static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, doub
     }
     double error = max_error(w->r, m);
     *out = (Outcome){error < d_min_m ? CONVERGED : MAX_ITERATIONS, max_iterations, error};
-done:
-    return status;
+    return 0;
 }
 
 /* ------------------------------------------------------------------- Python interface -- */
@@ -577,7 +573,7 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
             return -1;
         }
     *w = (Work){.T = T, .fingers = fingers, .nf = nf, .m = m, .nv = nv, .target = target};
-    size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 5) + T->nq +
+    size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 3) + T->nq +
                      (size_t)iterations + 1;
     w->M = malloc((size_t)T->nj * sizeof(Pose));
     w->stack = malloc(doubles * sizeof(double));
@@ -727,7 +723,7 @@ static PyTypeObject TreeType = {
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, .m_name = "_lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
+    PyModuleDef_HEAD_INIT, .m_name = "sahgrasp.ik._lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
     .m_size = -1,
 };
 

@@ -19,11 +19,15 @@ import pinocchio as pin
 
 from sahgrasp.errors import HandModelError
 from sahgrasp.hand import Hand
-from sahgrasp.ik._lm import Tree
+from sahgrasp.ik._lm import CONVERGED, MAX_ITERATIONS, NO_PROGRESS, Tree
 
 __all__ = ["OUTCOMES", "compiled_tree"]
 
-OUTCOMES: Final = ("converged", "no_progress", "max_iterations")
+OUTCOMES: Final = {
+    CONVERGED: "converged",
+    NO_PROGRESS: "no_progress",
+    MAX_ITERATIONS: "max_iterations",
+}
 """Outcome of :meth:`Tree.solve`, by the code it returns."""
 
 _TREES: weakref.WeakKeyDictionary[Hand, Tree] = weakref.WeakKeyDictionary()
