@@ -200,10 +200,7 @@ class PieceTree:
         depth_m: float,
     ) -> bool:
         """True if a link of ``links`` enters a shape of ``manager`` deeper than ``depth_m``."""
-        self._callback.init()
-        self._callback.data.request.security_margin = -depth_m
-        manager.collide(links, self._callback)
-        return bool(self._callback.data.result.isCollision())
+        return self._collides(manager, links, -depth_m)
 
     def nearest(
         self,
@@ -236,10 +233,23 @@ class PieceTree:
         link.computeAABB()
         if limit_m > 0.0:  # the tree only pairs overlapping boxes: grow the link's by the margin
             link.getAABB().expand(limit_m)
-        self._callback.init()
-        self._callback.data.request.security_margin = limit_m
-        manager.collide(link, self._callback)
+        closer = self._collides(manager, link, limit_m)
         link.computeAABB()  # leave the link's own box for the caller's bounds
+        return closer
+
+    def _collides(
+        self,
+        manager: coal.BroadPhaseCollisionManager,
+        other: coal.BroadPhaseCollisionManager | coal.CollisionObject,
+        margin_m: float,
+    ) -> bool:
+        """One collision test of ``manager`` against ``other`` with the security margin given.
+
+        The callback keeps its result (the first pair found) for :meth:`first_pair`.
+        """
+        self._callback.init()
+        self._callback.data.request.security_margin = margin_m
+        manager.collide(other, self._callback)
         return bool(self._callback.data.result.isCollision())
 
 
