@@ -30,6 +30,8 @@ __all__ = [
     "CollisionPair",
     "Penetration",
     "SelfCollision",
+    "copied_placements",
+    "geometry_placement_views",
     "settle_box_support",
     "stateless_requests",
 ]
@@ -235,7 +237,7 @@ class SelfCollision:
         # The gate left the shapes' placements of q in the witness data. Only pairs whose
         # bounding spheres come within the margin can be within it; each of those is queried
         # alone (an exact query of every pair read the same witnesses at about 3x the cost).
-        R, t = self._placements or _copied_placements(gd)
+        R, t = self._placements or copied_placements(gd)
         centres = np.matmul(R, self._centres_local[:, :, None])[:, :, 0] + t
         gap = centres[self._first] - centres[self._second]
         reach = self._reach_m + margin_m
@@ -276,10 +278,13 @@ def geometry_placement_views(
     return R, t
 
 
-def _copied_placements(
+def copied_placements(
     data: pin.GeometryData,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The placements of ``data.oMg`` as arrays (G, 3, 3) and (G, 3), copied."""
+    """The placements of ``data.oMg`` as arrays (G, 3, 3) and (G, 3), copied.
+
+    The fallback of :func:`geometry_placement_views` when the views cannot be made.
+    """
     return (
         np.array([M.rotation for M in data.oMg]),
         np.array([M.translation for M in data.oMg]),

@@ -44,7 +44,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.collision import Penetration, geometry_placement_views
+from sahgrasp.collision import Penetration, copied_placements, geometry_placement_views
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.objects.body import GraspObject
@@ -181,10 +181,7 @@ class HandObjectClearance:
         # The placements at the last _place: views of oMg, which Pinocchio writes in place.
         views = geometry_placement_views(self._geometry_data)
         self._copy_placements = views is None
-        self._link_R, self._link_t = views or (
-            np.zeros((len(geometries), 3, 3)),
-            np.zeros((len(geometries), 3)),
-        )
+        self._link_R, self._link_t = views or copied_placements(self._geometry_data)
         self._every = np.arange(len(geometries))
         self._link_objects = [
             coal.CollisionObject(g.geometry, coal.Transform3s()) for g in geometries
@@ -626,8 +623,7 @@ class HandObjectClearance:
             self._model, self._data, self._geometry_model, self._geometry_data, self.hand.check_q(q)
         )
         if self._copy_placements:
-            H = np.array([M.homogeneous for M in self._geometry_data.oMg])
-            self._link_R, self._link_t = H[:, :3, :3], H[:, :3, 3]
+            self._link_R, self._link_t = copied_placements(self._geometry_data)
         self._link_transforms = [None] * len(self._links)
         self._posed = [False] * len(self._links)
         key = T.tobytes()
