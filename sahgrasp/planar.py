@@ -69,7 +69,6 @@ T_DIM = 3  # dimension of F (Section V)
 _INF = np.inf
 _V = slice(0, 12)
 _TO = slice(12, 14)
-_VO = slice(14, 16)
 _U = slice(16, 19)
 
 
@@ -77,11 +76,6 @@ def _unit(angle: ArrayLike) -> FloatArray:
     """``w(angle) = (cos, sin)`` (Eq. (24)), stacked on a last axis."""
     a = np.asarray(angle, dtype=np.float64)
     return np.stack((np.cos(a), np.sin(a)), axis=-1)
-
-
-def _perp(a: FloatArray) -> FloatArray:
-    """``a`` turned by +90 degrees over the last axis."""
-    return np.stack((-a[..., 1], a[..., 0]), axis=-1)
 
 
 _NO_MOTIONS = np.zeros((0, 12))  # rates of no Eq. (13) rows: the grasp equations alone
