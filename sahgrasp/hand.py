@@ -950,26 +950,6 @@ class Hand:
         """
         return self.collision.in_collision(self._finite(q))
 
-    def separation_rows(
-        self, q: NDArray[np.float64], penetrations: list[Penetration]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Rows ``n^T (J_b(p_b) - J_a(p_a))`` (m, nv) and targets ``depth`` (m,) [m] of the pairs.
-
-        The IK's collision repair asks each penetrating pair's second witness to move away from
-        the first along the separating normal by the pair's depth.
-
-        Raises:
-            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
-        """
-        pin.computeJointJacobians(self.model, self.data, self._finite(q))
-        joints = [p.joint_a for p in penetrations] + [p.joint_b for p in penetrations]
-        points = np.array([p.point_a for p in penetrations] + [p.point_b for p in penetrations])
-        J = _point_jacobians(self.data.J, self._supports, self._reduce, joints, points)
-        m = len(penetrations)
-        normals = np.array([p.normal for p in penetrations])
-        rows = (normals[:, None, :] @ (J[m:] - J[:m]))[:, 0]
-        return rows, np.array([p.depth_m for p in penetrations])
-
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies closer than ``margin_m`` [m] at ``q``, with their witnesses.
 

@@ -19,7 +19,8 @@ from sahgrasp.bench.peers import available_peers
 from sahgrasp.bench.report import summary_table
 from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand
+from sahgrasp.hand import Hand, load_hand
+from sahgrasp.ik import IKSettings
 from sahgrasp.ik.learned import default_database
 from sahgrasp.progress import StderrProgress
 from sahgrasp.tables import format_table
@@ -90,7 +91,10 @@ def test_bench_ik_without_pink_runs_the_others(
     assert 0.0 < learned["cpu_median_ms"] <= learned["cpu_p95_ms"]
     assert learned["cpu_us_per_iteration"] > 0.0
     lookup = doc["learned_lookup"]
-    assert (lookup["entries"], lookup["k"]) == (20_000, 2) and 0.0 <= lookup["recall"] <= 1.0
+    shipped = default_database(load_hand("sah"))
+    assert shipped is not None
+    assert (lookup["entries"], lookup["k"]) == (len(shipped.features), IKSettings().learned_starts)
+    assert 0.0 <= lookup["recall"] <= 1.0
     with pytest.raises(InvalidSettingsError, match="problems"):
         bench_ik.run(problems=0)
 

@@ -12,7 +12,7 @@ from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, Inv
 from sahgrasp.experiments.ik_examples import solve_example
 from sahgrasp.experiments.setups import SAH_EXPERIMENTS, run_experiment
 from sahgrasp.hand import Hand
-from sahgrasp.ik import solve_ik
+from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.objects import (
     GRASP_NAMES,
     BoxSolid,
@@ -205,9 +205,9 @@ def _coal_depths(
 
 @pytest.mark.parametrize("name", GRASP_NAMES)
 def test_demo_grasps_leave_the_object_alone(sah: Hand, name: str) -> None:
-    example = solve_example(
-        sah, name
-    )  # what `sahgrasp demo` and examples/grasp_paper_object.py solve
+    # What `sahgrasp demo` and examples/grasp_paper_object.py solve: the paper's Algorithm 1,
+    # its starts from the sequence (experiments.arguments.ik_settings).
+    example = solve_example(sah, name, IKSettings(init="sequence"))
     assert example.result.success
     depths = _coal_depths(
         sah, example.result.q, example.obj, example.obj.T_world_object, set(sah.fingers)

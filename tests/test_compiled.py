@@ -198,3 +198,72 @@ def test_a_second_load_of_the_hand_gets_its_own_tree() -> None:
     first, second = load_hand("sah"), load_hand("sah")
     assert compiled_tree(first) is compiled_tree(first)
     assert compiled_tree(first) is not compiled_tree(second)
+
+
+def _reference_repair(
+    hand: Hand, q: np.ndarray, target: np.ndarray, fingers: np.ndarray, pairs: list
+) -> np.ndarray:
+    """One collision-repair step from Pinocchio's Jacobians and numpy (the step before it was
+    compiled): contact rows and witness rows in damped least squares, bounds as an active set."""
+    stack, J_contacts = _stack(compiled_tree(hand), hand, q, fingers)
+    state = hand.state(q, jacobians=True)
+    rows = [n @ (state.point_jacobian(jb, xb) - state.point_jacobian(ja, xa))
+            for ja, jb, xa, xb, n, _ in pairs]  # fmt: skip
+    J = np.vstack([J_contacts, rows])
+    e = np.concatenate([target - stack, [p[5] for p in pairs]])
+    g = J.T @ e
+    x, (low, high) = hand.finger_part(q), hand.bound_tests
+    fixed = ((x <= low) & (g[6:] < 0.0)) | ((x >= high) & (g[6:] > 0.0))
+    free = np.concatenate([np.ones(6, bool), ~fixed])
+    step = np.zeros(hand.nv)
+    JF = J[:, free]
+    step[free] = solve(JF.T @ JF + 1e-6 * np.eye(free.sum()), JF.T @ e, assume_a="pos")
+    out = pin.integrate(hand.model, q, step)
+    joints = hand.finger_part(out)
+    joints[:] = np.clip(joints, hand.lower, hand.upper)
+    return out
+
+
+@pytest.mark.parametrize("fingers", FINGER_SETS)
+def test_repair_step_matches_pinocchio_and_numpy(hand: Hand, fingers: list[int] | None) -> None:
+    tree, idx = compiled_tree(hand), _indices(hand, fingers)
+    rng = np.random.default_rng(31)
+    njoints = hand.model.njoints
+    for q in _configurations(hand, 10, 32):
+        # Joints at their bounds, so that the active set has work to do.
+        x = hand.finger_part(q)
+        x[::3] = np.where(rng.random(x[::3].size) < 0.5, hand.lower[::3], hand.upper[::3])
+        target = _stack(tree, hand, q, idx)[0] + rng.normal(scale=0.01, size=6 * len(idx))
+        # Pairs between random joints (0: the world) at random points, unit normals, depths [m].
+        pairs = []
+        for _ in range(3):
+            ja, jb = rng.integers(0, njoints, 2)
+            n = rng.normal(size=3)
+            pairs.append((ja, jb, rng.normal(size=3) * 0.1, rng.normal(size=3) * 0.1,
+                          n / np.linalg.norm(n), rng.uniform(0.0, 0.005)))  # fmt: skip
+        out = np.empty(hand.nq)
+        ok = tree.repair(
+            q, target, idx,
+            np.array([(p[0] - 1, p[1] - 1) for p in pairs], dtype=np.int64),
+            np.array([(p[2], p[3]) for p in pairs]), np.array([p[4] for p in pairs]),
+            np.array([p[5] for p in pairs]), out,
+        )  # fmt: skip
+        assert ok
+        expected = _reference_repair(hand, q, target, idx, pairs)
+        # A large step can land on the other sign of the same wrist quaternion.
+        for config in (out, expected):
+            config[3:7] *= np.sign(config[6])
+        np.testing.assert_allclose(out, expected, atol=1e-9)
+
+
+def test_repair_refuses_bad_input(sah: Hand) -> None:
+    tree, q, out = compiled_tree(sah), sah.configuration(), np.empty(sah.nq)
+    good = (np.zeros(24), np.arange(4), np.zeros((1, 2), np.int64), np.zeros((1, 2, 3)),
+            np.ones((1, 3)), np.zeros(1), out)  # fmt: skip
+    assert tree.repair(q, *good) in (True, False)
+    with pytest.raises(ValueError, match="joint out of range"):
+        tree.repair(q, *good[:2], np.full((1, 2), 99, np.int64), *good[3:])
+    with pytest.raises(ValueError, match="normals"):
+        tree.repair(q, *good[:4], np.ones((2, 3)), *good[5:])
+    with pytest.raises(TypeError):
+        tree.repair(q, *good[:2], np.zeros((1, 2)), *good[3:])  # float joints

@@ -10,7 +10,6 @@ import pytest
 import yourdfpy
 
 from sahgrasp import hand as hand_module
-from sahgrasp.collision import Penetration
 from sahgrasp.errors import HandModelError, InvalidConfigurationError, InvalidSettingsError
 from sahgrasp.hand import Hand, HandDescription, load_hand, sah_description
 
@@ -595,20 +594,6 @@ def test_stack_jacobian_and_point_jacobian_match_finite_differences(any_hand: Ha
     assert not state.point_jacobian(0, point).any()
     with pytest.raises(InvalidConfigurationError, match="no Jacobians"):
         any_hand.state(q).point_jacobian(joint, point)
-
-
-def test_separation_rows_are_normal_components_of_the_witness_jacobians(any_hand: Hand) -> None:
-    q = any_hand.random_configuration(np.random.default_rng(24))
-    stack, J = any_hand.contact_stack_jacobian(q)
-    last, point = any_hand.model.njoints - 1, stack[-6:-3]  # the last finger's contact point
-    normal = np.array([0.0, 0.6, 0.8])
-    pens = [
-        Penetration(0, last, np.zeros(3), point, normal, 1e-3),  # b on the finger moves
-        Penetration(last, 0, point, np.ones(3), normal, 2e-3),  # a on the finger: opposite sign
-    ]
-    rows, depths = any_hand.separation_rows(q, pens)
-    np.testing.assert_allclose(rows, [normal @ J[-6:-3], -normal @ J[-6:-3]], atol=1e-12)
-    np.testing.assert_array_equal(depths, [1e-3, 2e-3])
 
 
 def test_wrist_and_finger_parts_split_q(sah: Hand) -> None:

@@ -11,8 +11,9 @@ from sahgrasp.cli.common import HAND_HELP, add_command, check_outputs, nonnegati
 
 __all__ = ["LEARN_DEFAULTS", "add_parser", "run"]
 
-LEARN_DEFAULTS = {"samples": 20_000, "seed": 61803398}
-"""The shipped databases' size and seed, spelled out so that ``--help`` need not import the IK."""
+LEARN_DEFAULTS = {"samples": 2_500, "grasp_sets": 1_600, "seed": 61803398}
+"""The shipped SAH database's sizes and seed, spelled out so that ``--help`` need not import the
+IK (the Allegro hand's has no grasp entries: its reach is not known)."""
 
 
 def add_parser(sub: Any) -> None:
@@ -24,7 +25,16 @@ def add_parser(sub: Any) -> None:
         "Finished chunks are kept in FILE.parts, so an interrupted build continues when rerun.",
     )  # fmt: skip
     p.add_argument("--hand", default="sah", help=HAND_HELP)
-    p.add_argument("--samples", type=positive_int, default=d["samples"], help="database entries")
+    p.add_argument(
+        "--samples", type=positive_int, default=d["samples"],
+        help="random entries (collision-free configurations)",
+    )  # fmt: skip
+    p.add_argument(
+        "--grasps", type=nonnegative_int, default=None, metavar="SETS",
+        help=f"contact sets to draw on random primitive solids (5 per solid) and solve: the "
+        f"grasp entries (default: {d['grasp_sets']} for the SAH, 0 for a hand whose reach is "
+        "not known)",
+    )  # fmt: skip
     p.add_argument("--seed", type=nonnegative_int, default=d["seed"], help="seed (>= 0)")
     p.add_argument("--out", required=True, metavar="FILE", help="the .npz file to write")
     where = p.add_mutually_exclusive_group()
@@ -42,7 +52,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build (or resume building) the database."""
     from sahgrasp.hand import load_hand
-    from sahgrasp.ik.learned import build_database
+    from sahgrasp.ik.learned import SETS_PER_PRIMITIVE, build_database
     from sahgrasp.parallel import check_workers
     from sahgrasp.progress import StderrProgress
     from sahgrasp.sequence.executors import open_executor
@@ -51,15 +61,20 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None:
         check_workers(args.workers)
     hand = load_hand(args.hand)
+    grasp_sets = args.grasps
+    if grasp_sets is None:
+        grasp_sets = LEARN_DEFAULTS["grasp_sets"] if hand.description.name == "sah" else 0
+    solids = -(-grasp_sets // SETS_PER_PRIMITIVE)
     start = time.perf_counter()
     with StderrProgress() as bar, open_executor(args.scheduler, args.workers) as executor:
         db = build_database(
             hand, args.samples, args.out, args.seed, executor,
-            lambda done, total: bar("learn: chunks", done, total),
+            lambda done, total: bar("learn: chunks", done, total), grasp_sets,
         )  # fmt: skip
     size_mb = Path(args.out).stat().st_size / 1e6
     print(
-        f"{args.out}: {len(db.configurations)} grasps of hand {db.hand}, {size_mb:.1f} MB, "
+        f"{args.out}: {len(db.configurations)} entries of hand {db.hand} ({db.grasp_entries} "
+        f"solved grasps of contact sets on {solids} primitive solids), {size_mb:.1f} MB, "
         f"built in {time.perf_counter() - start:.1f} s"
     )
     return 0

@@ -700,6 +700,308 @@ static PyObject *Tree_integrate(Tree *self, PyObject *args) {
     Py_RETURN_NONE;
 }
 
+/* ------------------------------------------------------------------ collision repair -- */
+
+/* Adds to `row` (nv) `sign` times n^T J(x), J(x) the Jacobian with respect to v of the point x
+ * (world frame) fixed to tree joint k (-1: the world, which does not move). */
+static void add_point_row(const Tree *T, const Pose *M, int k, const double *x, const double *n,
+                          double sign, double *row) {
+    if (k < 0) return;
+    const Pose *W = &M[0];
+    double d[3] = {x[0] - W->t[0], x[1] - W->t[1], x[2] - W->t[2]};
+    for (int c = 0; c < 3; c++) { /* the wrist's local linear and angular velocity */
+        double col[3] = {W->R[c], W->R[3 + c], W->R[6 + c]}, m[3];
+        cross(col, d, m);
+        row[c] += sign * (n[0] * col[0] + n[1] * col[1] + n[2] * col[2]);
+        row[3 + c] += sign * (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]);
+    }
+    for (int j = k; j > 0; j = T->parent[j]) {
+        const Pose *K = &M[j];
+        const double *u = T->axis + 3 * j;
+        double a[3], m[3];
+        for (int i = 0; i < 3; i++)
+            a[i] = K->R[3 * i] * u[0] + K->R[3 * i + 1] * u[1] + K->R[3 * i + 2] * u[2];
+        if (T->prismatic[j]) {
+            memcpy(m, a, sizeof m);
+        } else {
+            double e[3] = {x[0] - K->t[0], x[1] - K->t[1], x[2] - K->t[2]};
+            cross(a, e, m);
+        }
+        row[T->v_index[j]] += sign * T->scale[j] * (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]);
+    }
+}
+
+/* One step of sahgrasp/ik/solver.py's `_separate`: the contact rows of `fingers` (towards
+ * `target`) and one row per penetrating pair (body b away from body a along the normal by the
+ * depth) solved together in damped least squares (damping 1e-6, bounds as an active set), the
+ * joints clamped. `joints` holds per pair the tree joints of a and b (-1: the world), `points`
+ * their witnesses. Writes the new configuration to `out`; returns 0 if the rows are degenerate,
+ * -1 if out of memory. */
+static int repair_step(const Tree *T, const double *q, const double *target,
+                       const long long *fingers, int nf, const long long *joints,
+                       const double *points, const double *normals, const double *depths, int np,
+                       double *out) {
+    int nv = T->nv, m = 6 * nf, rows = m + np;
+    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
+    double *buf = malloc(((size_t)rows * (nv + 2) + (size_t)nv * (2 * nv + 3)) * sizeof(double));
+    int *free_cols = malloc((size_t)nv * sizeof(int));
+    if (!M || !buf || !free_cols) {
+        free(M), free(buf), free(free_cols);
+        return -1;
+    }
+    double *J = buf, *e = J + (size_t)rows * nv, *stack = e + rows, *g = stack + m;
+    double *A = g + nv, *L = A + (size_t)nv * nv, *x = L + (size_t)nv * nv, *step = x + nv;
+    forward(T, q, M);
+    stack_of(T, M, fingers, nf, stack);
+    jacobian_of(T, M, fingers, nf, stack, J);
+    for (int i = 0; i < m; i++) e[i] = target[i] - stack[i];
+    memset(J + (size_t)m * nv, 0, (size_t)np * nv * sizeof(double));
+    for (int p = 0; p < np; p++) {
+        double *row = J + (size_t)(m + p) * nv;
+        add_point_row(T, M, (int)joints[2 * p + 1], points + 6 * p + 3, normals + 3 * p, 1.0, row);
+        add_point_row(T, M, (int)joints[2 * p], points + 6 * p, normals + 3 * p, -1.0, row);
+        e[m + p] = depths[p];
+    }
+    for (int c = 0; c < nv; c++) g[c] = 0.0;
+    for (int i = 0; i < rows; i++)
+        for (int c = 0; c < nv; c++) g[c] += J[(size_t)i * nv + c] * e[i];
+    int n = 0;
+    for (int c = 0; c < nv; c++) {
+        if (c >= 6) {
+            double lo = T->lower[c - 6] + 1e-12, hi = T->upper[c - 6] - 1e-12;
+            if ((q[c + 1] <= lo && g[c] < 0.0) || (q[c + 1] >= hi && g[c] > 0.0)) continue;
+        }
+        free_cols[n++] = c;
+    }
+    for (int a = 0; a < n; a++) {
+        for (int b = 0; b <= a; b++) {
+            double sum = 0.0;
+            for (int i = 0; i < rows; i++)
+                sum += J[(size_t)i * nv + free_cols[a]] * J[(size_t)i * nv + free_cols[b]];
+            A[a * n + b] = sum;
+        }
+        g[a] = g[free_cols[a]]; /* free_cols ascend: in place */
+    }
+    int ok = damped_solve(A, g, 1e-6, n, L, x);
+    if (ok) {
+        memset(step, 0, (size_t)nv * sizeof(double));
+        for (int a = 0; a < n; a++) step[free_cols[a]] = x[a];
+        integrate_clamped(T, q, step, out, 1);
+    }
+    free(M), free(buf), free(free_cols);
+    return ok;
+}
+
+/* repair(q, target, fingers, joints, points, normals, depths, out) -> bool (see repair_step). */
+static PyObject *Tree_repair(Tree *self, PyObject *args) {
+    enum { Q, TARGET, FINGERS, JOINTS, POINTS, NORMALS, DEPTHS, OUT, N_ARGS };
+    PyObject *o[N_ARGS];
+    if (!PyArg_ParseTuple(args, "OOOOOOOO:repair", &o[Q], &o[TARGET], &o[FINGERS], &o[JOINTS],
+                          &o[POINTS], &o[NORMALS], &o[DEPTHS], &o[OUT]))
+        return NULL;
+    if (check_ready(self) < 0) return NULL;
+    static const char *names[N_ARGS] = {"q", "target", "fingers", "joints", "points", "normals",
+                                        "depths", "out"};
+    static const char *formats[N_ARGS] = {"d", "d", "q", "q", "d", "d", "d", "d"};
+    /* The sizes follow from the fingers' and depths' lengths, so those two are taken first. */
+    static const int order[N_ARGS] = {FINGERS, DEPTHS, Q, TARGET, JOINTS, POINTS, NORMALS, OUT};
+    Py_buffer b[N_ARGS];
+    int held = 0, status = -2, nf = 0, np = 0;
+    for (; held < N_ARGS; held++) {
+        int i = order[held];
+        Py_ssize_t sizes[N_ARGS] = {self->nq, 6 * nf, -1, 2 * np, 6 * np, 3 * np, -1, self->nq};
+        if (get_buffer(o[i], &b[i], sizes[i], i == OUT, formats[i], names[i]) < 0) break;
+        if (i == FINGERS) nf = (int)(b[i].len / 8);
+        if (i == DEPTHS) np = (int)(b[i].len / 8);
+    }
+    if (held == N_ARGS) {
+        const long long *f = b[FINGERS].buf, *j = b[JOINTS].buf;
+        int bad = nf < 1;
+        for (int k = 0; k < nf; k++) bad |= f[k] < 0 || f[k] >= self->nf;
+        for (int k = 0; k < 2 * np; k++) bad |= j[k] < -1 || j[k] >= self->nj;
+        if (bad) {
+            PyErr_SetString(PyExc_ValueError, "fingers empty, or a finger or joint out of range");
+        } else {
+            status = repair_step(self, b[Q].buf, b[TARGET].buf, f, nf, j, b[POINTS].buf,
+                                 b[NORMALS].buf, b[DEPTHS].buf, np, b[OUT].buf);
+            if (status < 0) PyErr_NoMemory();
+        }
+    }
+    for (int k = 0; k < held; k++) PyBuffer_Release(&b[order[k]]);
+    if (status < 0) return NULL;
+    return PyBool_FromLong(status);
+}
+
+/* ------------------------------------------------------------------- rigid alignment -- */
+
+/* Eigenvector of the largest eigenvalue of the symmetric 4 x 4 `N` (cyclic Jacobi rotations). */
+static void largest_eigenvector(double N[4][4], double v[4]) {
+    double V[4][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}, {0, 0, 0, 1}};
+    for (int sweep = 0; sweep < 50; sweep++) {
+        double off = 0.0, scale = 0.0;
+        for (int i = 0; i < 4; i++) {
+            scale += N[i][i] * N[i][i];
+            for (int j = i + 1; j < 4; j++) off += N[i][j] * N[i][j];
+        }
+        if (off <= 1e-30 * scale || off == 0.0) break;
+        for (int p = 0; p < 3; p++)
+            for (int q = p + 1; q < 4; q++) {
+                if (N[p][q] == 0.0) continue;
+                /* The rotation in the (p, q) plane that zeroes N[p][q] (Golub & Van Loan 8.4). */
+                double theta = (N[q][q] - N[p][p]) / (2.0 * N[p][q]);
+                double t = (theta >= 0.0 ? 1.0 : -1.0) / (fabs(theta) + sqrt(theta * theta + 1.0));
+                double c = 1.0 / sqrt(t * t + 1.0), sn = t * c;
+                for (int k = 0; k < 4; k++) { /* N <- N G */
+                    double a = N[k][p], b = N[k][q];
+                    N[k][p] = c * a - sn * b;
+                    N[k][q] = sn * a + c * b;
+                }
+                for (int k = 0; k < 4; k++) { /* N <- G^T N */
+                    double a = N[p][k], b = N[q][k];
+                    N[p][k] = c * a - sn * b;
+                    N[q][k] = sn * a + c * b;
+                }
+                for (int k = 0; k < 4; k++) { /* V <- V G */
+                    double a = V[k][p], b = V[k][q];
+                    V[k][p] = c * a - sn * b;
+                    V[k][q] = sn * a + c * b;
+                }
+            }
+    }
+    int best = 0;
+    for (int i = 1; i < 4; i++)
+        if (N[i][i] > N[best][best]) best = i;
+    for (int k = 0; k < 4; k++) v[k] = V[k][best];
+}
+
+/* Moves the wrist of q by the rigid motion that best maps the stack `source` (k rows) onto
+ * `goal` in least squares: Horn's closed form, the rotation's quaternion being the eigenvector
+ * of the largest eigenvalue of a symmetric 4 x 4 matrix of the cross-covariance (no reflection
+ * can come out, unlike an SVD's). */
+static void align_wrist(double *q, const double *source, const double *goal, int k) {
+    double cs[3] = {0, 0, 0}, cg[3] = {0, 0, 0}, S[3][3] = {{0}};
+    for (int i = 0; i < k; i++)
+        for (int a = 0; a < 3; a++) cs[a] += source[3 * i + a] / k, cg[a] += goal[3 * i + a] / k;
+    for (int i = 0; i < k; i++)
+        for (int a = 0; a < 3; a++)
+            for (int b = 0; b < 3; b++)
+                S[a][b] += (source[3 * i + a] - cs[a]) * (goal[3 * i + b] - cg[b]);
+    double N[4][4] = {
+        {S[0][0] + S[1][1] + S[2][2], S[1][2] - S[2][1], S[2][0] - S[0][2], S[0][1] - S[1][0]},
+        {S[1][2] - S[2][1], S[0][0] - S[1][1] - S[2][2], S[0][1] + S[1][0], S[2][0] + S[0][2]},
+        {S[2][0] - S[0][2], S[0][1] + S[1][0], S[1][1] - S[0][0] - S[2][2], S[1][2] + S[2][1]},
+        {S[0][1] - S[1][0], S[2][0] + S[0][2], S[1][2] + S[2][1], S[2][2] - S[0][0] - S[1][1]},
+    };
+    double e[4]; /* (w, x, y, z) */
+    largest_eigenvector(N, e);
+    double r[4] = {e[1], e[2], e[3], e[0]}, R[9]; /* (x, y, z, w) */
+    quat_rotation(r, R);
+    double p[3];
+    for (int a = 0; a < 3; a++)
+        p[a] = R[3 * a] * (q[0] - cs[0]) + R[3 * a + 1] * (q[1] - cs[1]) +
+               R[3 * a + 2] * (q[2] - cs[2]) + cg[a];
+    /* The wrist's new orientation r * w (Hamilton product, both (x, y, z, w)). */
+    const double *w = q + 3;
+    double o[4] = {
+        r[3] * w[0] + w[3] * r[0] + r[1] * w[2] - r[2] * w[1],
+        r[3] * w[1] + w[3] * r[1] + r[2] * w[0] - r[0] * w[2],
+        r[3] * w[2] + w[3] * r[2] + r[0] * w[1] - r[1] * w[0],
+        r[3] * w[3] - r[0] * w[0] - r[1] * w[1] - r[2] * w[2],
+    };
+    double norm = sqrt(o[0] * o[0] + o[1] * o[1] + o[2] * o[2] + o[3] * o[3]);
+    memcpy(q, p, 3 * sizeof(double));
+    for (int a = 0; a < 4; a++) q[3 + a] = o[a] / norm;
+}
+
+/* align(q, goal, fingers): q's wrist moved so that its contact stack best fits goal. */
+static PyObject *Tree_align(Tree *self, PyObject *args) {
+    PyObject *q_obj, *goal_obj, *fingers_obj;
+    if (!PyArg_ParseTuple(args, "OOO:align", &q_obj, &goal_obj, &fingers_obj)) return NULL;
+    if (check_ready(self) < 0) return NULL;
+    Py_buffer qb, gb, fb;
+    int ok = 0;
+    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
+    int nf = (int)(fb.len / 8);
+    if (get_buffer(q_obj, &qb, self->nq, 1, "d", "q") < 0) goto release_f;
+    if (get_buffer(goal_obj, &gb, 6 * nf, 0, "d", "goal") < 0) goto release_q;
+    Work w;
+    if (nf < 1) {
+        PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
+    } else if (work_init(&w, self, fb.buf, nf, gb.buf, 0) == 0) {
+        forward(self, qb.buf, w.M);
+        stack_of(self, w.M, fb.buf, nf, w.stack);
+        align_wrist(qb.buf, w.stack, gb.buf, 2 * nf);
+        work_free(&w);
+        ok = 1;
+    }
+    PyBuffer_Release(&gb);
+release_q:
+    PyBuffer_Release(&qb);
+release_f:
+    PyBuffer_Release(&fb);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
+/* ------------------------------------------------------------------ database keys -- */
+
+/* rigid_key(points, normals, normal_scale, out): sahgrasp/ik/learned.py's rigid_features of
+ * one contact set (F >= 3 rows): the points and normal_scale times the normals in the contacts'
+ * own frame (origin their centroid, x towards the first, y along the last minus the second). */
+static PyObject *rigid_key(PyObject *module, PyObject *args) {
+    PyObject *p_obj, *n_obj, *out_obj;
+    double scale;
+    if (!PyArg_ParseTuple(args, "OOdO:rigid_key", &p_obj, &n_obj, &scale, &out_obj)) return NULL;
+    Py_buffer pb, nb, ob;
+    if (get_buffer(p_obj, &pb, -1, 0, "d", "points") < 0) return NULL;
+    int nf = (int)(pb.len / 24), ok = 0;
+    if (nf < 3 || pb.len != 24 * (Py_ssize_t)nf) {
+        PyErr_SetString(PyExc_ValueError, "points must hold F >= 3 rows of 3");
+        PyBuffer_Release(&pb);
+        return NULL;
+    }
+    if (get_buffer(n_obj, &nb, 3 * nf, 0, "d", "normals") < 0) goto release_p;
+    if (get_buffer(out_obj, &ob, 6 * nf, 1, "d", "out") < 0) goto release_n;
+    const double *p = pb.buf, *n = nb.buf;
+    double *out = ob.buf, c[3] = {0, 0, 0}, x[3], y[3], z[3], side[3];
+    for (int i = 0; i < nf; i++)
+        for (int a = 0; a < 3; a++) c[a] += p[3 * i + a];
+    for (int a = 0; a < 3; a++) {
+        c[a] /= nf;
+        x[a] = p[a] - c[a];
+        side[a] = p[3 * (nf - 1) + a] - p[3 + a];
+    }
+    double norm = fmax(sqrt(dot(x, x, 3)), 1e-12), along;
+    for (int a = 0; a < 3; a++) x[a] /= norm;
+    along = dot(side, x, 3);
+    for (int a = 0; a < 3; a++) y[a] = side[a] - along * x[a];
+    norm = fmax(sqrt(dot(y, y, 3)), 1e-12);
+    for (int a = 0; a < 3; a++) y[a] /= norm;
+    cross(x, y, z);
+    const double *axes[3] = {x, y, z};
+    for (int i = 0; i < nf; i++) {
+        double d[3] = {p[3 * i] - c[0], p[3 * i + 1] - c[1], p[3 * i + 2] - c[2]};
+        for (int a = 0; a < 3; a++) {
+            out[3 * i + a] = dot(d, axes[a], 3);
+            out[3 * (nf + i) + a] = scale * dot(n + 3 * i, axes[a], 3);
+        }
+    }
+    ok = 1;
+    PyBuffer_Release(&ob);
+release_n:
+    PyBuffer_Release(&nb);
+release_p:
+    PyBuffer_Release(&pb);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
+static PyMethodDef module_methods[] = {
+    {"rigid_key", rigid_key, METH_VARARGS,
+     "rigid_key(points, normals, normal_scale, out): the rigid-invariant key of one contact set."},
+    {NULL, NULL, 0, NULL},
+};
+
 static PyMethodDef Tree_methods[] = {
     {"solve", (PyCFunction)Tree_solve, METH_VARARGS,
      "solve(q, target, fingers, max_iterations, refine_m, d_min_m, stall, history) -> "
@@ -708,6 +1010,12 @@ static PyMethodDef Tree_methods[] = {
      "stack(q, fingers, stack_out, jacobian_out_or_None): contact stack and its Jacobian."},
     {"integrate", (PyCFunction)Tree_integrate, METH_VARARGS,
      "integrate(q, v, out, clamp): q (+) v, joints clamped to their limits if clamp."},
+    {"repair", (PyCFunction)Tree_repair, METH_VARARGS,
+     "repair(q, target, fingers, joints, points, normals, depths, out) -> bool: one collision "
+     "repair step into out; False if its rows are degenerate."},
+    {"align", (PyCFunction)Tree_align, METH_VARARGS,
+     "align(q, goal, fingers): q's wrist moved (in place) by the rigid motion that best maps "
+     "its contact stack onto goal."},
     {NULL, NULL, 0, NULL},
 };
 
@@ -724,7 +1032,7 @@ static PyTypeObject TreeType = {
 
 static struct PyModuleDef module = {
     PyModuleDef_HEAD_INIT, .m_name = "sahgrasp.ik._lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
-    .m_size = -1,
+    .m_size = -1, .m_methods = module_methods,
 };
 
 PyMODINIT_FUNC PyInit__lm(void) {

@@ -8,6 +8,8 @@ CONVERGED: int
 NO_PROGRESS: int
 MAX_ITERATIONS: int
 
+def rigid_key(points: NDArray, normals: NDArray, normal_scale: float, out: NDArray) -> None: ...
+
 class Tree:
     def __init__(
         self,
@@ -41,3 +43,15 @@ class Tree:
         self, q: NDArray, fingers: NDArray, stack_out: NDArray, jacobian_out: NDArray | None
     ) -> None: ...
     def integrate(self, q: NDArray, v: NDArray, out: NDArray, clamp: bool) -> None: ...
+    def align(self, q: NDArray, goal: NDArray, fingers: NDArray) -> None: ...
+    def repair(
+        self,
+        q: NDArray,
+        target: NDArray,
+        fingers: NDArray,
+        joints: NDArray,
+        points: NDArray,
+        normals: NDArray,
+        depths: NDArray,
+        out: NDArray,
+    ) -> bool: ...

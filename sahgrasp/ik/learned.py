@@ -6,17 +6,23 @@ configuration as a function of the constraints imposed by the contact points". A
 features that a rigid motion does not change: the contact points and normals expressed in a frame
 built from the contacts themselves. For a target, the nearest keys (``scipy.spatial.cKDTree``)
 give the finger joints of the first starts; each start's wrist is the neighbour's wrist moved by
-the rigid transform that best aligns its contacts to the target's (Kabsch's least squares).
+the rigid transform that best aligns its contacts to the target's (least squares, Horn's closed
+form).
 
-The entries are random collision-free configurations of the hand (every joint uniform in its
-range, virtual contact joints in the contact region): each is exactly solved by its own contacts,
-so no IK runs to build the database. Its seeds (:data:`LEARN_SEED`) are used nowhere else.
+The entries are of two kinds. *Random* entries are collision-free configurations of the hand
+(every joint uniform in its range, virtual contact joints in the contact region): each is exactly
+solved by its own contacts, so no IK runs to build them. *Grasp* entries are solved grasps of
+contact sets that a grasp planner would draw (:mod:`sahgrasp.objects.grasp_sampler`) on random
+primitive solids -- cylinders, boxes, ellipsoids and capsules of graspable sizes, none of them a
+catalog object -- each solved by the IK from the searched sequence: a planner's contact sets lie
+far from every random entry's key, and nearest random entries started no better there than the
+sequence (docs/ik.md, "Limits"). Grasp entries need the hand's reach, known for the SAH only.
+The seeds (:data:`LEARN_SEED`) are used nowhere else.
 """
 
 from __future__ import annotations
 
 import io
-import math
 import os
 import zipfile
 from collections.abc import Iterator
@@ -28,26 +34,29 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dgesdd
 from scipy.spatial import cKDTree
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
 from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
+from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
-from sahgrasp.ik.initial import cross_floats
 
 __all__ = [
     "CHUNK_SAMPLES",
     "FORMAT",
     "LEARN_SEED",
+    "PRIMITIVES_PER_CHUNK",
+    "SETS_PER_PRIMITIVE",
     "GraspDatabase",
     "GraspDatabaseError",
     "build_database",
+    "contact_key",
     "default_database",
+    "grasp_chunk",
+    "primitive_mesh",
     "rigid_features",
     "target_key",
 ]
@@ -57,7 +66,11 @@ FORMAT = "sahgrasp-grasp-db-1"
 LEARN_SEED = 61_803_398
 """Seed of the shipped databases; no benchmark or test draws from it."""
 CHUNK_SAMPLES = 2000
-"""Entries per chunk of :func:`build_database` (the unit of work, checkpoint and resume)."""
+"""Random entries per chunk of :func:`build_database` (the unit of work, checkpoint, resume)."""
+SETS_PER_PRIMITIVE = 5
+"""Contact sets drawn on each random primitive solid of the grasp entries."""
+PRIMITIVES_PER_CHUNK = 100
+"""Primitive solids per chunk of grasp entries."""
 NORMAL_WEIGHT_M = 0.02
 """Length [m] that a unit normal counts as in the features: 1 rad of normal ~ 2 cm of contact."""
 QUERY_EPS = 1.0
@@ -92,69 +105,34 @@ def rigid_features(points: NDArray[np.float64], normals: NDArray[np.float64]) ->
         )
         each = [rigid_features(p, n) for p, n in zip(flat_points, flat_normals, strict=True)]
         return np.array(each).reshape(*points.shape[:-2], -1)
-    frame, centroid = _contact_frame(points)
-    # Points and scaled normals in one product: (2F, 3) rows times the frame's axes.
-    rows = np.concatenate([points - centroid, normals * NORMAL_WEIGHT_M])
-    return np.asarray(rows.dot(frame.T).ravel())
-
-
-def _contact_frame(
-    points: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Rows: the axes of :func:`rigid_features`' frame in world, shape (3, 3); the centroid (3,).
-
-    In Python floats: on a few 3-vectors numpy's fixed cost per call (several microseconds for
-    ``np.sum``, ``np.stack``, fancy indexing) is many times the arithmetic; this was about 60 us
-    in numpy and is about 10 in floats (docs/ik.md, "Where the time goes").
-    """
-    rows = points.tolist()
-    n = len(rows)
-    centroid = [sum(column) / n for column in zip(*rows, strict=True)]
-    x = _unit([a - c for a, c in zip(rows[0], centroid, strict=True)])
-    side = [a - b for a, b in zip(rows[-1], rows[1], strict=True)]
-    along = sum(a * b for a, b in zip(side, x, strict=True))
-    y = _unit([a - along * b for a, b in zip(side, x, strict=True)])
-    return np.array([x, y, cross_floats(x, y)]), np.array(centroid)
-
-
-def _unit(v: list[float]) -> list[float]:
-    norm = max(math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]), 1e-12)
-    return [v[0] / norm, v[1] / norm, v[2] / norm]
-
-
-def kabsch(source: NDArray[np.float64], target: NDArray[np.float64]) -> pin.SE3:
-    """The rigid transform ``T`` minimising ``sum |T source_i - target_i|^2`` (rows are points).
-
-    LAPACK's ``dgesdd`` directly: ``np.linalg.svd``'s checks cost twice the 3 x 3 decomposition.
-    """
-    scale = 1.0 / len(source)
-    cs, ct = source.sum(axis=0) * scale, target.sum(axis=0) * scale
-    # The centred source sums to zero, so the target needs no centring in the covariance.
-    U, _, Vt, info = dgesdd((source - cs).T.dot(target))
-    if info != 0:
-        raise np.linalg.LinAlgError(f"dgesdd failed ({info}) on a 3 x 3 covariance")
-    R = U.dot(Vt).T
-    if _det3(R) < 0.0:  # a reflection: flip the axis of the smallest singular value
-        Vt[2] *= -1.0
-        R = U.dot(Vt).T
-    return pin.SE3(R, ct - R.dot(cs))
-
-
-def _det3(M: NDArray[np.float64]) -> float:
-    """Determinant of a 3 x 3 matrix, in plain floats (np.linalg.det costs ~10 us here)."""
-    (a, b, c), (d, e, f), (g, h, i) = M.tolist()
-    return float(a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g))
+    out = np.empty(6 * points.shape[-2])
+    # Compiled: on a few 3-vectors numpy's fixed cost per call is many times the arithmetic.
+    rigid_key(np.ascontiguousarray(points), np.ascontiguousarray(normals), NORMAL_WEIGHT_M, out)
+    return out
 
 
 def target_key(hand: Hand, target: GraspTarget) -> NDArray[np.float64] | None:
-    """The database key (:func:`rigid_features`) of ``target``; None without every finger."""
+    """The database key of ``target``; None without a contact for every finger."""
     if set(target.fingers) != set(hand.fingers):
         return None
     contacts = [target.contact(f) for f in hand.fingers]
     points = np.array([c.point for c in contacts])
-    # Target normals point into the fingertips; the features use the fingertips' outward ones.
-    normals = -np.array([c.normal for c in contacts])
-    return np.asarray(rigid_features(points, normals))
+    return contact_key(points, np.array([c.normal for c in contacts]))
+
+
+def contact_key(
+    points: NDArray[np.float64], target_normals: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """The database key (:func:`rigid_features`) of contacts in the hand's finger order.
+
+    Args:
+        points: Contact points, shape (F, 3) [m].
+        target_normals: The targets' unit normals, which point into the fingertips (the features
+            use the fingertips' outward ones), shape (F, 3).
+    """
+    out = np.empty(6 * len(points))
+    rigid_key(points, target_normals, -NORMAL_WEIGHT_M, out)
+    return out
 
 
 @dataclass(frozen=True)
@@ -167,6 +145,8 @@ class GraspDatabase:
         configurations: Configurations ``q``, shape (n, nq) (float32: they are starts only).
         features: :func:`rigid_features` of their contacts, shape (n, 6 F) (float32).
         seed: Seed the entries were drawn from.
+        grasp_entries: How many of the entries, the last ones, are solved grasps of contact sets
+            drawn on primitive solids (the others are random configurations).
     """
 
     hand: str
@@ -174,6 +154,7 @@ class GraspDatabase:
     configurations: NDArray[np.float32]
     features: NDArray[np.float32]
     seed: int
+    grasp_entries: int = 0
 
     @cached_property
     def tree(self) -> cKDTree:
@@ -187,30 +168,29 @@ class GraspDatabase:
             "build one with `sahgrasp learn --hand ...`",
         )  # fmt: skip
 
-    def starts(self, hand: Hand, target: GraspTarget, count: int) -> Iterator[NDArray[np.float64]]:
-        """The ``count`` nearest entries' configurations, each wrist moved onto ``target``.
+    def starts(
+        self, hand: Hand, key: NDArray[np.float64], goal: NDArray[np.float64], count: int
+    ) -> Iterator[NDArray[np.float64]]:
+        """The ``count`` nearest entries' configurations, each wrist moved onto the target.
 
-        Lazy: a start is aligned only when the solver asks for it. Requires a target with a
-        contact for every finger of the hand (else: no starts).
+        Lazy: a start is aligned only when the solver asks for it.
+
+        Args:
+            hand: The hand.
+            key: The target's key (:func:`contact_key`, :func:`target_key`).
+            goal: The target's contact stack (p_i*, r_i*) per finger in the hand's order, shape
+                (6 F,) [m]: each start's wrist moves by the rigid motion that best maps its own
+                stack onto it (least squares, Horn's closed form, compiled).
+            count: Starts to yield at most.
         """
-        key = target_key(hand, target)
-        if count <= 0 or key is None:
+        if count <= 0:
             return
         _, index = self.tree.query(key, k=min(count, len(self.features)), eps=QUERY_EPS)
-        # Rows (p_i, r_i) per finger, the order of Hand.contact_stack.
-        contacts = [target.contact(f) for f in hand.fingers]
-        goal = np.array([row for c in contacts for row in (c.point, c.centre(hand.radius_m))])
+        tree, fingers = compiled_tree(hand), np.arange(len(hand.fingers))
         for i in np.atleast_1d(index).tolist():
-            yield self._moved(hand, i, goal)
-
-    def _moved(self, hand: Hand, i: int, goal: NDArray[np.float64]) -> NDArray[np.float64]:
-        q = self.configurations[i].astype(np.float64)
-        # The compiled tree's stack: a quarter of Hand.contact_stack's cost, equal to 1e-12.
-        source = np.empty((2 * len(hand.fingers), 3))
-        compiled_tree(hand).stack(q, np.arange(len(hand.fingers)), source, None)
-        wrist = kabsch(source, goal) * hand.wrist_pose(q)
-        hand.wrist_part(q)[:] = pin.SE3ToXYZQUAT(wrist)
-        return q
+            q = self.configurations[i].astype(np.float64)
+            tree.align(q, goal, fingers)
+            yield q
 
     def to_bytes(self) -> bytes:
         """The ``.npz`` file content."""
@@ -221,6 +201,7 @@ class GraspDatabase:
             hand=np.array(self.hand),
             hand_digest=np.array(self.hand_digest),
             seed=np.array(self.seed),
+            grasp_entries=np.array(self.grasp_entries),
             configurations=self.configurations,
             features=self.features,
         )
@@ -233,14 +214,23 @@ class GraspDatabase:
     @classmethod
     def load(cls, path: str | os.PathLike[str] | Any) -> GraspDatabase:
         """Read a database file, raising :class:`GraspDatabaseError` if it is not one."""
+        db = cls._read(path)
+        db.validate(str(path))
+        return db
+
+    @classmethod
+    def _read(cls, path: str | os.PathLike[str] | Any) -> GraspDatabase:
+        """The file's database, not yet validated."""
         try:
             with np.load(path, allow_pickle=False) as data:
                 if str(data["format"]) != FORMAT:
                     raise ValueError(f"format is {str(data['format'])!r}, not {FORMAT}")
+                # Files written before grasp entries existed hold random entries only.
+                grasps = int(data["grasp_entries"]) if "grasp_entries" in data.files else 0
                 db = cls(
                     str(data["hand"]), str(data["hand_digest"]),
                     np.asarray(data["configurations"], dtype=np.float32),
-                    np.asarray(data["features"], dtype=np.float32), int(data["seed"]),
+                    np.asarray(data["features"], dtype=np.float32), int(data["seed"]), grasps,
                 )  # fmt: skip
         except FileNotFoundError as exc:
             raise GraspDatabaseError(f"grasp database {path} not found") from exc
@@ -249,30 +239,36 @@ class GraspDatabase:
                 f"{path} is not a valid sahgrasp grasp database ({exc}); build one with "
                 "`sahgrasp learn --hand ... --out FILE`"
             ) from exc
-        db.validate(str(path))
         return db
 
-    def validate(self, origin: str) -> None:
-        """Raise :class:`GraspDatabaseError` on inconsistent shapes or non-finite values."""
+    def validate(self, origin: str, empty_ok: bool = False) -> None:
+        """Raise :class:`GraspDatabaseError` on inconsistent shapes or non-finite values.
+
+        Args:
+            origin: Where the database comes from (for the message).
+            empty_ok: Accept a database without entries (a chunk of :func:`build_database`).
+        """
         n = len(self.configurations)
         ok = (
-            n > 0
+            (n > 0 or empty_ok)
             and self.configurations.ndim == 2
             and self.features.shape[0] == n
             and self.features.ndim == 2
+            and 0 <= self.grasp_entries <= n
             and bool(np.isfinite(self.configurations).all() and np.isfinite(self.features).all())
         )
         if not ok:
             raise GraspDatabaseError(
-                f"{origin}: a grasp database needs n > 0 finite configurations (n, nq) and "
-                f"features (n, 6F); got {self.configurations.shape} and {self.features.shape}"
+                f"{origin}: a grasp database needs n > 0 finite configurations (n, nq), features "
+                f"(n, 6F) and 0 <= grasp_entries <= n; got {self.configurations.shape}, "
+                f"{self.features.shape} and {self.grasp_entries}"
             )
 
 
 def sample_chunk(
     description: HandDescription, digest: str, seed: int, chunk: int, samples: int
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
-    """Entries of chunk ``chunk``: ``samples`` random collision-free configurations and features.
+    """Random entries of chunk ``chunk``: ``samples`` collision-free configurations, features.
 
     A pure function of its arguments (seeded by ``[seed, chunk]``), so any executor may run it.
     """
@@ -281,10 +277,89 @@ def sample_chunk(
     hand = worker_hand(description, digest)
     rng = np.random.default_rng([seed, chunk])
     q = np.array([hand.random_configuration(rng, collision_free=True) for _ in range(samples)])
+    return _entries(hand, q)
+
+
+def _entries(hand: Hand, q: NDArray[np.float64]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Database rows of the configurations ``q`` (n, nq): themselves and their contacts' keys."""
+    if not len(q):  # a grasp chunk whose solids all were out of reach
+        return np.zeros((0, hand.nq), np.float32), np.zeros((0, 6 * len(hand.fingers)), np.float32)
     states = [hand.contact_state(x) for x in q]
-    points = np.array([s.points for s in states])
-    normals = np.array([s.normals for s in states])
+    points = np.array([s.points for s in states]).reshape(len(q), len(hand.fingers), 3)
+    normals = np.array([s.normals for s in states]).reshape(points.shape)
     return q.astype(np.float32), rigid_features(points, normals).astype(np.float32)
+
+
+_GRASP_STREAM = 1
+"""Second word of the grasp chunks' seeds (``[seed, 1, chunk]``), apart from the random ones'."""
+
+
+def primitive_mesh(rng: np.random.Generator) -> Any:
+    """A random primitive solid of graspable size, as a closed ``trimesh.Trimesh`` [m].
+
+    One of four kinds, equally likely: a cylinder (radius 15-60 mm, height 40-200 mm), a box
+    (edges 20-140 mm), an ellipsoid (semi-axes 20-70 mm) or a capsule (radius 15-50 mm, 20-150
+    mm between the caps' centres). Their placement does not matter: the keys are rigid-invariant.
+    """
+    import trimesh.creation
+
+    kind = int(rng.integers(4))
+    if kind == 0:
+        radius, height = rng.uniform(0.015, 0.06), rng.uniform(0.04, 0.2)
+        return trimesh.creation.cylinder(radius=radius, height=height, sections=48)
+    if kind == 1:
+        return trimesh.creation.box(extents=rng.uniform(0.02, 0.14, 3))
+    if kind == 2:
+        sphere = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+        sphere.apply_scale(rng.uniform(0.02, 0.07, 3))
+        return sphere
+    radius, height = rng.uniform(0.015, 0.05), rng.uniform(0.02, 0.15)
+    return trimesh.creation.capsule(radius=radius, height=height, count=[24, 24])
+
+
+def grasp_chunk(
+    description: HandDescription, digest: str, seed: int, chunk: int, primitives: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Grasp entries of chunk ``chunk``: contact sets on ``primitives`` random solids, solved.
+
+    Each solid (:func:`primitive_mesh`) gets :data:`SETS_PER_PRIMITIVE` contact sets from the
+    grasp sampler with the hand's reach (a solid too large for it gives none); each set is solved
+    by :func:`~sahgrasp.ik.solver.solve_ik` from the searched sequence, and the solved ones are
+    the entries. A pure function of its arguments (seeded by ``[seed, 1, chunk]``).
+    """
+    from sahgrasp.ik.batch import worker_hand
+    from sahgrasp.ik.solver import solve_ik
+    from sahgrasp.objects.grasp_sampler import GraspSamplingError, sample_contact_sets
+
+    hand = worker_hand(description, digest)
+    reach = hand_reach(hand)
+    rng = np.random.default_rng([seed, _GRASP_STREAM, chunk])
+    solved = []
+    for _ in range(primitives):
+        mesh, set_seed = primitive_mesh(rng), int(rng.integers(2**63))
+        try:
+            targets = sample_contact_sets(mesh, SETS_PER_PRIMITIVE, set_seed, reach)
+        except GraspSamplingError:  # too few sets within the reach: a solid too large or small
+            continue
+        results = (solve_ik(hand, t, init="sequence", seed=seed) for t in targets)
+        solved += [r.q for r in results if r.success]
+    return _entries(hand, np.array(solved).reshape(-1, hand.nq))
+
+
+def hand_reach(hand: Hand) -> Any:
+    """The grasp sampler's :class:`~sahgrasp.objects.grasp_sampler.HandReach` of ``hand``.
+
+    Raises:
+        GraspDatabaseError: Not known for this hand (the SAH's only).
+    """
+    from sahgrasp.objects.grasp_sampler import SAH_REACH
+
+    if hand.description.name != "sah":
+        raise GraspDatabaseError(
+            f"grasp entries need the hand's reach, known for the SAH only, not for "
+            f"{hand.description.name!r}; build with grasps=0 (`--grasps 0`)"
+        )
+    return SAH_REACH
 
 
 def build_database(
@@ -294,53 +369,86 @@ def build_database(
     seed: int = LEARN_SEED,
     executor: Executor | None = None,
     progress: Any = None,
+    grasp_sets: int = 0,
 ) -> GraspDatabase:
-    """Build a database of ``samples`` entries and write it to ``out`` (atomic, resumable).
+    """Build a database of ``samples`` random entries and grasp entries; write it to ``out``.
 
-    Work is split into chunks of :data:`CHUNK_SAMPLES`; each finished chunk is saved in
+    Work is split into chunks (:data:`CHUNK_SAMPLES` random entries, or
+    :data:`PRIMITIVES_PER_CHUNK` primitive solids); each finished chunk is saved in
     ``<out>.parts/`` and a rerun with the same arguments skips it, so an interrupted build
     resumes where it stopped. The result does not depend on the executor or on interruptions.
 
     Args:
         hand: The hand.
-        samples: Entries (>= 1).
-        out: The ``.npz`` file to write.
+        samples: Random entries (>= 1).
+        out: The ``.npz`` file to write (atomically).
         seed: Seed of the entries (default :data:`LEARN_SEED`).
         executor: Where the chunks run (None: in this process).
         progress: Called with (chunks done, chunks) after each chunk.
+        grasp_sets: Contact sets to draw on primitive solids, :data:`SETS_PER_PRIMITIVE` per
+            solid (rounded up); the solved ones become grasp entries (0: none).
+
+    Raises:
+        GraspDatabaseError: Grasp entries asked for a hand whose reach is unknown.
     """
+    if grasp_sets > 0:
+        hand_reach(hand)
+    digest = hand.description.digest()
+    solids = -(-grasp_sets // SETS_PER_PRIMITIVE)
+    jobs = [(sample_chunk, "r", _split(samples, CHUNK_SAMPLES)),
+            (grasp_chunk, "g", _split(solids, PRIMITIVES_PER_CHUNK))]  # fmt: skip
+    tasks = [(fn, i, n, f"{seed}-{tag}{i}-{n}-{digest[:16]}.npz")
+             for fn, tag, sizes in jobs for i, n in enumerate(sizes)]  # fmt: skip
     parts = Path(f"{out}.parts")
     parts.mkdir(parents=True, exist_ok=True)
-    digest = hand.description.digest()
-    sizes = [min(CHUNK_SAMPLES, samples - s) for s in range(0, samples, CHUNK_SAMPLES)]
-    names = [parts / f"{seed}-{i}-{n}-{digest[:16]}.npz" for i, n in enumerate(sizes)]
-    todo = [i for i, name in enumerate(names) if not name.is_file()]
-    args = [(hand.description, digest, seed, i, sizes[i]) for i in todo]
+    todo = [t for t in tasks if not (parts / t[3]).is_file()]
     results: Any = iter(())
-    if args:
+    if todo:
+        args = [(fn, hand.description, digest, seed, i, n) for fn, i, n, _ in todo]
         results = (
-            (sample_chunk(*a) for a in args)
+            (_run(*a) for a in args)
             if executor is None
-            else executor.map(sample_chunk, *zip(*args, strict=True))
+            else executor.map(_run, *zip(*args, strict=True))
         )
-    done = len(names) - len(todo)
-    for i, (q, features) in zip(todo, results, strict=True):
+    done = len(tasks) - len(todo)
+    for (_, _, _, name), (q, features) in zip(todo, results, strict=True):
         part = GraspDatabase(hand.description.name, digest, q, features, seed)
-        write_bytes_atomic(names[i], part.to_bytes())
+        write_bytes_atomic(parts / name, part.to_bytes())
         done += 1
         if progress is not None:
-            progress(done, len(names))
-    chunks = [GraspDatabase.load(name) for name in names]
+            progress(done, len(tasks))
+    chunks = [_load_part(parts / name) for _, _, _, name in tasks]
+    grasps = sum(
+        len(c.configurations) for c, t in zip(chunks, tasks, strict=True) if t[0] is grasp_chunk
+    )
     db = GraspDatabase(
         hand.description.name, digest,
-        np.concatenate([c.configurations for c in chunks]),
-        np.concatenate([c.features for c in chunks]), seed,
+        np.concatenate([c.configurations for c in chunks]).reshape(-1, hand.nq),
+        np.concatenate([c.features for c in chunks]).reshape(-1, 6 * len(hand.fingers)),
+        seed, grasps,
     )  # fmt: skip
     db.save(out)
-    for name in names:
-        name.unlink()
+    for _, _, _, name in tasks:
+        (parts / name).unlink()
     parts.rmdir()
     return db
+
+
+def _load_part(path: Path) -> GraspDatabase:
+    """A finished chunk of :func:`build_database` (it may hold no entry)."""
+    part = GraspDatabase._read(path)
+    part.validate(str(path), empty_ok=True)
+    return part
+
+
+def _split(total: int, size: int) -> list[int]:
+    """``total`` in chunks of ``size``, the last one smaller."""
+    return [min(size, total - start) for start in range(0, total, size)]
+
+
+def _run(fn: Any, *args: Any) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """``fn(*args)``: one picklable entry point for the executors' map."""
+    return fn(*args)
 
 
 _DEFAULTS: dict[str, GraspDatabase | None] = {}

@@ -22,20 +22,18 @@ import math
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from functools import lru_cache
 from typing import TYPE_CHECKING, Any, Literal, get_args
 
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
-from scipy.linalg.lapack import dposv
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
-from sahgrasp.ik.learned import GraspDatabase, default_database
+from sahgrasp.ik.learned import GraspDatabase, contact_key, default_database
 from sahgrasp.ik.obstacle import Obstacle
 from sahgrasp.ik.starts import initial_lambdas
 
@@ -270,6 +268,7 @@ class ContactProblem:
         self.stack_fingers = None if not free_fingers else self.rows.tolist()
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
+        self.normals = np.array([c.normal for c in contacts])
         self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
         # The targets in the order of Hand.contact_stack: (p_i*, r_i*) per constrained finger.
         self.target_stack = np.concatenate([self.points, self.centres], axis=1).ravel()
@@ -454,66 +453,6 @@ def _recorder(history: list[NDArray[np.float64]], q: NDArray[np.float64]) -> Cal
     return lambda: history.append(q.copy())
 
 
-def _free_coordinates(
-    hand: Hand, q: NDArray[np.float64], gradient: NDArray[np.float64]
-) -> NDArray[np.bool_] | None:
-    """Active set: coordinates at a bound that the descent direction pushes outwards are fixed.
-
-    Returns the mask of the free coordinates, or None when every coordinate is free (the usual
-    case, which then needs no column selection). A coordinate is fixed when it sits at its lower
-    bound with ``g < 0`` or at its upper bound with ``g > 0``: one product of signs and flags
-    (numpy's fixed cost per call, not the arithmetic, is what an iteration pays for).
-    """
-    x, g = hand.finger_part(q), gradient[6:]
-    at_lower, at_upper = hand.bound_tests
-    fixed = ((x <= at_lower) & (g < 0.0)) | ((x >= at_upper) & (g > 0.0))
-    # count_nonzero is a plain C call; ndarray.any() and np.ones go through Python wrappers.
-    if not np.count_nonzero(fixed):
-        return None
-    free = np.empty(hand.nv, dtype=bool)
-    free[:6] = True
-    np.logical_not(fixed, out=free[6:])
-    return free
-
-
-def _clamped_step(
-    hand: Hand, q: NDArray[np.float64], step: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    candidate = hand.integrate(q, step)
-    joints = hand.finger_part(candidate)
-    # np.clip's Python wrapper costs several times these two ufuncs.
-    np.minimum(np.maximum(joints, hand.lower, out=joints), hand.upper, out=joints)
-    return candidate
-
-
-def _damped_solve(
-    A: NDArray[np.float64], g: NDArray[np.float64], mu: float
-) -> NDArray[np.float64] | None:
-    """``(A + mu I)^-1 g`` by Cholesky (LAPACK ``dposv``); None if not positive definite."""
-    damped = A + mu * _identity(len(A))
-    _, x, info = dposv(damped, g, overwrite_a=True)
-    return None if info != 0 else np.asarray(x)
-
-
-@lru_cache(maxsize=8)
-def _identity(n: int) -> NDArray[np.float64]:
-    """The n x n identity, built once per size (the damping adds ``mu I`` every step)."""
-    identity = np.eye(n)
-    identity.flags.writeable = False
-    return identity
-
-
-def _full_step(
-    hand: Hand, free: NDArray[np.bool_] | None, x: NDArray[np.float64]
-) -> NDArray[np.float64]:
-    """The step in ``v`` whose free coordinates are ``x`` (fixed ones stay)."""
-    if free is None:
-        return x
-    step = np.zeros(hand.nv)
-    step[free] = x
-    return step
-
-
 REPAIR_PATIENCE = 3
 """With an obstacle: repair steps without a new low of the summed or deepest penetration."""
 
@@ -530,7 +469,8 @@ def _separate(
     The solution set is redundant (27 DoF, 20 contact constraints for the SAH), so a converged but
     colliding configuration can usually slide along it out of collision: each step solves the
     contact rows together with one row per penetrating pair asking the second body to move along
-    the separating normal by the penetration depth plus a margin. A link in the obstacle is such a
+    the separating normal by the penetration depth plus a margin (damped least squares, bounds as
+    an active set; compiled, ``Tree.repair``). A link in the obstacle is such a
     pair whose first body is the object (fixed). With an obstacle, a repair whose summed and
     deepest penetration set no new low for :data:`REPAIR_PATIENCE` steps is given up: such
     repairs rarely end clear, and each step costs a hand-object query (docs/ik.md, item 5).
@@ -538,11 +478,12 @@ def _separate(
     # Only with an obstacle: without one, giving up early saved no time and cost starts.
     patience = REPAIR_PATIENCE if problem.obstacle is not None else s.repair_iterations
     lows_m, stalled = np.array([np.inf, np.inf]), 0
+    tree, out = compiled_tree(hand), np.empty(hand.nq)
     for k in range(s.repair_iterations):
         penetrations = problem.penetrations(q, s.collision_margin_m)
         if not penetrations:
             return q, k
-        rows, depths = hand.separation_rows(q, penetrations)
+        depths = np.array([p.depth_m for p in penetrations])
         # A hopeless repair wanders: give it up once neither the summed nor the deepest
         # penetration has set a new low for ``patience`` steps (the deepest alone cut the
         # three-finger can's paper grasp, whose repair climbs for three steps and then clears).
@@ -551,15 +492,15 @@ def _separate(
         lows_m = np.minimum(lows_m, depth_m)
         if stalled >= patience:
             return q, k
-        stack, J_contacts = hand.contact_stack_jacobian(q, problem.stack_fingers)
-        J = np.vstack([J_contacts, rows])
-        e = np.concatenate([problem.target_stack - stack, depths])
-        free = _free_coordinates(hand, q, J.T.dot(e))
-        JF = J if free is None else J[:, free]
-        x = _damped_solve(JF.T.dot(JF), JF.T.dot(e), 1e-6)
-        if x is None:  # the rows are degenerate: no separating step exists here
+        # The compiled step (sahgrasp/ik/_lm.c): Pinocchio joint j is the tree's joint j - 1,
+        # and the object (joint 0) is the world, -1.
+        joints = np.array([(p.joint_a - 1, p.joint_b - 1) for p in penetrations], dtype=np.int64)
+        points = np.array([(p.point_a, p.point_b) for p in penetrations])
+        normals = np.array([p.normal for p in penetrations])
+        args = (problem.target_stack, problem.rows, joints, points, normals, depths, out)
+        if not tree.repair(q, *args):  # the rows are degenerate: no separating step exists here
             return q, k
-        q = _clamped_step(hand, q, _full_step(hand, free, x))
+        q = out.copy()
         if history is not None:
             history.append(q.copy())
     return q, s.repair_iterations
@@ -691,8 +632,11 @@ def _starts(
 ) -> Iterator[tuple[Literal["q", "coords"], NDArray[np.float64]]]:
     """The ``max_inits`` starts: learned configurations first, then the sequence's coordinates."""
     used = 0
-    if s.init == "learned" and database is not None:
-        for q in database.starts(hand, problem.target, min(s.learned_starts, s.max_inits)):
+    # Database keys hold every finger: a problem with free fingers starts from the sequence.
+    if s.init == "learned" and database is not None and problem.stack_fingers is None:
+        key = contact_key(problem.points, problem.normals)
+        count = min(s.learned_starts, s.max_inits)
+        for q in database.starts(hand, key, problem.target_stack, count):
             used += 1
             yield "q", q
     init = "sequence" if s.init == "learned" else s.init
