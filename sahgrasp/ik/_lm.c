@@ -642,36 +642,55 @@ release_f:
     return result;
 }
 
+/* The buffers of a call on (q, fingers, a 6 nf vector): fingers, q, vector, in b[0..2]; 0, or -1
+ * with an exception and nothing held. */
+static int take_finger_buffers(const Tree *self, PyObject *q_obj, int q_writable,
+                               PyObject *fingers_obj, PyObject *vec_obj, int vec_writable,
+                               const char *vec_name, Py_buffer b[3], int *nf) {
+    if (check_ready(self) < 0) return -1;
+    if (get_buffer(fingers_obj, &b[0], -1, 0, "q", "fingers") < 0) return -1;
+    *nf = (int)(b[0].len / 8);
+    if (get_buffer(q_obj, &b[1], self->nq, q_writable, "d", "q") < 0) {
+        PyBuffer_Release(&b[0]);
+        return -1;
+    }
+    if (get_buffer(vec_obj, &b[2], 6 * *nf, vec_writable, "d", vec_name) < 0) {
+        PyBuffer_Release(&b[1]);
+        PyBuffer_Release(&b[0]);
+        return -1;
+    }
+    return 0;
+}
+
+static void release_buffers(Py_buffer *b, int n) {
+    for (int i = 0; i < n; i++) PyBuffer_Release(&b[i]);
+}
+
 /* stack(q, fingers, stack_out, jacobian_out or None): the contact stack and its Jacobian. */
 static PyObject *Tree_stack(Tree *self, PyObject *args) {
     PyObject *q_obj, *fingers_obj, *stack_obj, *jac_obj;
     if (!PyArg_ParseTuple(args, "OOOO:stack", &q_obj, &fingers_obj, &stack_obj, &jac_obj))
         return NULL;
-    if (check_ready(self) < 0) return NULL;
-    Py_buffer qb, fb, sb, jb;
-    int ok = 0;
-    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
-    int nf = (int)(fb.len / 8);
-    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) goto release_f;
-    if (get_buffer(stack_obj, &sb, 6 * nf, 1, "d", "stack") < 0) goto release_q;
-    if (jac_obj != Py_None &&
-        get_buffer(jac_obj, &jb, (Py_ssize_t)6 * nf * self->nv, 1, "d", "jacobian") < 0)
-        goto release_s;
+    Py_buffer b[4];
+    int nf, held = 3, ok = 0, jac = jac_obj != Py_None;
+    if (take_finger_buffers(self, q_obj, 0, fingers_obj, stack_obj, 1, "stack", b, &nf) < 0)
+        return NULL;
+    if (jac) {
+        if (get_buffer(jac_obj, &b[3], (Py_ssize_t)6 * nf * self->nv, 1, "d", "jacobian") < 0) {
+            release_buffers(b, held);
+            return NULL;
+        }
+        held = 4;
+    }
     Work w;
-    if (work_init(&w, self, fb.buf, nf, sb.buf, 0) == 0) {
-        forward(self, qb.buf, w.M);
-        stack_of(self, w.M, fb.buf, nf, sb.buf);
-        if (jac_obj != Py_None) jacobian_of(self, w.M, fb.buf, nf, sb.buf, jb.buf);
+    if (work_init(&w, self, b[0].buf, nf, b[2].buf, 0) == 0) {
+        forward(self, b[1].buf, w.M);
+        stack_of(self, w.M, b[0].buf, nf, b[2].buf);
+        if (jac) jacobian_of(self, w.M, b[0].buf, nf, b[2].buf, b[3].buf);
         work_free(&w);
         ok = 1;
     }
-    if (jac_obj != Py_None) PyBuffer_Release(&jb);
-release_s:
-    PyBuffer_Release(&sb);
-release_q:
-    PyBuffer_Release(&qb);
-release_f:
-    PyBuffer_Release(&fb);
+    release_buffers(b, held);
     if (!ok) return NULL;
     Py_RETURN_NONE;
 }
@@ -917,28 +936,21 @@ static void align_wrist(double *q, const double *source, const double *goal, int
 static PyObject *Tree_align(Tree *self, PyObject *args) {
     PyObject *q_obj, *goal_obj, *fingers_obj;
     if (!PyArg_ParseTuple(args, "OOO:align", &q_obj, &goal_obj, &fingers_obj)) return NULL;
-    if (check_ready(self) < 0) return NULL;
-    Py_buffer qb, gb, fb;
-    int ok = 0;
-    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
-    int nf = (int)(fb.len / 8);
-    if (get_buffer(q_obj, &qb, self->nq, 1, "d", "q") < 0) goto release_f;
-    if (get_buffer(goal_obj, &gb, 6 * nf, 0, "d", "goal") < 0) goto release_q;
+    Py_buffer b[3];
+    int nf, ok = 0;
+    if (take_finger_buffers(self, q_obj, 1, fingers_obj, goal_obj, 0, "goal", b, &nf) < 0)
+        return NULL;
     Work w;
     if (nf < 1) {
         PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
-    } else if (work_init(&w, self, fb.buf, nf, gb.buf, 0) == 0) {
-        forward(self, qb.buf, w.M);
-        stack_of(self, w.M, fb.buf, nf, w.stack);
-        align_wrist(qb.buf, w.stack, gb.buf, 2 * nf);
+    } else if (work_init(&w, self, b[0].buf, nf, b[2].buf, 0) == 0) {
+        forward(self, b[1].buf, w.M);
+        stack_of(self, w.M, b[0].buf, nf, w.stack);
+        align_wrist(b[1].buf, w.stack, b[2].buf, 2 * nf);
         work_free(&w);
         ok = 1;
     }
-    PyBuffer_Release(&gb);
-release_q:
-    PyBuffer_Release(&qb);
-release_f:
-    PyBuffer_Release(&fb);
+    release_buffers(b, 3);
     if (!ok) return NULL;
     Py_RETURN_NONE;
 }
