@@ -16,8 +16,8 @@ contact sets that a grasp planner would draw (:mod:`sahgrasp.objects.grasp_sampl
 primitive solids -- cylinders, boxes, ellipsoids and capsules of graspable sizes, none of them a
 catalog object -- each solved by the IK from the searched sequence: a planner's contact sets lie
 far from every random entry's key, and nearest random entries started no better there than the
-sequence (docs/ik.md, "Limits"). Grasp entries need the hand's reach, known for the SAH only.
-The seeds (:data:`LEARN_SEED`) are used nowhere else.
+sequence (docs/ik.md, "The learned start"). Grasp entries need the hand's reach, known for the
+SAH only. The seeds (:data:`LEARN_SEED`) are used nowhere else.
 """
 
 from __future__ import annotations
@@ -131,6 +131,7 @@ def contact_key(
             use the fingertips' outward ones), shape (F, 3).
     """
     out = np.empty(6 * len(points))
+    points, target_normals = np.ascontiguousarray(points), np.ascontiguousarray(target_normals)
     rigid_key(points, target_normals, -NORMAL_WEIGHT_M, out)
     return out
 
