@@ -12,6 +12,9 @@ with the benchmark's per-object seed), solves each without and then with the obj
   ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
   alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
   (pairs, clearance, link) is the same;
+* ``ik OLD_CLEARANCE_PY``: the same with the IK's own questions, the repair query
+  (``per_link=REPAIR_PAIRS_PER_LINK``; pairs and witnesses compared to the bit) and the
+  acceptance test (``clearance_if_clear``), the latter split by verdict;
 * ``solves OLD_CLEARANCE_PY``: the solves themselves, per set alternating the old checker with
   the old acceptance test (the exact clearance, as before the fourth round) and this code, best
   of ``--repeats`` (``--new-first``: this code before the old in each pair); prints the CPU
@@ -34,6 +37,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
+    python benchmarks/object_queries.py ik old.py --sets 60 --repeats 3
     python benchmarks/object_queries.py solves old.py --sets 20 --repeats 2
     python benchmarks/object_queries.py sets --sets 30
     python benchmarks/object_queries.py alone --sets 100 --objects coffee_cup
@@ -69,7 +73,7 @@ from sahgrasp.bench.grasps import (
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, solve_ik
-from sahgrasp.ik.obstacle import Obstacle
+from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle
 from sahgrasp.objects import GraspObject, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.collision import CollisionShape, convex_hull
@@ -203,6 +207,24 @@ def _old_module(old_path: str) -> Any:
     return old
 
 
+def _alternate(
+    checkers: tuple[Any, Any], queries: list[Any], answer: Callable[..., Any], repeats: int
+) -> tuple[float, float, bool]:
+    """Mean best-of-``repeats`` CPU [us] per query of two checkers, query by query alternating
+    (which one goes first alternates too), and whether every answer is the same."""
+    best = np.full((len(queries), 2), np.inf)
+    same = True
+    for r in range(repeats):
+        for i, (kind, q, contacts, arg) in enumerate(queries):
+            answers = [None, None]
+            for j in (0, 1) if (i + r) % 2 == 0 else (1, 0):
+                spent, answers[j] = _cpu(answer, checkers[j], kind, q, contacts, arg)
+                best[i, j] = min(best[i, j], spent)
+            same &= answers[0] == answers[1]
+    old_us, new_us = best.mean(axis=0) * 1e6 if queries else (math.nan, math.nan)
+    return float(old_us), float(new_us), same
+
+
 def compare(
     hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
 ) -> None:
@@ -211,19 +233,41 @@ def compare(
     checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
     for kind in ("penetrations", "clearance"):
         queries = [entry for entry in log if entry[0] == kind]
-        best = np.full((len(queries), 2), np.inf)
-        same = True
-        for _ in range(repeats):
-            for i, (_, q, contacts, arg) in enumerate(queries):
-                answers = []
-                for j, checker in enumerate(checkers):
-                    spent, out = _cpu(_answer, checker, kind, q, contacts, arg)
-                    best[i, j] = min(best[i, j], spent)
-                    answers.append(out)
-                same &= answers[0] == answers[1]
-        old_us, new_us = best.mean(axis=0) * 1e6
+        old_us, new_us, same = _alternate(checkers, queries, _answer, repeats)
         print(
             f"{obj.name:16s} {kind:12s} {len(queries):5d} queries: old {old_us:6.0f} us, "
+            f"new {new_us:6.0f} us ({new_us / old_us - 1:+.0%}), same answers: {same}"
+        )
+
+
+def _ik_answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...], arg: Any) -> Any:
+    """What the IK asks: its repair query (pairs, witnesses to the bit) or acceptance test."""
+    if kind == "clearance":  # as a tuple: each version has its own Clearance class
+        found = checker.clearance_if_clear(q, contacts, ALLOWANCE_M)
+        return None if found is None else (found.distance_m, found.link, dict(found.links_m))
+    pairs = checker.penetrations(q, arg, contacts, ALLOWANCE_M, per_link=REPAIR_PAIRS_PER_LINK)
+    return [
+        (p.joint_b, p.depth_m, tuple(p.point_a), tuple(p.point_b), tuple(p.normal)) for p in pairs
+    ]
+
+
+def ik(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
+) -> None:
+    old = _old_module(old_path)
+    log = _queries(hand, obj, targets)
+    checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+    groups: dict[str, list[Any]] = {"repair": [], "accept, inside": [], "accept, clear": []}
+    for entry in log:
+        if entry[0] == "penetrations":
+            groups["repair"].append(entry)
+        elif entry[3]:  # an acceptance test
+            clear = checkers[1].clearance_if_clear(entry[1], entry[2], ALLOWANCE_M) is not None
+            groups["accept, clear" if clear else "accept, inside"].append(entry)
+    for group, queries in groups.items():
+        old_us, new_us, same = _alternate(checkers, queries, _ik_answer, repeats)
+        print(
+            f"{obj.name:16s} {group:14s} {len(queries):5d} queries: old {old_us:6.0f} us, "
             f"new {new_us:6.0f} us ({new_us / old_us - 1:+.0%}), same answers: {same}"
         )
 
@@ -425,17 +469,31 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "mode",
-        choices=("profile", "compare", "solves", "sets", "alone", "verdicts", "finer", "pieces"),
+        choices=(
+            "profile",
+            "compare",
+            "ik",
+            "solves",
+            "sets",
+            "alone",
+            "verdicts",
+            "finer",
+            "pieces",
+        ),
     )
-    parser.add_argument("old", nargs="?", help="compare, solves: another version's clearance.py")
+    parser.add_argument(
+        "old", nargs="?", help="compare, ik, solves: another version's clearance.py"
+    )
     parser.add_argument("--sets", type=int, default=20, help="contact sets per object")
-    parser.add_argument("--repeats", type=int, default=5, help="compare, verdicts, pieces: best of")
+    parser.add_argument(
+        "--repeats", type=int, default=5, help="compare, ik, verdicts, pieces: best of"
+    )
     parser.add_argument("--new-first", action="store_true", help="solves: this code first")
     parser.add_argument(
         "--objects", nargs="+", default=["coffee_cup", "mesh:mug.stl", "mesh:bottle.obj"]
     )
     args = parser.parse_args()
-    if args.mode in ("compare", "solves") and not args.old:
+    if args.mode in ("compare", "ik", "solves") and not args.old:
         parser.error(f"{args.mode} needs the other version's clearance.py")
     hand = load_hand("sah")
     for name in args.objects:
@@ -446,6 +504,8 @@ def main() -> None:
             profile(hand, obj, targets)
         elif args.mode == "compare":
             compare(hand, obj, targets, args.old, args.repeats)
+        elif args.mode == "ik":
+            ik(hand, obj, targets, args.old, args.repeats)
         elif args.mode == "solves":
             solves(hand, obj, targets, args.old, args.repeats, args.new_first)
         elif args.mode == "sets":

@@ -145,6 +145,10 @@ class PieceTree:
         self.boxes_m = _boxes(self._objects[0])
         self.coarse_boxes_m = _boxes(self._objects[1])
         self._callback = coal.CollisionCallBackDefault()
+        # Its request and result, looked up once: init() clears the result in place and keeps
+        # the request, and each lookup through ``data`` builds two Python wrappers.
+        self._request = self._callback.data.request
+        self._result = self._callback.data.result
         self._distances = coal.DistanceCallBackDefault()
         self._distances.data.request.enable_signed_distance = True  # init() keeps the request
 
@@ -171,7 +175,7 @@ class PieceTree:
         """
         if not self._closer(self._fine, link, threshold_m):
             return None
-        contact = self._callback.data.result.getContact(0)  # the piece is o1, the link o2
+        contact = self._result.getContact(0)  # the piece is o1, the link o2
         return (
             float(contact.penetration_depth),  # coal stores the signed distance there
             np.array(contact.getNearestPoint1(), dtype=np.float64),
@@ -248,9 +252,9 @@ class PieceTree:
         The callback keeps its result (the first pair found) for :meth:`first_pair`.
         """
         self._callback.init()
-        self._callback.data.request.security_margin = margin_m
+        self._request.security_margin = margin_m
         manager.collide(other, self._callback)
-        return bool(self._callback.data.result.isCollision())
+        return bool(self._result.isCollision())
 
 
 def _boxes(objects: Sequence[coal.CollisionObject]) -> FloatArray:
