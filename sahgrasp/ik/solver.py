@@ -34,7 +34,7 @@ from sahgrasp.hand import ContactState, Hand
 from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, contact_key, default_database
-from sahgrasp.ik.obstacle import Obstacle
+from sahgrasp.ik.obstacle import Obstacle, checker_of
 from sahgrasp.ik.starts import initial_lambdas
 
 if TYPE_CHECKING:
@@ -612,13 +612,10 @@ def _place_free_fingers(
     Only the free fingers' joints move (``HandObjectClearance.place_free_fingers``), so the
     contacts are untouched; a placement that would collide is not taken.
     """
-    from sahgrasp.objects.clearance import HandObjectClearance  # objects imports the hand only
-
-    # With an obstacle, its checker: built once per (hand, object), not once per solve.
+    # One checker per (hand, object), not one per solve (about 0.7 ms to build without an object).
     checker = (
-        HandObjectClearance(problem.hand, None) if problem.obstacle is None
-        else problem.obstacle.checker
-    )  # fmt: skip
+        checker_of(problem.hand, None) if problem.obstacle is None else problem.obstacle.checker
+    )
     placed = checker.place_free_fingers(q, free_fingers).q
     return placed if problem.collision(placed) is None else q
 
