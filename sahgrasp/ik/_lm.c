@@ -126,6 +126,29 @@ static void stack_of(const Tree *T, const Pose *M, const long long *fingers, int
     }
 }
 
+/* Columns c and 3 + c of the Jacobian of the world point x: the velocity of x per unit of the
+ * wrist's local linear (col) and angular (m) velocity along its axis c. */
+static void wrist_columns(const Pose *W, const double *x, int c, double *col, double *m) {
+    double d[3] = {x[0] - W->t[0], x[1] - W->t[1], x[2] - W->t[2]};
+    col[0] = W->R[c], col[1] = W->R[3 + c], col[2] = W->R[6 + c];
+    cross(col, d, m);
+}
+
+/* The velocity of the world point x per unit velocity of joint k (before a mimic's scale). */
+static void joint_velocity(const Tree *T, const Pose *M, int k, const double *x, double *m) {
+    const Pose *K = &M[k];
+    const double *u = T->axis + 3 * k;
+    double a[3];
+    for (int i = 0; i < 3; i++)
+        a[i] = K->R[3 * i] * u[0] + K->R[3 * i + 1] * u[1] + K->R[3 * i + 2] * u[2];
+    if (T->prismatic[k]) {
+        memcpy(m, a, sizeof a);
+    } else {
+        double e[3] = {x[0] - K->t[0], x[1] - K->t[1], x[2] - K->t[2]};
+        cross(a, e, m);
+    }
+}
+
 /* Jacobian (6 nf x nv, row-major) of the stack with respect to v at the placements M. The root's
  * columns are Pinocchio's free-flyer velocity (linear, angular) in the wrist frame; a mimic
  * joint adds its scaled column to its leader's. */
@@ -139,10 +162,9 @@ static void jacobian_of(const Tree *T, const Pose *M, const long long *fingers, 
         for (int half = 0; half < 2; half++) {
             const double *x = stack + 6 * b + 3 * half;
             double *rows = J + (size_t)(6 * b + 3 * half) * nv;
-            double d[3] = {x[0] - W->t[0], x[1] - W->t[1], x[2] - W->t[2]};
             for (int c = 0; c < 3; c++) {
-                double col[3] = {W->R[c], W->R[3 + c], W->R[6 + c]}, m[3];
-                cross(col, d, m);
+                double col[3], m[3];
+                wrist_columns(W, x, c, col, m);
                 for (int i = 0; i < 3; i++) {
                     rows[i * nv + c] = col[i];
                     rows[i * nv + 3 + c] = m[i];
@@ -150,17 +172,8 @@ static void jacobian_of(const Tree *T, const Pose *M, const long long *fingers, 
             }
             for (int n = 0; n < T->chain_len[f]; n++) {
                 int k = T->chain[f * T->nj + n];
-                const Pose *K = &M[k];
-                const double *u = T->axis + 3 * k;
-                double a[3], m[3];
-                for (int i = 0; i < 3; i++)
-                    a[i] = K->R[3 * i] * u[0] + K->R[3 * i + 1] * u[1] + K->R[3 * i + 2] * u[2];
-                if (T->prismatic[k]) {
-                    memcpy(m, a, sizeof m);
-                } else {
-                    double e[3] = {x[0] - K->t[0], x[1] - K->t[1], x[2] - K->t[2]};
-                    cross(a, e, m);
-                }
+                double m[3];
+                joint_velocity(T, M, k, x, m);
                 for (int i = 0; i < 3; i++) rows[i * nv + T->v_index[k]] += T->scale[k] * m[i];
             }
         }
@@ -283,16 +296,19 @@ static double residual_of(Work *w, const double *q, double *stack, double *r) {
     return dot(r, r, w->m);
 }
 
+/* Whether column c is fixed: a joint at a bound with the gradient g pushing it outwards. */
+static int fixed_at_bound(const Tree *T, const double *q, int c, double g) {
+    if (c < 6) return 0; /* the wrist is free */
+    double value = q[c + 1], lo = T->lower[c - 6] + 1e-12, hi = T->upper[c - 6] - 1e-12;
+    return (value <= lo && g < 0.0) || (value >= hi && g > 0.0);
+}
+
 /* Active set: the free columns (at a bound with the gradient pushing outwards = fixed). */
 static int free_columns(const Work *w, const double *q) {
     int n = 0;
     for (int c = 0; c < w->nv; c++) {
         w->position[c] = -1;
-        if (c >= 6) {
-            double value = q[c + 1], grad = w->g[c];
-            double lo = w->T->lower[c - 6] + 1e-12, hi = w->T->upper[c - 6] - 1e-12;
-            if ((value <= lo && grad < 0.0) || (value >= hi && grad > 0.0)) continue;
-        }
+        if (fixed_at_bound(w->T, q, c, w->g[c])) continue;
         w->position[c] = n;
         w->free_cols[n++] = c;
     }
@@ -598,50 +614,6 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
     return 0;
 }
 
-static PyObject *Tree_solve(Tree *self, PyObject *args) {
-    PyObject *q_obj, *target_obj, *fingers_obj, *history;
-    int max_iterations, stall;
-    double refine_m, d_min_m;
-    if (!PyArg_ParseTuple(args, "OOOiddiO:solve", &q_obj, &target_obj, &fingers_obj,
-                          &max_iterations, &refine_m, &d_min_m, &stall, &history))
-        return NULL;
-    if (check_ready(self) < 0) return NULL;
-    if (max_iterations < 0 || stall < 1) {
-        PyErr_SetString(PyExc_ValueError, "max_iterations must be >= 0 and stall >= 1");
-        return NULL;
-    }
-    Py_buffer qb, tb, fb;
-    if (get_buffer(fingers_obj, &fb, -1, 0, "q", "fingers") < 0) return NULL;
-    int nf = (int)(fb.len / 8);
-    PyObject *result = NULL;
-    if (get_buffer(q_obj, &qb, self->nq, 1, "d", "q") < 0) goto release_f;
-    if (get_buffer(target_obj, &tb, 6 * nf, 0, "d", "target") < 0) goto release_q;
-    Work w;
-    if (nf < 1 || work_init(&w, self, fb.buf, nf, tb.buf, max_iterations) < 0) {
-        if (nf < 1) PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
-        goto release_t;
-    }
-    Outcome out;
-    int status;
-    if (history == Py_None) {
-        /* No Python call inside: other threads (threaded executors' workers) run meanwhile. */
-        Py_BEGIN_ALLOW_THREADS
-        status = lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall, NULL, &out);
-        Py_END_ALLOW_THREADS
-    } else {
-        status = lm_loop(&w, qb.buf, max_iterations, refine_m, d_min_m, stall, history, &out);
-    }
-    if (status == 0) result = Py_BuildValue("iid", out.outcome, out.iterations, out.error);
-    work_free(&w);
-release_t:
-    PyBuffer_Release(&tb);
-release_q:
-    PyBuffer_Release(&qb);
-release_f:
-    PyBuffer_Release(&fb);
-    return result;
-}
-
 /* The buffers of a call on (q, fingers, a 6 nf vector): fingers, q, vector, in b[0..2]; 0, or -1
  * with an exception and nothing held. */
 static int take_finger_buffers(const Tree *self, PyObject *q_obj, int q_writable,
@@ -664,6 +636,44 @@ static int take_finger_buffers(const Tree *self, PyObject *q_obj, int q_writable
 
 static void release_buffers(Py_buffer *b, int n) {
     for (int i = 0; i < n; i++) PyBuffer_Release(&b[i]);
+}
+
+static PyObject *Tree_solve(Tree *self, PyObject *args) {
+    PyObject *q_obj, *target_obj, *fingers_obj, *history;
+    int max_iterations, stall;
+    double refine_m, d_min_m;
+    if (!PyArg_ParseTuple(args, "OOOiddiO:solve", &q_obj, &target_obj, &fingers_obj,
+                          &max_iterations, &refine_m, &d_min_m, &stall, &history))
+        return NULL;
+    if (max_iterations < 0 || stall < 1) {
+        PyErr_SetString(PyExc_ValueError, "max_iterations must be >= 0 and stall >= 1");
+        return NULL;
+    }
+    Py_buffer b[3]; /* fingers, q, target */
+    int nf;
+    if (take_finger_buffers(self, q_obj, 1, fingers_obj, target_obj, 0, "target", b, &nf) < 0)
+        return NULL;
+    PyObject *result = NULL;
+    Work w;
+    if (nf < 1) {
+        PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
+    } else if (work_init(&w, self, b[0].buf, nf, b[2].buf, max_iterations) == 0) {
+        Outcome out;
+        int status;
+        double *q = b[1].buf;
+        if (history == Py_None) {
+            /* No Python call inside: other threads (threaded executors' workers) run meanwhile. */
+            Py_BEGIN_ALLOW_THREADS
+            status = lm_loop(&w, q, max_iterations, refine_m, d_min_m, stall, NULL, &out);
+            Py_END_ALLOW_THREADS
+        } else {
+            status = lm_loop(&w, q, max_iterations, refine_m, d_min_m, stall, history, &out);
+        }
+        if (status == 0) result = Py_BuildValue("iid", out.outcome, out.iterations, out.error);
+        work_free(&w);
+    }
+    release_buffers(b, 3);
+    return result;
 }
 
 /* stack(q, fingers, stack_out, jacobian_out or None): the contact stack and its Jacobian. */
@@ -726,26 +736,15 @@ static PyObject *Tree_integrate(Tree *self, PyObject *args) {
 static void add_point_row(const Tree *T, const Pose *M, int k, const double *x, const double *n,
                           double sign, double *row) {
     if (k < 0) return;
-    const Pose *W = &M[0];
-    double d[3] = {x[0] - W->t[0], x[1] - W->t[1], x[2] - W->t[2]};
-    for (int c = 0; c < 3; c++) { /* the wrist's local linear and angular velocity */
-        double col[3] = {W->R[c], W->R[3 + c], W->R[6 + c]}, m[3];
-        cross(col, d, m);
+    for (int c = 0; c < 3; c++) {
+        double col[3], m[3];
+        wrist_columns(&M[0], x, c, col, m);
         row[c] += sign * (n[0] * col[0] + n[1] * col[1] + n[2] * col[2]);
         row[3 + c] += sign * (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]);
     }
     for (int j = k; j > 0; j = T->parent[j]) {
-        const Pose *K = &M[j];
-        const double *u = T->axis + 3 * j;
-        double a[3], m[3];
-        for (int i = 0; i < 3; i++)
-            a[i] = K->R[3 * i] * u[0] + K->R[3 * i + 1] * u[1] + K->R[3 * i + 2] * u[2];
-        if (T->prismatic[j]) {
-            memcpy(m, a, sizeof m);
-        } else {
-            double e[3] = {x[0] - K->t[0], x[1] - K->t[1], x[2] - K->t[2]};
-            cross(a, e, m);
-        }
+        double m[3];
+        joint_velocity(T, M, j, x, m);
         row[T->v_index[j]] += sign * T->scale[j] * (n[0] * m[0] + n[1] * m[1] + n[2] * m[2]);
     }
 }
@@ -785,13 +784,8 @@ static int repair_step(const Tree *T, const double *q, const double *target,
     for (int i = 0; i < rows; i++)
         for (int c = 0; c < nv; c++) g[c] += J[(size_t)i * nv + c] * e[i];
     int n = 0;
-    for (int c = 0; c < nv; c++) {
-        if (c >= 6) {
-            double lo = T->lower[c - 6] + 1e-12, hi = T->upper[c - 6] - 1e-12;
-            if ((q[c + 1] <= lo && g[c] < 0.0) || (q[c + 1] >= hi && g[c] > 0.0)) continue;
-        }
-        free_cols[n++] = c;
-    }
+    for (int c = 0; c < nv; c++)
+        if (!fixed_at_bound(T, q, c, g[c])) free_cols[n++] = c;
     for (int a = 0; a < n; a++) {
         for (int b = 0; b <= a; b++) {
             double sum = 0.0;
