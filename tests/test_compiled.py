@@ -91,7 +91,7 @@ def test_integration_matches_pinocchio_and_clamps(hand: Hand) -> None:
 
 def _plain_loop(hand: Hand, problem: ContactProblem, q: np.ndarray, s: IKSettings) -> tuple:
     """The loop of ``_lm_loop`` written out in numpy on Pinocchio's kinematics (the reference)."""
-    damping, fingers = 1e-3, problem.stack_fingers
+    damping, fingers = 1e-3, problem.rows.tolist()
     stack, J = hand.contact_stack_jacobian(q, fingers)
     e = problem.target_stack - stack
     costs = [e.dot(e)]

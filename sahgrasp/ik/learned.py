@@ -286,8 +286,7 @@ def _entries(hand: Hand, q: NDArray[np.float64]) -> tuple[NDArray[np.float32], N
     if not len(q):  # a grasp chunk whose solids all were out of reach
         return np.zeros((0, hand.nq), np.float32), np.zeros((0, 6 * len(hand.fingers)), np.float32)
     states = [hand.contact_state(x) for x in q]
-    points = np.array([s.points for s in states]).reshape(len(q), len(hand.fingers), 3)
-    normals = np.array([s.normals for s in states]).reshape(points.shape)
+    points, normals = np.array([s.points for s in states]), np.array([s.normals for s in states])
     return q.astype(np.float32), rigid_features(points, normals).astype(np.float32)
 
 

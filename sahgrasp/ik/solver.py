@@ -264,8 +264,6 @@ class ContactProblem:
         self.target = target
         self.fingers = tuple(constrained)
         self.rows = np.array([hand.fingers.index(f) for f in constrained], dtype=np.intp)
-        # Fingers of Hand.contact_stack: None (all, the fast path) unless some are free.
-        self.stack_fingers = None if not free_fingers else self.rows.tolist()
         contacts = [target.contact(f) for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.normals = np.array([c.normal for c in contacts])
@@ -630,7 +628,7 @@ def _starts(
     """The ``max_inits`` starts: learned configurations first, then the sequence's coordinates."""
     used = 0
     # Database keys hold every finger: a problem with free fingers starts from the sequence.
-    if s.init == "learned" and database is not None and problem.stack_fingers is None:
+    if s.init == "learned" and database is not None and len(problem.fingers) == len(hand.fingers):
         key = contact_key(problem.points, problem.normals)
         count = min(s.learned_starts, s.max_inits)
         for q in database.starts(hand, key, problem.target_stack, count):

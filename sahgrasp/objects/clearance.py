@@ -657,7 +657,6 @@ class HandObjectClearance:
         A geometry is posed once per placement, its box the tight one of its shape.
         """
         hand_tree = self._hand_tree if self._object_at_origin else None
-        placed = hand_tree is not None
         if hand_tree is not None and not self._hand_placed:  # the world is the object frame
             hand_tree.update(False)  # all links at once
             self._hand_placed = True
@@ -666,7 +665,7 @@ class HandObjectClearance:
             if self._posed[g]:
                 continue
             link = self._link_objects[g]
-            if not placed:
+            if hand_tree is None:
                 if self._object_at_origin:
                     at_link = self._at_link(g)
                 else:
