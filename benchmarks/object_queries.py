@@ -225,12 +225,19 @@ def _alternate(
     return float(old_us), float(new_us), same
 
 
+def _queries_and_checkers(
+    hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str
+) -> tuple[list[tuple[str, np.ndarray, tuple[str, ...], Any]], tuple[Any, HandObjectClearance]]:
+    """The IK's logged queries on ``targets``, and the old and the new checker of ``obj``."""
+    old = _old_module(old_path)
+    log = _queries(hand, obj, targets)
+    return log, (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+
+
 def compare(
     hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
 ) -> None:
-    old = _old_module(old_path)
-    log = _queries(hand, obj, targets)
-    checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+    log, checkers = _queries_and_checkers(hand, obj, targets, old_path)
     for kind in ("penetrations", "clearance"):
         queries = [entry for entry in log if entry[0] == kind]
         old_us, new_us, same = _alternate(checkers, queries, _answer, repeats)
@@ -254,9 +261,7 @@ def _ik_answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...]
 def ik(
     hand: Hand, obj: GraspObject, targets: list[GraspTarget], old_path: str, repeats: int
 ) -> None:
-    old = _old_module(old_path)
-    log = _queries(hand, obj, targets)
-    checkers = (old.HandObjectClearance(hand, obj), HandObjectClearance(hand, obj))
+    log, checkers = _queries_and_checkers(hand, obj, targets, old_path)
     groups: dict[str, list[Any]] = {"repair": [], "accept, inside": [], "accept, clear": []}
     for entry in log:
         if entry[0] == "penetrations":
