@@ -328,12 +328,13 @@ def grasp_chunk(
     the entries. A pure function of its arguments (seeded by ``[seed, 1, chunk]``).
     """
     from sahgrasp.ik.batch import worker_hand
-    from sahgrasp.ik.solver import solve_ik
+    from sahgrasp.ik.solver import IKSettings, solve_ik
     from sahgrasp.objects.grasp_sampler import GraspSamplingError, sample_contact_sets
 
     hand = worker_hand(description, digest)
     reach = hand_reach(hand)
     rng = np.random.default_rng([seed, _GRASP_STREAM, chunk])
+    settings = IKSettings(init="sequence", seed=seed)  # validated once, not per solve
     solved = []
     for _ in range(primitives):
         mesh, set_seed = primitive_mesh(rng), int(rng.integers(2**63))
@@ -341,7 +342,7 @@ def grasp_chunk(
             targets = sample_contact_sets(mesh, SETS_PER_PRIMITIVE, set_seed, reach)
         except GraspSamplingError:  # too few sets within the reach: a solid too large or small
             continue
-        results = (solve_ik(hand, t, init="sequence", seed=seed) for t in targets)
+        results = (solve_ik(hand, t, settings) for t in targets)
         solved += [r.q for r in results if r.success]
     return _entries(hand, np.array(solved).reshape(-1, hand.nq))
 
