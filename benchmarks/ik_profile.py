@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, random_problems, solve_ik, solver
 
 PARTS: tuple[tuple[object, str], ...] = (
@@ -24,7 +24,7 @@ PARTS: tuple[tuple[object, str], ...] = (
     (solver, "_result"),
     (solver, "ContactProblem"),
     (solver, "contact_key"),
-    (Hand, "in_collision"),
+    (solver, "self_collides"),
 )
 
 

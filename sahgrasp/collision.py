@@ -220,11 +220,20 @@ class SelfCollision:
         pin.computeDistances(self.model, self.data, self.geometry_model, self.geometry_data, q)
         return float(min(r.min_distance for r in self.geometry_data.distanceResults))
 
-    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+    def penetrations(
+        self, q: NDArray[np.float64], margin_m: float, pairs: NDArray[np.intp] | None = None
+    ) -> list[Penetration]:
         """Every checked pair closer than ``margin_m`` [m] at ``q``, with coal's witnesses.
 
         A first pass stops at the first pair within the margin, so the usual answer of the IK's
         repair loop, "none", costs one cheap query; the witnesses are read only when needed.
+
+        Args:
+            q: Configuration.
+            margin_m: Distance [m] below which a pair is reported.
+            pairs: Indices into :attr:`pairs` of the only pairs to ask coal about, e.g. those
+                the IK's compiled verdict found within the margin (no first pass then); None:
+                every checked pair.
         """
         gd = self._witness_data
         if margin_m != self._witness_margin_m:  # ~1 us per request: set once per margin
@@ -232,21 +241,32 @@ class SelfCollision:
                 request.enable_contact = True
                 request.security_margin = margin_m
             self._witness_margin_m = margin_m
-        if not pin.computeCollisions(self.model, self.data, self._witness_broadphase, q, True):
+        if pairs is not None:
+            if not len(pairs):
+                return []
+            pin.updateGeometryPlacements(self.model, self.data, self.geometry_model, gd, q)
+            near = pairs.tolist()
+        elif not pin.computeCollisions(self.model, self.data, self._witness_broadphase, q, True):
             return []
-        # The gate left the shapes' placements of q in the witness data. Only pairs whose
-        # bounding spheres come within the margin can be within it; each of those is queried
-        # alone (an exact query of every pair read the same witnesses at about 3x the cost).
-        R, t = self._placements or copied_placements(gd)
+        else:
+            near = self._near_pairs(margin_m)
+        return [
+            _penetration(self._pair_joints[k], self._witness_results[k].getContact(0), margin_m)
+            for k in near
+            if pin.computeCollision(self.geometry_model, gd, k)
+        ]
+
+    def _near_pairs(self, margin_m: float) -> list[int]:
+        """The pairs whose bounding spheres come within ``margin_m`` [m].
+
+        At the placements the witness data hold. An exact query of every pair read the same
+        witnesses at about 3x the cost of querying only these.
+        """
+        R, t = self._placements or copied_placements(self._witness_data)
         centres = np.matmul(R, self._centres_local[:, :, None])[:, :, 0] + t
         gap = centres[self._first] - centres[self._second]
         reach = self._reach_m + margin_m
-        near = np.flatnonzero(np.einsum("ij,ij->i", gap, gap) < reach * reach)
-        return [
-            _penetration(self._pair_joints[k], self._witness_results[k].getContact(0), margin_m)
-            for k in near.tolist()
-            if pin.computeCollision(self.geometry_model, gd, k)
-        ]
+        return np.flatnonzero(np.einsum("ij,ij->i", gap, gap) < reach * reach).tolist()
 
 
 def geometry_placement_views(

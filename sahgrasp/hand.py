@@ -950,13 +950,17 @@ class Hand:
         """
         return self.collision.in_collision(self._finite(q))
 
-    def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
+    def penetrations(
+        self, q: NDArray[np.float64], margin_m: float, pairs: NDArray[np.intp] | None = None
+    ) -> list[Penetration]:
         """Pairs of hand bodies closer than ``margin_m`` [m] at ``q``, with their witnesses.
+
+        ``pairs``: indices into ``collision.pairs`` of the only pairs to query (None: all).
 
         Raises:
             InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
         """
-        return self.collision.penetrations(self._finite(q), margin_m)
+        return self.collision.penetrations(self._finite(q), margin_m, pairs)
 
     def min_distance(self, q: NDArray[np.float64]) -> float:
         """Smallest signed distance [m] between checked pairs of hand bodies at ``q``.

@@ -5,6 +5,7 @@ import itertools
 import math
 from pathlib import Path
 
+import coal
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -12,9 +13,16 @@ from scipy.linalg import solve
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand, load_hand, sah_description
-from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems
+from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems, solve_ik
 from sahgrasp.ik._lm import Tree
-from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
+from sahgrasp.ik.compiled import (
+    OUTCOMES,
+    _export,
+    _shapes,
+    compiled_tree,
+    near_pairs,
+    self_collides,
+)
 from sahgrasp.ik.solver import ContactProblem, _lm_loop
 
 FINGER_SETS = (None, [0, 2, 3], [1])
@@ -267,3 +275,104 @@ def test_repair_refuses_bad_input(sah: Hand) -> None:
         tree.repair(q, *good[:4], np.ones((2, 3)), *good[5:])
     with pytest.raises(TypeError):
         tree.repair(q, *good[:2], np.zeros((1, 2)), *good[3:])  # float joints
+
+
+def _coal_distances(hand: Hand, q: np.ndarray) -> np.ndarray:
+    """coal's signed distance of every checked pair at ``q`` [m], in pair order."""
+    collision = hand.collision
+    pin.computeDistances(
+        hand.model, collision.data, collision.geometry_model, collision.geometry_data, q
+    )
+    return np.array([r.min_distance for r in collision.geometry_data.distanceResults])
+
+
+def _self_collision_configurations(hand: Hand) -> list[np.ndarray]:
+    """Random configurations (half of them colliding) and IK solutions (near contact)."""
+    solved = [r.q for r in (solve_ik(hand, t) for t in random_problems(hand, 20, seed=8123))]
+    return _configurations(hand, 60, 8124) + solved
+
+
+@pytest.mark.parametrize("margin_m", [0.0, 1e-3, 5e-3])
+def test_pairs_within_match_coal_distances(hand: Hand, margin_m: float) -> None:
+    tree = compiled_tree(hand)
+    assert tree.shape_count == len(hand.collision.geometry_model.geometryObjects)
+    assert tree.pair_count == len(hand.collision.pairs)
+    out, counted = np.empty(tree.pair_count, dtype=np.int64), 0
+    for q in _self_collision_configurations(hand):
+        distances = _coal_distances(hand, q)
+        found = set(out[: tree.pairs_within(q, margin_m, out)].tolist())
+        clear_cut = np.abs(distances - margin_m) > 1e-9  # GJK's tolerance decides the others
+        expected = set(np.flatnonzero(clear_cut & (distances < margin_m)).tolist())
+        assert found & set(np.flatnonzero(clear_cut)) == expected
+        counted += len(expected)
+    assert counted > 0  # some pairs were within the margin
+
+
+def test_pairs_within_stops_at_the_length_of_out(sah: Hand) -> None:
+    tree = compiled_tree(sah)
+    q = next(q for q in _configurations(sah, 50, 8125) if sah.in_collision(q))
+    every = np.empty(tree.pair_count, dtype=np.int64)
+    count = tree.pairs_within(q, 0.01, every)
+    first = np.empty(1, dtype=np.int64)
+    assert count >= 1 and tree.pairs_within(q, 0.01, first) == 1
+    assert first[0] == every[0]
+    with pytest.raises(ValueError, match="margin_m"):
+        tree.pairs_within(q, -1e-3, every)
+    with pytest.raises(TypeError):
+        tree.pairs_within(q, 0.0, np.empty(3))  # float indices
+
+
+def test_self_collides_is_the_verdict_of_coal_distances(hand: Hand) -> None:
+    verdicts = []
+    for q in _self_collision_configurations(hand):
+        deepest_m = _coal_distances(hand, q).min()
+        if abs(deepest_m) > 1e-9:
+            assert self_collides(hand, q) == (deepest_m < 0.0)
+            verdicts.append(deepest_m < 0.0)
+    assert any(verdicts) and not all(verdicts)
+
+
+def test_near_pairs_give_the_same_witnesses_as_coal_alone(sah: Hand) -> None:
+    for q in _configurations(sah, 40, 8126):
+        near = near_pairs(sah, q, 2e-3)
+        assert near is not None
+        alone = sah.penetrations(q, 2e-3)
+        guided = sah.penetrations(q, 2e-3, near)
+        assert [(p.joint_a, p.joint_b, p.depth_m) for p in guided] == [
+            (p.joint_a, p.joint_b, p.depth_m) for p in alone
+        ]
+
+
+def test_a_hand_with_a_mesh_shape_falls_back_to_coal(tmp_path: Path) -> None:
+    description = sah_description()
+    mesh = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
+    urdf = description.urdf_path.read_text()
+    palm = '<geometry><box size="0.0657 0.12 0.13"/></geometry></collision>'
+    assert palm in urdf
+    urdf = urdf.replace(
+        palm, f'<geometry><mesh filename="{mesh}" scale="0.5 0.5 0.5"/></geometry></collision>', 1
+    )
+    path = tmp_path / "sah_mesh_palm.urdf"
+    path.write_text(urdf)
+    hand = Hand(dataclasses.replace(description, urdf_path=path))
+    assert compiled_tree(hand).shape_count == 0
+    assert near_pairs(hand, hand.configuration(), 1e-3) is None
+    for q in _configurations(hand, 10, 8127):
+        assert self_collides(hand, q) == hand.in_collision(q)
+
+
+def test_capsules_are_inflated_segments(sah: Hand) -> None:
+    geometry = pin.GeometryModel()
+    for name, shape in (("ball", coal.Sphere(0.01)), ("capsule", coal.Capsule(0.02, 0.1))):
+        geometry.addGeometryObject(pin.GeometryObject(name, 1, pin.SE3.Identity(), shape))
+    shapes = _shapes(geometry)
+    assert shapes is not None
+    joints, placements, kinds, sizes, balls, _ = shapes
+    assert kinds.tolist() == [0, 2]  # a point and a cylinder of radius 0, both inflated
+    np.testing.assert_allclose(sizes, [[0, 0, 0, 0.01], [0, 0.05, 0, 0.02]])
+    tree, out, pair = _export(sah), np.empty(1, dtype=np.int64), np.array([[0, 1]], np.int64)
+    # The capsule moved along x from the sphere's centre: they touch at x = 0.03 m.
+    for x_m, touching in ((0.0299, True), (0.0301, False)):
+        moved = np.array([placements[0], [*np.eye(3).ravel(), x_m, 0.0, 0.0]])
+        tree.set_shapes(joints, moved, kinds, sizes, balls, pair)
+        assert (tree.pairs_within(sah.configuration(), 0.0, out) == 1) is touching

@@ -12,11 +12,14 @@
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <structmember.h>
+#include <stddef.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../_arrays.h"
+#include "../_gjk.h"
 
 typedef struct {
     double R[9];
@@ -40,6 +43,13 @@ typedef struct {
     int *columns_len;
     double radius;   /* fingertip sphere radius [m] */
     double *lower, *upper;  /* limits of q[7:] */
+    /* Collision shapes (set_shapes), for the self-collision verdicts; none until set. */
+    int ns, npairs;
+    int *shape_joint;     /* tree joint carrying each shape */
+    Pose *shape_place;    /* each shape's placement in its joint's frame */
+    GjkShape *shapes;     /* kind, size, inflation; placed per query */
+    double *ball;         /* bounding ball per shape: local centre, radius (4 values) */
+    int *pairs;           /* the checked pairs, 2 shape indices each */
 } Tree;
 
 /* ---------------------------------------------------------------- small linear algebra -- */
@@ -456,6 +466,11 @@ static void Tree_dealloc(Tree *self) {
     free(self->columns_len);
     free(self->lower);
     free(self->upper);
+    free(self->shape_joint);
+    free(self->shape_place);
+    free(self->shapes);
+    free(self->ball);
+    free(self->pairs);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -845,6 +860,126 @@ static PyObject *Tree_repair(Tree *self, PyObject *args) {
     return PyBool_FromLong(status);
 }
 
+/* ------------------------------------------------------------------ self-collision -- */
+
+/* set_shapes(joints, placements, kinds, sizes, balls, pairs): the hand's collision shapes
+ * (tree joint, placement in it as 12 values, kind of _gjk.h, 4 sizes: box half extents or
+ * cylinder radius and half length, then the inflation), their bounding balls (local centre,
+ * radius) and the pairs to check. */
+static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
+    enum { JOINTS, PLACEMENTS, KINDS, SIZES, BALLS, PAIRS, N_ARGS };
+    PyObject *o[N_ARGS];
+    if (!PyArg_ParseTuple(args, "OOOOOO:set_shapes", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5]))
+        return NULL;
+    if (check_ready(self) < 0) return NULL;
+    static const char *names[N_ARGS] = {"joints", "placements", "kinds", "sizes", "balls", "pairs"};
+    static const char *formats[N_ARGS] = {"q", "d", "q", "d", "d", "q"};
+    Py_buffer b[N_ARGS];
+    int held = 0, ns = 0, ok = 0;
+    for (; held < N_ARGS; held++) {
+        Py_ssize_t sizes[N_ARGS] = {-1, 12 * ns, ns, 4 * ns, 4 * ns, -1};
+        if (get_buffer(o[held], &b[held], sizes[held], 0, formats[held], names[held]) < 0) break;
+        if (held == JOINTS) ns = (int)(b[0].len / 8);
+    }
+    if (held == N_ARGS) {
+        const long long *joints = b[JOINTS].buf, *kinds = b[KINDS].buf, *pairs = b[PAIRS].buf;
+        int npairs = (int)(b[PAIRS].len / 16), bad = b[PAIRS].len % 16 != 0;
+        for (int k = 0; k < ns; k++)
+            bad |= joints[k] < 0 || joints[k] >= self->nj || kinds[k] < SHAPE_POINT ||
+                   kinds[k] > SHAPE_CYLINDER;
+        for (int k = 0; k < 2 * npairs; k++) bad |= pairs[k] < 0 || pairs[k] >= ns;
+        int *joint = malloc((size_t)ns * sizeof(int) + 1), *pair = malloc(2 * (size_t)npairs * sizeof(int) + 1);
+        Pose *place = malloc((size_t)ns * sizeof(Pose) + 1);
+        GjkShape *shapes = calloc((size_t)ns + 1, sizeof(GjkShape));
+        double *ball = malloc(4 * (size_t)ns * sizeof(double) + 1);
+        if (bad) {
+            PyErr_SetString(PyExc_ValueError, "set_shapes: a joint, kind or pair is out of range");
+        } else if (!joint || !pair || !place || !shapes || !ball) {
+            PyErr_NoMemory();
+        } else {
+            const double *placements = b[PLACEMENTS].buf, *sizes = b[SIZES].buf;
+            for (int k = 0; k < ns; k++) {
+                joint[k] = (int)joints[k];
+                memcpy(place[k].R, placements + 12 * k, 9 * sizeof(double));
+                memcpy(place[k].t, placements + 12 * k + 9, 3 * sizeof(double));
+                shapes[k].kind = (int)kinds[k];
+                memcpy(shapes[k].size, sizes + 4 * k, 3 * sizeof(double));
+                shapes[k].radius = sizes[4 * k + 3];
+            }
+            for (int k = 0; k < 2 * npairs; k++) pair[k] = (int)pairs[k];
+            memcpy(ball, b[BALLS].buf, 4 * (size_t)ns * sizeof(double));
+            free(self->shape_joint), free(self->shape_place), free(self->shapes);
+            free(self->ball), free(self->pairs);
+            self->shape_joint = joint, self->shape_place = place, self->shapes = shapes;
+            self->ball = ball, self->pairs = pair, self->ns = ns, self->npairs = npairs;
+            joint = NULL, pair = NULL, place = NULL, shapes = NULL, ball = NULL;
+            ok = 1;
+        }
+        free(joint), free(pair), free(place), free(shapes), free(ball);
+    }
+    release_buffers(b, held);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
+/* The pairs whose shapes come within `margin_m` at q, into `found` (up to `most` of them, in
+ * pair order): how many; -1 if out of memory. */
+static int pairs_within(const Tree *T, const double *q, double margin_m, long long *found,
+                        int most) {
+    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
+    GjkShape *shapes = malloc((size_t)T->ns * sizeof(GjkShape) + 1);
+    double *centres = malloc(3 * (size_t)T->ns * sizeof(double) + 1);
+    int count = -1;
+    if (M && shapes && centres) {
+        forward(T, q, M);
+        for (int k = 0; k < T->ns; k++) {
+            Pose world;
+            compose(&M[T->shape_joint[k]], &T->shape_place[k], &world);
+            shapes[k] = T->shapes[k];
+            memcpy(shapes[k].R, world.R, sizeof world.R);
+            memcpy(shapes[k].t, world.t, sizeof world.t);
+            const double *c = T->ball + 4 * k;
+            for (int i = 0; i < 3; i++)
+                centres[3 * k + i] = world.R[3 * i] * c[0] + world.R[3 * i + 1] * c[1] +
+                                     world.R[3 * i + 2] * c[2] + world.t[i];
+        }
+        count = 0;
+        for (int p = 0; p < T->npairs && count < most; p++) {
+            int a = T->pairs[2 * p], b = T->pairs[2 * p + 1];
+            double gap[3], reach = T->ball[4 * a + 3] + T->ball[4 * b + 3] + margin_m;
+            for (int i = 0; i < 3; i++) gap[i] = centres[3 * a + i] - centres[3 * b + i];
+            if (dot(gap, gap, 3) >= reach * reach) continue;  /* the bounding balls are apart */
+            if (gjk_within(&shapes[a], &shapes[b], margin_m)) found[count++] = p;
+        }
+    }
+    free(M), free(shapes), free(centres);
+    return count;
+}
+
+/* pairs_within(q, margin_m, out) -> int: the checked pairs closer than margin_m >= 0 [m] at q
+ * (intersecting if 0), their indices into out (the first len(out)); how many were written. */
+static PyObject *Tree_pairs_within(Tree *self, PyObject *args) {
+    PyObject *q_obj, *out_obj;
+    double margin_m;
+    if (!PyArg_ParseTuple(args, "OdO:pairs_within", &q_obj, &margin_m, &out_obj)) return NULL;
+    if (check_ready(self) < 0) return NULL;
+    if (!(margin_m >= 0.0)) {
+        PyErr_SetString(PyExc_ValueError, "pairs_within: margin_m must be >= 0");
+        return NULL;
+    }
+    Py_buffer qb, ob;
+    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) return NULL;
+    if (get_buffer(out_obj, &ob, -1, 1, "q", "out") < 0) {
+        PyBuffer_Release(&qb);
+        return NULL;
+    }
+    int count = pairs_within(self, qb.buf, margin_m, ob.buf, (int)(ob.len / 8));
+    PyBuffer_Release(&ob);
+    PyBuffer_Release(&qb);
+    if (count < 0) return PyErr_NoMemory();
+    return PyLong_FromLong(count);
+}
+
 /* ------------------------------------------------------------------- rigid alignment -- */
 
 /* Eigenvector of the largest eigenvalue of the symmetric 4 x 4 `N` (cyclic Jacobi rotations). */
@@ -1019,10 +1154,22 @@ static PyMethodDef Tree_methods[] = {
     {"repair", (PyCFunction)Tree_repair, METH_VARARGS,
      "repair(q, target, fingers, joints, points, normals, depths, out) -> bool: one collision "
      "repair step into out; False if its rows are degenerate."},
+    {"set_shapes", (PyCFunction)Tree_set_shapes, METH_VARARGS,
+     "set_shapes(joints, placements, kinds, sizes, balls, pairs): the collision shapes and the "
+     "pairs the self-collision verdicts check."},
+    {"pairs_within", (PyCFunction)Tree_pairs_within, METH_VARARGS,
+     "pairs_within(q, margin_m, out) -> int: the checked pairs closer than margin_m at q "
+     "(indices into out, at most len(out)); how many."},
     {"align", (PyCFunction)Tree_align, METH_VARARGS,
      "align(q, goal, fingers): q's wrist moved (in place) by the rigid motion that best maps "
      "its contact stack onto goal."},
     {NULL, NULL, 0, NULL},
+};
+
+static PyMemberDef Tree_members[] = {
+    {"shape_count", T_INT, offsetof(Tree, ns), READONLY, "collision shapes set (set_shapes)"},
+    {"pair_count", T_INT, offsetof(Tree, npairs), READONLY, "shape pairs checked (set_shapes)"},
+    {NULL, 0, 0, 0, NULL},
 };
 
 static PyTypeObject TreeType = {
@@ -1034,6 +1181,7 @@ static PyTypeObject TreeType = {
     .tp_init = (initproc)Tree_init,
     .tp_dealloc = (destructor)Tree_dealloc,
     .tp_methods = Tree_methods,
+    .tp_members = Tree_members,
 };
 
 static struct PyModuleDef module = {

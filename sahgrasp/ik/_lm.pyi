@@ -11,6 +11,8 @@ MAX_ITERATIONS: int
 def rigid_key(points: NDArray, normals: NDArray, normal_scale: float, out: NDArray) -> None: ...
 
 class Tree:
+    shape_count: int
+    pair_count: int
     def __init__(
         self,
         parents: NDArray,
@@ -55,3 +57,13 @@ class Tree:
         depths: NDArray,
         out: NDArray,
     ) -> bool: ...
+    def set_shapes(
+        self,
+        joints: NDArray,
+        placements: NDArray,
+        kinds: NDArray,
+        sizes: NDArray,
+        balls: NDArray,
+        pairs: NDArray,
+    ) -> None: ...
+    def pairs_within(self, q: NDArray, margin_m: float, out: NDArray) -> int: ...

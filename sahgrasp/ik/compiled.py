@@ -12,16 +12,18 @@ integration against :class:`~sahgrasp.hand.Hand` (Pinocchio) and finite differen
 from __future__ import annotations
 
 import weakref
-from typing import Final
+from typing import Any, Final
 
+import coal
 import numpy as np
 import pinocchio as pin
+from numpy.typing import NDArray
 
 from sahgrasp.errors import HandModelError
 from sahgrasp.hand import Hand
 from sahgrasp.ik._lm import CONVERGED, MAX_ITERATIONS, NO_PROGRESS, Tree
 
-__all__ = ["OUTCOMES", "compiled_tree"]
+__all__ = ["OUTCOMES", "compiled_tree", "near_pairs", "self_collides"]
 
 OUTCOMES: Final = {
     CONVERGED: "converged",
@@ -46,6 +48,42 @@ def compiled_tree(hand: Hand) -> Tree:
     return tree
 
 
+def self_collides(hand: Hand, q: NDArray[np.float64]) -> bool:
+    """True if the hand collides with itself at ``q``: :meth:`Hand.in_collision`'s verdict.
+
+    Compiled (GJK in ``sahgrasp/_gjk.h``, the shapes placed by the tree's own kinematics) when
+    every collision shape is a sphere, box, cylinder or capsule, as in the shipped hands: one
+    native call instead of Pinocchio's and coal's broad phase through Python (docs/ik.md,
+    "Compiled self-collision verdict"). coal answers for other shapes (meshes). The verdicts
+    differ only for pairs within GJK's tolerance of touching (about 1e-12 of their distance).
+    """
+    tree = compiled_tree(hand)
+    if not tree.shape_count:
+        return hand.in_collision(q)
+    return tree.pairs_within(q, 0.0, np.empty(1, dtype=np.int64)) > 0
+
+
+def near_pairs(hand: Hand, q: NDArray[np.float64], margin_m: float) -> NDArray[np.intp] | None:
+    """Indices of the hand's checked pairs that may be closer than ``margin_m`` >= 0 [m] at ``q``.
+
+    Compiled: the pairs the IK's collision repair asks coal's witnesses of
+    (:meth:`Hand.penetrations`), every pair closer than the margin and those within
+    :data:`_TIE_M` beyond it. None when the hand has shapes the compiled check does not know
+    (coal then finds them).
+    """
+    tree = compiled_tree(hand)
+    if not tree.shape_count:
+        return None
+    found = np.empty(tree.pair_count, dtype=np.int64)
+    count = tree.pairs_within(q, margin_m + _TIE_M, found)
+    return found[:count].astype(np.intp)
+
+
+_TIE_M = 1e-9
+"""Pairs this close to the margin [m] are left to coal to decide: a repair step puts the pairs
+it separates at the margin up to rounding, where coal's test and GJK's tolerance may differ."""
+
+
 def _export(hand: Hand) -> Tree:
     model = hand.model
     data = model.createData()
@@ -65,7 +103,7 @@ def _export(hand: Hand) -> Tree:
         for placement in model.jointPlacements[1:]
     ]
     yaw = [model.frames[hand.contact_frame_id(f)].parentJoint - 1 for f in hand.fingers]
-    return Tree(
+    tree = Tree(
         parents=np.array([model.parents[j] - 1 for j in joints], dtype=np.int64),
         placements=np.ascontiguousarray(placements, dtype=np.float64),
         axes=np.ascontiguousarray(axes, dtype=np.float64),
@@ -80,6 +118,47 @@ def _export(hand: Hand) -> Tree:
         upper=np.ascontiguousarray(hand.upper),
         nq=hand.nq,
         nv=hand.nv,
+    )
+    shapes = _shapes(hand.collision.geometry_model)
+    if shapes is not None:
+        tree.set_shapes(*shapes)
+    return tree
+
+
+_SPHERE, _BOX, _CYLINDER = 0, 1, 2  # shape kinds of sahgrasp/_gjk.h
+
+
+def _shapes(geometry_model: pin.GeometryModel) -> tuple[NDArray[Any], ...] | None:
+    """The arguments of :meth:`Tree.set_shapes`; None if a shape is not a primitive it knows."""
+    joints, placements, kinds, sizes, balls = [], [], [], [], []
+    for g in geometry_model.geometryObjects:
+        shape = g.geometry
+        if isinstance(shape, coal.Sphere):
+            kind, size = _SPHERE, [0.0, 0.0, 0.0, shape.radius]
+        elif isinstance(shape, coal.Box):
+            kind, size = _BOX, [*np.asarray(shape.halfSide).tolist(), 0.0]
+        elif isinstance(shape, coal.Cylinder):
+            kind, size = _CYLINDER, [shape.radius, shape.halfLength, 0.0, 0.0]
+        elif isinstance(shape, coal.Capsule):  # a segment inflated by the radius
+            kind, size = _CYLINDER, [0.0, shape.halfLength, 0.0, shape.radius]
+        else:
+            return None
+        if g.parentJoint < 1:
+            return None
+        shape.computeLocalAABB()
+        joints.append(g.parentJoint - 1)
+        placements.append(np.concatenate([g.placement.rotation.ravel(), g.placement.translation]))
+        kinds.append(kind)
+        sizes.append(size)
+        balls.append([*np.asarray(shape.aabb_center).tolist(), float(shape.aabb_radius)])
+    pairs = [(p.first, p.second) for p in geometry_model.collisionPairs]
+    return (
+        np.array(joints, dtype=np.int64),
+        np.ascontiguousarray(placements, dtype=np.float64),
+        np.array(kinds, dtype=np.int64),
+        np.array(sizes, dtype=np.float64),
+        np.array(balls, dtype=np.float64),
+        np.array(pairs, dtype=np.int64).reshape(-1, 2),
     )
 
 

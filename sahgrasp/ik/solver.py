@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
-from sahgrasp.ik.compiled import OUTCOMES, compiled_tree
+from sahgrasp.ik.compiled import OUTCOMES, compiled_tree, near_pairs, self_collides
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, contact_key, default_database
 from sahgrasp.ik.obstacle import Obstacle, checker_of
@@ -290,14 +290,14 @@ class ContactProblem:
         verdict: Literal["collision", "object_collision"] | None = None
         if self.obstacle is not None and self.obstacle.penetrated(q):
             verdict = "object_collision"
-        elif self.hand.in_collision(q):
+        elif self_collides(self.hand, q):
             verdict = "collision"
         self._checked = (key, verdict)
         return verdict
 
     def penetrations(self, q: NDArray[np.float64], margin_m: float) -> list[Penetration]:
         """Pairs of hand bodies, and links and the obstacle, closer than ``margin_m`` [m]."""
-        found = self.hand.penetrations(q, margin_m)
+        found = self.hand.penetrations(q, margin_m, near_pairs(self.hand, q, margin_m))
         if self.obstacle is not None:
             found += self.obstacle.penetrations(q, margin_m)
         return found
@@ -657,7 +657,7 @@ def _result(
     if success:
         reason, collision_free = "converged", True
     else:
-        collision_free = not hand.in_collision(chosen.q)
+        collision_free = not self_collides(hand, chosen.q)
         # An inner solver plugged in by a benchmark may name other outcomes: out of starts.
         reason = _FAILURE_REASONS.get(chosen.outcome, "max_inits")
     begin = time.perf_counter()  # the final clearance is part of the solve's time
