@@ -19,17 +19,52 @@
 #include <math.h>
 #include <string.h>
 
-enum { SHAPE_POINT = 0, SHAPE_BOX = 1, SHAPE_CYLINDER = 2, SHAPE_CONVEX = 3 };
+enum { SHAPE_POINT = 0, SHAPE_BOX = 1, SHAPE_CYLINDER = 2, SHAPE_ELLIPSOID = 3, SHAPE_CONVEX = 4 };
 
 typedef struct {
     int kind;
     double R[9];             /* world rotation, row-major */
     double t[3];             /* world position of the shape frame [m] */
-    double size[3];          /* box: half extents; cylinder: radius, half length [m] */
+    double size[3];          /* box: half extents; cylinder: radius, half length; ellipsoid:
+                                radii; convex: half extents of a box holding it [m] */
+    double centre[3];        /* convex: centre of that box in the shape frame [m]; else 0 */
     double radius;           /* inflation [m] (a sphere's radius) */
     const double *vertices;  /* convex: local vertices, 3 per vertex [m] */
     int count;               /* convex: number of vertices */
+    const int *first;        /* convex, or NULL: per vertex, where its neighbours start in
+                                `neighbours` (count + 1 offsets) */
+    const int *neighbours;   /* the vertices (this shape's indices) adjacent to each vertex */
+    const int *starts;       /* convex with neighbours: per cube-map cell (gjk_cell), the vertex
+                                the hill climbing starts from */
 } GjkShape;
+
+#define GJK_CELLS 16
+#define GJK_DIRECTIONS (6 * GJK_CELLS * GJK_CELLS)
+
+/* The cell of a cube map (6 faces of GJK_CELLS x GJK_CELLS) a direction falls in: where the
+ * hill climbing of a convex shape starts, from the vertex farthest along the cell's centre. */
+static int gjk_cell(const double *l) {
+    int a = 0;
+    for (int i = 1; i < 3; i++)
+        if (fabs(l[i]) > fabs(l[a])) a = i;
+    double m = fabs(l[a]);
+    if (m == 0.0) return 0;
+    int face = 2 * a + (l[a] < 0.0), cell[2];
+    for (int k = 0; k < 2; k++) {
+        double u = l[(a + 1 + k) % 3] / m;  /* in [-1, 1] */
+        int c = (int)((u + 1.0) * 0.5 * GJK_CELLS);
+        cell[k] = c < 0 ? 0 : (c >= GJK_CELLS ? GJK_CELLS - 1 : c);
+    }
+    return (face * GJK_CELLS + cell[0]) * GJK_CELLS + cell[1];
+}
+
+/* The centre direction of cube-map cell `index` (not normalised: only argmax uses it). */
+static void gjk_cell_direction(int index, double *l) {
+    int face = index / (GJK_CELLS * GJK_CELLS), rest = index % (GJK_CELLS * GJK_CELLS);
+    int a = face / 2, cells[2] = {rest / GJK_CELLS, rest % GJK_CELLS};
+    l[a] = face % 2 ? -1.0 : 1.0;
+    for (int k = 0; k < 2; k++) l[(a + 1 + k) % 3] = -1.0 + (2.0 * cells[k] + 1.0) / GJK_CELLS;
+}
 
 static double gjk_dot(const double *a, const double *b) {
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
@@ -48,12 +83,31 @@ static void gjk_support(const GjkShape *s, const double *d, double *out) {
             p[1] = s->size[0] * l[1] / rho;
         }
         p[2] = l[2] < 0.0 ? -s->size[1] : s->size[1];
+    } else if (s->kind == SHAPE_ELLIPSOID) {
+        double scaled[3], norm = 0.0;
+        for (int i = 0; i < 3; i++) {
+            scaled[i] = s->size[i] * s->size[i] * l[i];
+            norm += scaled[i] * l[i];
+        }
+        if (norm > 0.0)
+            for (int i = 0; i < 3; i++) p[i] = scaled[i] / sqrt(norm);
     } else if (s->kind == SHAPE_CONVEX) {
-        int best = 0;
-        double high = -INFINITY;
-        for (int k = 0; k < s->count; k++) {
-            double h = gjk_dot(s->vertices + 3 * k, l);
-            if (h > high) high = h, best = k;
+        int best = s->first == NULL ? 0 : s->starts[gjk_cell(l)];
+        double high = gjk_dot(s->vertices + 3 * best, l);
+        if (s->first == NULL) {
+            for (int k = 1; k < s->count; k++) {
+                double h = gjk_dot(s->vertices + 3 * k, l);
+                if (h > high) high = h, best = k;
+            }
+        } else {  /* hill climbing on the hull's edges: a vertex no neighbour beats is a maximum */
+            for (int moved = 1; moved;) {
+                moved = 0;
+                for (int e = s->first[best]; e < s->first[best + 1]; e++) {
+                    int k = s->neighbours[e];
+                    double h = gjk_dot(s->vertices + 3 * k, l);
+                    if (h > high) high = h, best = k, moved = 1;
+                }
+            }
         }
         memcpy(p, s->vertices + 3 * best, 3 * sizeof(double));
     }
@@ -194,10 +248,12 @@ static double gjk_core_distance(const GjkShape *a, const GjkShape *b, double sto
     return sqrt(gjk_dot(v, v));
 }
 
-/* Half extents of a box holding the shape (inflation included), in the shape frame. */
-static void gjk_box_of(const GjkShape *s, double *half) {
+/* A box holding the shape (inflation included) in the shape frame: its centre and half
+ * extents; 0 if the shape has none (a convex polytope without its box). */
+static int gjk_box_of(const GjkShape *s, double *centre, double *half) {
     double r = s->radius;
-    if (s->kind == SHAPE_BOX) {
+    memcpy(centre, s->centre, 3 * sizeof(double));
+    if (s->kind == SHAPE_BOX || s->kind == SHAPE_ELLIPSOID || s->kind == SHAPE_CONVEX) {
         for (int i = 0; i < 3; i++) half[i] = s->size[i] + r;
     } else if (s->kind == SHAPE_CYLINDER) {
         half[0] = half[1] = s->size[0] + r;
@@ -205,17 +261,20 @@ static void gjk_box_of(const GjkShape *s, double *half) {
     } else {
         half[0] = half[1] = half[2] = r;
     }
+    return 1;
 }
 
-/* Whether the boxes holding a and b are farther apart than `margin_m` along a face normal of
- * either box (the separating-axis test on those six axes): then so are the shapes. Convex
- * polytopes have no such box here: never apart. */
-static int gjk_boxes_apart(const GjkShape *a, const GjkShape *b, double margin_m) {
-    if (a->kind == SHAPE_CONVEX || b->kind == SHAPE_CONVEX) return 0;
-    double ha[3], hb[3], d[3], C[9];
-    gjk_box_of(a, ha);
-    gjk_box_of(b, hb);
-    for (int c = 0; c < 3; c++) d[c] = b->t[c] - a->t[c];
+/* A lower bound [m] of the signed distance between a and b: the largest gap between the boxes
+ * holding them along a face normal of either box (the separating-axis test on those six axes;
+ * a gap below 0 is an overlap, and the penetration depth is at most the smallest overlap). */
+static double gjk_box_gap(const GjkShape *a, const GjkShape *b) {
+    double ca[3], cb[3], ha[3], hb[3], d[3], C[9], gap = -INFINITY;
+    gjk_box_of(a, ca, ha);
+    gjk_box_of(b, cb, hb);
+    for (int c = 0; c < 3; c++)  /* between the box centres, world frame */
+        d[c] = b->t[c] - a->t[c] +
+               (b->R[3 * c] * cb[0] + b->R[3 * c + 1] * cb[1] + b->R[3 * c + 2] * cb[2]) -
+               (a->R[3 * c] * ca[0] + a->R[3 * c + 1] * ca[1] + a->R[3 * c + 2] * ca[2]);
     for (int i = 0; i < 3; i++)  /* C = R_a^T R_b */
         for (int j = 0; j < 3; j++)
             C[3 * i + j] = a->R[i] * b->R[j] + a->R[3 + i] * b->R[3 + j] + a->R[6 + i] * b->R[6 + j];
@@ -223,19 +282,21 @@ static int gjk_boxes_apart(const GjkShape *a, const GjkShape *b, double margin_m
         double along = fabs(a->R[i] * d[0] + a->R[3 + i] * d[1] + a->R[6 + i] * d[2]);
         double reach = ha[i] + hb[0] * fabs(C[3 * i]) + hb[1] * fabs(C[3 * i + 1]) +
                        hb[2] * fabs(C[3 * i + 2]);
-        if (along - reach > margin_m) return 1;
+        gap = fmax(gap, along - reach);
     }
     for (int j = 0; j < 3; j++) {  /* b's axes */
         double along = fabs(b->R[j] * d[0] + b->R[3 + j] * d[1] + b->R[6 + j] * d[2]);
         double reach = hb[j] + ha[0] * fabs(C[j]) + ha[1] * fabs(C[3 + j]) + ha[2] * fabs(C[6 + j]);
-        if (along - reach > margin_m) return 1;
+        gap = fmax(gap, along - reach);
     }
-    return 0;
+    return gap;
 }
 
-/* Whether a and b, inflated, come closer than `margin_m` >= 0 [m] (or intersect). */
+/* Whether a and b, inflated, come closer than `margin_m` [m] (or intersect; a negative margin
+ * asks for a penetration deeper than -margin_m, which needs the inflation: radius_a + radius_b
+ * + margin_m > 0). */
 static int gjk_within(const GjkShape *a, const GjkShape *b, double margin_m) {
-    if (gjk_boxes_apart(a, b, margin_m)) return 0;
+    if (gjk_box_gap(a, b) > margin_m) return 0;
     double reach = a->radius + b->radius + margin_m;
     double d = gjk_core_distance(a, b, reach);
     return d < reach || d <= 0.0;

@@ -980,6 +980,383 @@ static PyObject *Tree_pairs_within(Tree *self, PyObject *args) {
     return PyLong_FromLong(count);
 }
 
+/* --------------------------------------------------------------- hand-object checks -- */
+
+/* An object's convex pieces in its own frame, with a coarse level of cells (balls holding
+ * groups of pieces), for the compiled hand-object verdicts (sahgrasp/objects/clearance.py). */
+typedef struct {
+    PyObject_HEAD
+    int n, ncells;
+    GjkShape *shapes;    /* placed in the object frame; convex ones point into the arrays below */
+    double *ball;        /* per piece: centre (object frame), radius */
+    double *vertices;    /* every convex piece's local vertices */
+    int *first;          /* per vertex of every piece, where its neighbours start (count + 1 per
+                            piece with neighbours) */
+    int *neighbours;
+    int *starts;         /* per piece with neighbours, GJK_DIRECTIONS start vertices */
+    double *cell_ball;   /* per cell: centre, radius */
+    int *cell_start;     /* ncells + 1 offsets into cell_members */
+    int *cell_members;
+} Pieces;
+
+static void Pieces_dealloc(Pieces *self) {
+    free(self->shapes);
+    free(self->ball);
+    free(self->vertices);
+    free(self->first);
+    free(self->neighbours);
+    free(self->starts);
+    free(self->cell_ball);
+    free(self->cell_start);
+    free(self->cell_members);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+/* Pieces(kinds, placements, sizes, balls, vertex_start, vertices, first, neighbours,
+ *        cell_balls, cell_start, cell_members): per piece its kind (_gjk.h), placement (12
+ * values), sizes (3) and inflation (1) as `sizes` (4 per piece), bounding ball (4); convex
+ * pieces' vertices (piece p: rows vertex_start[p] to vertex_start[p + 1]), and for each vertex
+ * the offsets `first` (one more than the vertices of a piece with neighbours, per such piece
+ * laid out in piece order; -1 as its first value for a piece without) into `neighbours`. */
+static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
+    enum { KINDS, PLACEMENTS, SIZES, BALLS, VSTART, VERTICES, FIRST, NEIGHBOURS, CBALLS, CSTART,
+           CMEMBERS, N_ARGS };
+    static char *kwlist[] = {"kinds", "placements", "sizes", "balls", "vertex_start", "vertices",
+                             "first", "neighbours", "cell_balls", "cell_start", "cell_members",
+                             NULL};
+    PyObject *o[N_ARGS];
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOOOO", kwlist, &o[0], &o[1], &o[2], &o[3],
+                                     &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10]))
+        return -1;
+    if (self->shapes != NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Pieces is already initialised");
+        return -1;
+    }
+    static const char *formats[N_ARGS] = {"q", "d", "d", "d", "q", "d", "q", "q", "d", "q", "q"};
+    static const char *names[N_ARGS] = {"kinds", "placements", "sizes", "balls", "vertex_start",
+                                        "vertices", "first", "neighbours", "cell_balls",
+                                        "cell_start", "cell_members"};
+    Py_buffer b[N_ARGS];
+    int held = 0, status = -1, n = 0, ncells = 0;
+    for (; held < N_ARGS; held++) {
+        Py_ssize_t sizes[N_ARGS] = {-1, 12 * n, 4 * n, 4 * n, n + 1, -1, -1, -1, -1, -1, n};
+        if (get_buffer(o[held], &b[held], sizes[held], 0, formats[held], names[held]) < 0) goto out;
+        if (held == KINDS) n = (int)(b[KINDS].len / 8);
+        if (held == CBALLS) ncells = (int)(b[CBALLS].len / 32);
+    }
+    const long long *kinds = b[KINDS].buf, *vstart = b[VSTART].buf, *first = b[FIRST].buf,
+                    *nb = b[NEIGHBOURS].buf, *cstart = b[CSTART].buf, *members = b[CMEMBERS].buf;
+    Py_ssize_t nvert = b[VERTICES].len / 24, nfirst = b[FIRST].len / 8, nnb = b[NEIGHBOURS].len / 8;
+    int bad = b[VERTICES].len % 24 != 0 || b[CBALLS].len % 32 != 0 ||
+              b[CSTART].len != 8 * (Py_ssize_t)(ncells + 1) || vstart[0] != 0 || vstart[n] != nvert ||
+              cstart[0] != 0 || cstart[ncells] != n;
+    for (int p = 0; p < n && !bad; p++)
+        bad = kinds[p] < SHAPE_POINT || kinds[p] > SHAPE_CONVEX || vstart[p + 1] < vstart[p] ||
+              (kinds[p] == SHAPE_CONVEX) != (vstart[p + 1] > vstart[p]);
+    for (int k = 0; k < ncells && !bad; k++) bad = cstart[k + 1] < cstart[k];
+    for (int k = 0; k < n && !bad; k++) bad = members[k] < 0 || members[k] >= n;
+    for (Py_ssize_t e = 0; e < nnb && !bad; e++) bad = nb[e] < 0;
+    if (bad) {
+        PyErr_SetString(PyExc_ValueError, "Pieces: inconsistent arrays");
+        goto out;
+    }
+    self->shapes = calloc((size_t)n + 1, sizeof(GjkShape));
+    self->ball = malloc(4 * (size_t)n * sizeof(double) + 1);
+    self->vertices = malloc(3 * (size_t)nvert * sizeof(double) + 1);
+    self->first = malloc((size_t)nfirst * sizeof(int) + 1);
+    self->neighbours = malloc((size_t)nnb * sizeof(int) + 1);
+    self->cell_ball = malloc(4 * (size_t)ncells * sizeof(double) + 1);
+    self->cell_start = malloc(((size_t)ncells + 1) * sizeof(int));
+    self->cell_members = malloc((size_t)n * sizeof(int) + 1);
+    self->starts = malloc((size_t)n * GJK_DIRECTIONS * sizeof(int) + 1);
+    if (!self->shapes || !self->ball || !self->vertices || !self->first || !self->neighbours ||
+        !self->cell_ball || !self->cell_start || !self->cell_members || !self->starts) {
+        PyErr_NoMemory();
+        goto out;
+    }
+    memcpy(self->ball, b[BALLS].buf, 4 * (size_t)n * sizeof(double));
+    memcpy(self->vertices, b[VERTICES].buf, 3 * (size_t)nvert * sizeof(double));
+    memcpy(self->cell_ball, b[CBALLS].buf, 4 * (size_t)ncells * sizeof(double));
+    for (Py_ssize_t e = 0; e < nfirst; e++) self->first[e] = (int)first[e];
+    for (Py_ssize_t e = 0; e < nnb; e++) self->neighbours[e] = (int)nb[e];
+    for (int k = 0; k <= ncells; k++) self->cell_start[k] = (int)cstart[k];
+    for (int k = 0; k < n; k++) self->cell_members[k] = (int)members[k];
+    const double *placements = b[PLACEMENTS].buf, *sizes = b[SIZES].buf;
+    Py_ssize_t at = 0; /* the next piece's offsets in `first` */
+    for (int p = 0; p < n; p++) {
+        GjkShape *g = &self->shapes[p];
+        g->kind = (int)kinds[p];
+        memcpy(g->R, placements + 12 * p, 9 * sizeof(double));
+        memcpy(g->t, placements + 12 * p + 9, 3 * sizeof(double));
+        memcpy(g->size, sizes + 4 * p, 3 * sizeof(double));
+        g->radius = sizes[4 * p + 3];
+        if (g->kind != SHAPE_CONVEX) continue;
+        g->vertices = self->vertices + 3 * vstart[p];
+        g->count = (int)(vstart[p + 1] - vstart[p]);
+        for (int i = 0; i < 3; i++) {  /* the box of its vertices, for the separating axes */
+            double low = INFINITY, high = -INFINITY;
+            for (int v = 0; v < g->count; v++) {
+                low = fmin(low, g->vertices[3 * v + i]);
+                high = fmax(high, g->vertices[3 * v + i]);
+            }
+            g->centre[i] = 0.5 * (low + high);
+            g->size[i] = 0.5 * (high - low);
+        }
+        if (at >= nfirst) bad = 1;
+        else if (first[at] < 0) at++; /* no neighbours: a scan of the vertices */
+        else if (at + g->count + 1 > nfirst) bad = 1;
+        else {
+            g->first = self->first + at;
+            g->neighbours = self->neighbours;
+            int *starts = self->starts + (size_t)p * GJK_DIRECTIONS;
+            for (int k = 0; k < GJK_DIRECTIONS; k++) {
+                double high = -INFINITY, l[3];
+                gjk_cell_direction(k, l);
+                for (int v = 0; v < g->count; v++) {
+                    double h = gjk_dot(g->vertices + 3 * v, l);
+                    if (h > high) high = h, starts[k] = v;
+                }
+            }
+            g->starts = starts;
+            for (int v = 0; v < g->count && !bad; v++)
+                bad = g->first[v] > g->first[v + 1] || g->first[v + 1] > nnb;
+            for (int e = g->first[0]; e < g->first[g->count] && !bad; e++)
+                bad = self->neighbours[e] >= g->count;
+            at += g->count + 1;
+        }
+    }
+    if (bad || at != nfirst) {
+        PyErr_SetString(PyExc_ValueError, "Pieces: inconsistent neighbour offsets");
+        goto out;
+    }
+    self->n = n;
+    self->ncells = ncells;
+    status = 0;
+out:
+    if (status < 0) { /* a failed init leaves an uninitialised object */
+        free(self->shapes), free(self->ball), free(self->vertices), free(self->first);
+        free(self->neighbours), free(self->cell_ball), free(self->cell_start);
+        free(self->cell_members), free(self->starts);
+        self->shapes = NULL, self->ball = NULL, self->vertices = NULL, self->first = NULL;
+        self->neighbours = NULL, self->cell_ball = NULL, self->cell_start = NULL;
+        self->cell_members = NULL, self->starts = NULL;
+    }
+    release_buffers(b, held);
+    return status;
+}
+
+static PyTypeObject PiecesType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "sahgrasp.ik._lm.Pieces",
+    .tp_basicsize = sizeof(Pieces),
+    .tp_flags = Py_TPFLAGS_DEFAULT,
+    .tp_doc = "An object's convex pieces and their coarse cells, for the hand-object verdicts.",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Pieces_init,
+    .tp_dealloc = (destructor)Pieces_dealloc,
+};
+
+static double ball_gap(const double *a, const double *b) {
+    double d[3] = {a[0] - b[0], a[1] - b[1], a[2] - b[2]};
+    return sqrt(dot(d, d, 3)) - a[3] - b[3];
+}
+
+/* The smallest signed distance [m] from the shape (placed in the object frame, its bounding
+ * ball `ball`) to the pieces if it is below `limit_m`, else some value >= limit_m; -inf when
+ * the cores intersect (a penetration of at least the inflations). Returns at the first value
+ * below `stop_m`. `gaps`: room for one value per cell. */
+static double shape_to_pieces(const Pieces *P, const GjkShape *shape, const double *ball,
+                              double limit_m, double stop_m, double *gaps) {
+    double best = limit_m;
+    for (int k = 0; k < P->ncells; k++) gaps[k] = ball_gap(ball, P->cell_ball + 4 * k);
+    for (;;) {  /* the nearest cell not yet searched whose ball comes below the best so far */
+        int k = -1;
+        for (int c = 0, low = 0; c < P->ncells; c++)
+            if (gaps[c] < best && (!low || gaps[c] < gaps[k])) k = c, low = 1;
+        if (k < 0) return best;
+        gaps[k] = INFINITY;
+        for (int m = P->cell_start[k]; m < P->cell_start[k + 1]; m++) {
+            int p = P->cell_members[m];
+            if (ball_gap(ball, P->ball + 4 * p) >= best) continue;
+            const GjkShape *piece = &P->shapes[p];
+            if (gjk_box_gap(shape, piece) >= best) continue;
+            double inflation = shape->radius + piece->radius;
+            double core = gjk_core_distance(shape, piece, best + inflation);
+            double d = core <= 0.0 ? -INFINITY : core - inflation;
+            if (d < best) best = d;
+            if (best < stop_m) return best;
+        }
+    }
+}
+
+/* The hand's shapes at q placed in the frame of an object at T_world_object (12 values), and
+ * their bounding balls there (4 values each); 0, or -1 out of memory. */
+static int shapes_in_object(const Tree *T, const double *q, const double *T_world_object,
+                            GjkShape *shapes, double *balls) {
+    Pose *M = malloc((size_t)T->nj * sizeof(Pose)), object, inverse;
+    if (M == NULL) return -1;
+    forward(T, q, M);
+    memcpy(object.R, T_world_object, 9 * sizeof(double));
+    memcpy(object.t, T_world_object + 9, 3 * sizeof(double));
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) inverse.R[3 * i + j] = object.R[3 * j + i];
+        inverse.t[i] = -(object.R[i] * object.t[0] + object.R[3 + i] * object.t[1] +
+                         object.R[6 + i] * object.t[2]);
+    }
+    for (int k = 0; k < T->ns; k++) {
+        Pose world, local;
+        compose(&M[T->shape_joint[k]], &T->shape_place[k], &world);
+        compose(&inverse, &world, &local);
+        shapes[k] = T->shapes[k];
+        memcpy(shapes[k].R, local.R, sizeof local.R);
+        memcpy(shapes[k].t, local.t, sizeof local.t);
+        const double *c = T->ball + 4 * k;
+        for (int i = 0; i < 3; i++)
+            balls[4 * k + i] = local.R[3 * i] * c[0] + local.R[3 * i + 1] * c[1] +
+                               local.R[3 * i + 2] * c[2] + local.t[i];
+        balls[4 * k + 3] = c[3];
+    }
+    free(M);
+    return 0;
+}
+
+/* The buffers of an object query: q, T_world_object (4 x 4), per-shape thresholds; 0 or -1. */
+static int take_object_buffers(const Tree *self, PyObject *pieces, PyObject *q_obj,
+                               PyObject *T_obj, PyObject *th_obj, Py_buffer b[3]) {
+    if (check_ready(self) < 0) return -1;
+    if (!PyObject_TypeCheck(pieces, &PiecesType) || ((Pieces *)pieces)->shapes == NULL) {
+        PyErr_SetString(PyExc_TypeError, "pieces must be an initialised Pieces");
+        return -1;
+    }
+    if (!self->ns) {
+        PyErr_SetString(PyExc_ValueError, "the tree has no collision shapes (set_shapes)");
+        return -1;
+    }
+    if (get_buffer(q_obj, &b[0], self->nq, 0, "d", "q") < 0) return -1;
+    if (get_buffer(T_obj, &b[1], 16, 0, "d", "T_world_object") < 0) {
+        release_buffers(b, 1);
+        return -1;
+    }
+    if (get_buffer(th_obj, &b[2], self->ns, 0, "d", "thresholds") < 0) {
+        release_buffers(b, 2);
+        return -1;
+    }
+    return 0;
+}
+
+/* The 4 x 4 row-major placement as the 12 values of a Pose. */
+static void pose_values(const double *T, double *out) {
+    for (int i = 0; i < 3; i++) {
+        for (int j = 0; j < 3; j++) out[3 * i + j] = T[4 * i + j];
+        out[9 + i] = T[4 * i + 3];
+    }
+}
+
+/* A smallest lower bound [m] of the shape's distance to any cell (its ball's gap to theirs). */
+static double gap_to_cells(const Pieces *P, const double *ball) {
+    double gap = INFINITY;
+    for (int k = 0; k < P->ncells; k++) gap = fmin(gap, ball_gap(ball, P->cell_ball + 4 * k));
+    return gap;
+}
+
+/* The verdict and clearance of object_clearance (below) on shapes placed in the object frame. */
+static void clearance_of(const Pieces *P, GjkShape *shapes, const double *balls, int ns,
+                         const double *thresholds, int *order, double *bounds, double *gaps,
+                         int *inside, double *best, int *closest) {
+    *inside = 0, *best = INFINITY, *closest = -1;
+    for (int k = 0; k < ns && !*inside; k++) {  /* the excepted tips first: few */
+        if (thresholds[k] >= 0.0) continue;
+        double d = shape_to_pieces(P, &shapes[k], balls + 4 * k, thresholds[k], thresholds[k],
+                                   gaps);
+        *inside = d < thresholds[k];
+    }
+    /* The other shapes nearest first (by their balls), so that the smallest distance found so
+     * far soon rules out the far ones without a GJK call. */
+    int n = 0;
+    for (int k = 0; k < ns; k++) {
+        if (thresholds[k] < 0.0) continue;
+        double gap = gap_to_cells(P, balls + 4 * k);
+        int at = n++;
+        for (; at > 0 && bounds[at - 1] > gap; at--) bounds[at] = bounds[at - 1], order[at] = order[at - 1];
+        bounds[at] = gap, order[at] = k;
+    }
+    for (int i = 0; i < n && !*inside && bounds[i] < *best; i++) {
+        int k = order[i];
+        double d = shape_to_pieces(P, &shapes[k], balls + 4 * k, *best, thresholds[k], gaps);
+        *inside = d < thresholds[k];
+        if (d < *best) *best = d, *closest = k;
+    }
+}
+
+/* object_clearance(pieces, q, T_world_object, thresholds) -> (inside, distance_m, shape):
+ * inside if a shape comes closer to the pieces than its threshold (0 for the links that must
+ * stay out, -allowance for the contact tips); else the smallest signed distance [m] of a shape
+ * whose threshold is >= 0 and that shape (-1 and inf if there is none). */
+static PyObject *Tree_object_clearance(Tree *self, PyObject *args) {
+    PyObject *pieces, *q_obj, *T_obj, *th_obj;
+    if (!PyArg_ParseTuple(args, "OOOO:object_clearance", &pieces, &q_obj, &T_obj, &th_obj))
+        return NULL;
+    Py_buffer b[3];
+    if (take_object_buffers(self, pieces, q_obj, T_obj, th_obj, b) < 0) return NULL;
+    const Pieces *P = (const Pieces *)pieces;
+    int ns = self->ns;
+    int *order = malloc((size_t)ns * sizeof(int));
+    GjkShape *shapes = malloc((size_t)ns * sizeof(GjkShape));
+    double *balls = malloc(4 * (size_t)ns * sizeof(double)), placement[12];
+    double *bounds = malloc((size_t)ns * sizeof(double));
+    double *gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
+    PyObject *result = NULL;
+    pose_values(b[1].buf, placement);
+    if (!order || !shapes || !balls || !bounds || !gaps ||
+        shapes_in_object(self, b[0].buf, placement, shapes, balls) < 0) {
+        PyErr_NoMemory();
+    } else {
+        int inside, closest;
+        double best;
+        clearance_of(P, shapes, balls, ns, b[2].buf, order, bounds, gaps, &inside, &best,
+                     &closest);
+        result = Py_BuildValue("Odi", inside ? Py_True : Py_False, best, closest);
+    }
+    free(order), free(shapes), free(balls), free(bounds), free(gaps);
+    release_buffers(b, 3);
+    return result;
+}
+
+/* shapes_near(pieces, q, T_world_object, thresholds, out) -> int: the shapes closer to the
+ * pieces than their thresholds [m], their indices into out; how many. */
+static PyObject *Tree_shapes_near(Tree *self, PyObject *args) {
+    PyObject *pieces, *q_obj, *T_obj, *th_obj, *out_obj;
+    if (!PyArg_ParseTuple(args, "OOOOO:shapes_near", &pieces, &q_obj, &T_obj, &th_obj, &out_obj))
+        return NULL;
+    Py_buffer b[4];
+    if (take_object_buffers(self, pieces, q_obj, T_obj, th_obj, b) < 0) return NULL;
+    if (get_buffer(out_obj, &b[3], self->ns, 1, "q", "out") < 0) {
+        release_buffers(b, 3);
+        return NULL;
+    }
+    const Pieces *P = (const Pieces *)pieces;
+    const double *thresholds = b[2].buf;
+    long long *out = b[3].buf;
+    GjkShape *shapes = malloc((size_t)self->ns * sizeof(GjkShape));
+    double *balls = malloc(4 * (size_t)self->ns * sizeof(double)), placement[12];
+    double *gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
+    PyObject *result = NULL;
+    pose_values(b[1].buf, placement);
+    if (!shapes || !balls || !gaps ||
+        shapes_in_object(self, b[0].buf, placement, shapes, balls) < 0) {
+        PyErr_NoMemory();
+    } else {
+        int count = 0;
+        for (int k = 0; k < self->ns; k++)
+            if (shape_to_pieces(P, &shapes[k], balls + 4 * k, thresholds[k], thresholds[k],
+                                gaps) < thresholds[k])
+                out[count++] = k;
+        result = PyLong_FromLong(count);
+    }
+    free(shapes), free(balls), free(gaps);
+    release_buffers(b, 4);
+    return result;
+}
+
 /* ------------------------------------------------------------------- rigid alignment -- */
 
 /* Eigenvector of the largest eigenvalue of the symmetric 4 x 4 `N` (cyclic Jacobi rotations). */
@@ -1160,6 +1537,11 @@ static PyMethodDef Tree_methods[] = {
     {"pairs_within", (PyCFunction)Tree_pairs_within, METH_VARARGS,
      "pairs_within(q, margin_m, out) -> int: the checked pairs closer than margin_m at q "
      "(indices into out, at most len(out)); how many."},
+    {"object_clearance", (PyCFunction)Tree_object_clearance, METH_VARARGS,
+     "object_clearance(pieces, q, T_world_object, thresholds) -> (inside, distance_m, shape)."},
+    {"shapes_near", (PyCFunction)Tree_shapes_near, METH_VARARGS,
+     "shapes_near(pieces, q, T_world_object, thresholds, out) -> int: the shapes closer to the "
+     "pieces than their thresholds, their indices into out; how many."},
     {"align", (PyCFunction)Tree_align, METH_VARARGS,
      "align(q, goal, fingers): q's wrist moved (in place) by the rigid motion that best maps "
      "its contact stack onto goal."},
@@ -1190,12 +1572,18 @@ static struct PyModuleDef module = {
 };
 
 PyMODINIT_FUNC PyInit__lm(void) {
-    if (PyType_Ready(&TreeType) < 0) return NULL;
+    if (PyType_Ready(&TreeType) < 0 || PyType_Ready(&PiecesType) < 0) return NULL;
     PyObject *m = PyModule_Create(&module);
     if (m == NULL) return NULL;
     Py_INCREF(&TreeType);
     if (PyModule_AddObject(m, "Tree", (PyObject *)&TreeType) < 0) {
         Py_DECREF(&TreeType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    Py_INCREF(&PiecesType);
+    if (PyModule_AddObject(m, "Pieces", (PyObject *)&PiecesType) < 0) {
+        Py_DECREF(&PiecesType);
         Py_DECREF(m);
         return NULL;
     }

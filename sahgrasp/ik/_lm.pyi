@@ -10,6 +10,22 @@ MAX_ITERATIONS: int
 
 def rigid_key(points: NDArray, normals: NDArray, normal_scale: float, out: NDArray) -> None: ...
 
+class Pieces:
+    def __init__(
+        self,
+        kinds: NDArray,
+        placements: NDArray,
+        sizes: NDArray,
+        balls: NDArray,
+        vertex_start: NDArray,
+        vertices: NDArray,
+        first: NDArray,
+        neighbours: NDArray,
+        cell_balls: NDArray,
+        cell_start: NDArray,
+        cell_members: NDArray,
+    ) -> None: ...
+
 class Tree:
     shape_count: int
     pair_count: int
@@ -67,3 +83,9 @@ class Tree:
         pairs: NDArray,
     ) -> None: ...
     def pairs_within(self, q: NDArray, margin_m: float, out: NDArray) -> int: ...
+    def object_clearance(
+        self, pieces: Pieces, q: NDArray, T_world_object: NDArray, thresholds: NDArray
+    ) -> tuple[bool, float, int]: ...
+    def shapes_near(
+        self, pieces: Pieces, q: NDArray, T_world_object: NDArray, thresholds: NDArray, out: NDArray
+    ) -> int: ...

@@ -19,14 +19,17 @@ from numpy.typing import NDArray
 from sahgrasp.collision import Penetration
 from sahgrasp.errors import InvalidTargetError
 from sahgrasp.hand import Hand
+from sahgrasp.ik._lm import Pieces
+from sahgrasp.ik.compiled import compiled_tree
 
 # The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
 # solves with an obstacle need it.
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
     from sahgrasp.objects.clearance import Clearance, HandObjectClearance
+    from sahgrasp.objects.collision import CollisionShape
 
-__all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of"]
+__all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of", "pieces_of"]
 
 REPAIR_PAIRS_PER_LINK = 1
 """Most (link, piece) pairs one link adds to a collision-repair step.
@@ -57,6 +60,107 @@ def checker_of(hand: Hand, obj: GraspObject | None) -> HandObjectClearance:
     from sahgrasp.objects.clearance import HandObjectClearance
 
     return HandObjectClearance(hand, obj)
+
+
+_POINT, _BOX, _CYLINDER, _ELLIPSOID, _CONVEX = range(5)  # shape kinds of sahgrasp/_gjk.h
+
+_CLIMB_ABOVE = 16
+"""Convex pieces with more vertices than this find their support points by hill climbing on
+the hull's edges (coal's neighbours) instead of a scan of every vertex."""
+
+_TIE_M = 1e-9
+"""Links this close to their repair threshold [m] are left to coal to decide (GJK's and coal's
+tolerances differ in the last digits; a repair step puts links at the threshold)."""
+
+
+@functools.lru_cache(maxsize=8)
+def pieces_of(checker: HandObjectClearance) -> Pieces | None:
+    """The checker's object pieces for the compiled verdicts, None if they cannot be compiled.
+
+    The compiled verdicts (``Tree.object_clearance``, ``Tree.shapes_near``: GJK in
+    ``sahgrasp/_gjk.h``) know points, boxes, cylinders, capsules, ellipsoids and convex hulls,
+    inflated by coal's swept-sphere radius; another piece, or a hand whose own shapes are not
+    compiled, leaves every query to coal.
+    """
+    if not compiled_tree(checker.hand).shape_count:
+        return None
+    tree = checker.piece_tree
+    shapes = checker.object.collision_shapes()
+    described = [_describe(shape) for shape in shapes]
+    if not shapes or any(d is None for d in described):
+        return None
+    kinds, sizes, vertices, neighbours = zip(*described, strict=True)
+    counts = [len(v) for v in vertices]
+    first, flat = _neighbour_offsets(kinds, neighbours)
+    cells = np.hstack([tree.coarse_centres_m, tree.coarse_radii_m[:, None]])
+    return Pieces(
+        kinds=np.array(kinds, dtype=np.int64),
+        placements=np.array(
+            [np.concatenate([s.placement[:3, :3].ravel(), s.placement[:3, 3]]) for s in shapes]
+        ),
+        sizes=np.array(sizes, dtype=np.float64),
+        balls=np.array(
+            [
+                [*shape.placement[:3, 3], shape.bounding_radius_m + size[3]]
+                for shape, size in zip(shapes, sizes, strict=True)
+            ]
+        ),
+        vertex_start=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        vertices=np.concatenate([np.reshape(v, (-1, 3)) for v in vertices]).astype(np.float64),
+        first=first,
+        neighbours=flat,
+        cell_balls=np.ascontiguousarray(cells, dtype=np.float64),
+        cell_start=np.concatenate([[0], np.cumsum(tree.sizes)]).astype(np.int64),
+        cell_members=np.concatenate(tree.members).astype(np.int64),
+    )
+
+
+def _describe(
+    shape: CollisionShape,
+) -> tuple[int, list[float], NDArray[np.float64], list[list[int]] | None] | None:
+    """A piece's kind, sizes (3, then the inflation [m]), convex vertices and their neighbours."""
+    import coal
+
+    g, none = shape.geometry, np.empty((0, 3))
+    inflation = float(g.getSweptSphereRadius())
+    if isinstance(g, coal.ConvexBase):
+        points = np.asarray(g.points(), dtype=np.float64)
+        climb = (
+            [list(g.neighbors(k)) for k in range(len(points))]
+            if len(points) > _CLIMB_ABOVE
+            else None
+        )
+        return _CONVEX, [0.0, 0.0, 0.0, inflation], points, climb
+    if isinstance(g, coal.Box):
+        return _BOX, [*np.asarray(g.halfSide).tolist(), inflation], none, None
+    if isinstance(g, coal.Ellipsoid):
+        return _ELLIPSOID, [*np.asarray(g.radii).tolist(), inflation], none, None
+    if isinstance(g, coal.Sphere):
+        return _POINT, [0.0, 0.0, 0.0, g.radius + inflation], none, None
+    if isinstance(g, coal.Cylinder):
+        return _CYLINDER, [g.radius, g.halfLength, 0.0, inflation], none, None
+    if isinstance(g, coal.Capsule):
+        return _CYLINDER, [0.0, g.halfLength, 0.0, g.radius + inflation], none, None
+    return None
+
+
+def _neighbour_offsets(
+    kinds: tuple[int, ...], neighbours: tuple[list[list[int]] | None, ...]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The ``first`` and ``neighbours`` arrays of :class:`Pieces` (see ``sahgrasp/ik/_lm.c``)."""
+    first: list[int] = []
+    flat: list[int] = []
+    for kind, piece in zip(kinds, neighbours, strict=True):
+        if kind != _CONVEX:
+            continue
+        if piece is None:  # its vertices are scanned
+            first.append(-1)
+            continue
+        for adjacent in piece:
+            first.append(len(flat))
+            flat += adjacent
+        first.append(len(flat))
+    return np.array(first, dtype=np.int64), np.array(flat, dtype=np.int64)
 
 
 def check_obstacle(obj: object) -> None:
@@ -98,6 +202,9 @@ class Obstacle:
         self.checker = checker_of(hand, obj)
         self.contacts = contacts
         self.allowance_m = allowance_m
+        self._tree = compiled_tree(hand)
+        self._pieces = pieces_of(self.checker)
+        self._near = np.empty(len(self.checker.links), dtype=np.int64)
         # The last q asked about and its exact clearance (None: only known to be inside).
         self._last: tuple[bytes, Clearance | None] = (b"", None)
 
@@ -106,9 +213,16 @@ class Obstacle:
 
         At most :data:`REPAIR_PAIRS_PER_LINK` pairs per link: a separation row each in the repair.
         """
+        near = None
+        if self._pieces is not None:  # coal is asked about the links the compiled check finds
+            thresholds = self.checker.thresholds(self.contacts, margin_m, self.allowance_m)
+            T = self.checker.object.T_world_object
+            count = self._tree.shapes_near(self._pieces, q, T, thresholds + _TIE_M, self._near)
+            near = self._near[:count].tolist()
         return self.checker.penetrations(
-            q, margin_m, self.contacts, self.allowance_m, per_link=REPAIR_PAIRS_PER_LINK
-        )
+            q, margin_m, self.contacts, self.allowance_m, per_link=REPAIR_PAIRS_PER_LINK,
+            geometries=near,
+        )  # fmt: skip
 
     def penetrated(self, q: NDArray[np.float64]) -> bool:
         """True if a link is inside the object (contact tips: deeper than the allowance)."""
@@ -116,9 +230,29 @@ class Obstacle:
         key = q.tobytes()
         if self._last[0] == key:
             return self._last[1] is None or not self._last[1].clear()
-        found = self.checker.clearance_if_clear(q, self.contacts, self.allowance_m)
+        found = (
+            self.checker.clearance_if_clear(q, self.contacts, self.allowance_m)
+            if self._pieces is None
+            else self._compiled_clearance(q, self._pieces)
+        )
         self._last = (key, found)
         return found is None
+
+    def _compiled_clearance(self, q: NDArray[np.float64], pieces: Pieces) -> Clearance | None:
+        """:meth:`HandObjectClearance.clearance_if_clear` by the compiled check (GJK).
+
+        The same verdict and clearance up to GJK's tolerance (about 1e-12 of the distance);
+        the closest link is the one geometry found at the smallest distance.
+        """
+        from sahgrasp.objects.clearance import Clearance
+
+        thresholds = self.checker.thresholds(self.contacts, 0.0, self.allowance_m)
+        T = self.checker.object.T_world_object
+        inside, distance_m, closest = self._tree.object_clearance(pieces, q, T, thresholds)
+        if inside:
+            return None
+        link = self.checker.links[closest] if closest >= 0 else ""
+        return Clearance(distance_m, link, {link: distance_m} if link else {})
 
     def clearance(self, q: NDArray[np.float64]) -> Clearance:
         """Smallest signed distance [m] of a link to the object and that link (kept for ``q``)."""

@@ -264,6 +264,11 @@ class HandObjectClearance:
         self._offset = bool(self._offset_m.any())
 
     @property
+    def piece_tree(self) -> PieceTree:
+        """The object's pieces in coal's broad phase with their coarse cells (object frame)."""
+        return self._tree
+
+    @property
     def links(self) -> tuple[str, ...]:
         """Links with collision geometry, one per hand geometry (a link may repeat)."""
         return self._links
@@ -277,6 +282,7 @@ class HandObjectClearance:
         allowance_m: float = CONTACT_ALLOWANCE_M,
         T_world_object: FloatArray | None = None,
         per_link: int | None = None,
+        geometries: Iterable[int] | None = None,
     ) -> list[Penetration]:
         """Every (link shape, object piece) pair closer than required at ``q``.
 
@@ -293,7 +299,9 @@ class HandObjectClearance:
         (:meth:`PieceTree.first_pair`). The IK's repair asks for one: a link deep in a finely
         cut object overlaps hundreds of pieces, and a row per pair costs a GJK call and a
         Jacobian each, for normals that mostly agree
-        (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`).
+        (:data:`sahgrasp.ik.obstacle.REPAIR_PAIRS_PER_LINK`). ``geometries`` (with
+        ``per_link=1``): the only hand geometries to ask about, e.g. those the IK's compiled
+        check found near the object (None: those whose balls come near the object's box).
 
         Raises:
             InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
@@ -302,7 +310,11 @@ class HandObjectClearance:
         thresholds, T = self._query(q, contacts, margin_m, allowance_m, T_world_object)
         pairs: list[_Pair] = []
         if per_link == 1:  # a C++ query per link costs less than finer bounds in numpy
-            near = self._within_object_box(T, thresholds).tolist()
+            near = (
+                self._within_object_box(T, thresholds).tolist()
+                if geometries is None
+                else list(geometries)
+            )
             self._pose_links(near)
             for g in near:
                 pairs += self._first_pair(T, g, float(thresholds[g]))
@@ -451,7 +463,7 @@ class HandObjectClearance:
             InvalidTargetError: A name in ``fingers`` is not a finger of the hand.
             InvalidSettingsError: ``margin_m`` is negative or not finite.
         """
-        self._thresholds((), margin_m, 0.0)
+        self.thresholds((), margin_m, 0.0)
         q = self.hand.check_q(q).copy()
         T = self._placement(T_world_object)
         distance = math.inf
@@ -586,10 +598,18 @@ class HandObjectClearance:
         grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(coordinates))
         return _FreeFinger(coordinates, grid, geometries, pairs)
 
-    def _thresholds(
+    def thresholds(
         self, contacts: Iterable[str], margin_m: float, allowance_m: float
     ) -> NDArray[np.float64]:
-        """Smallest accepted signed distance [m] per hand geometry (kept per argument set)."""
+        """Smallest accepted signed distance [m] per hand geometry (kept per argument set).
+
+        ``margin_m`` for every link, ``-allowance_m`` for the tip spheres of the fingers in
+        ``contacts``; read-only.
+
+        Raises:
+            InvalidTargetError: A finger in ``contacts`` is not a finger of the hand.
+            InvalidSettingsError: ``margin_m`` or ``allowance_m`` is negative or not finite.
+        """
         key = (frozenset(contacts), margin_m, allowance_m)
         cached = self._thresholds_cache.get(key)
         if cached is not None:
@@ -619,7 +639,7 @@ class HandObjectClearance:
         T_world_object: FloatArray | None,
     ) -> tuple[NDArray[np.float64], FloatArray]:
         """A query's thresholds and object placement, with the hand and object placed at them."""
-        thresholds = self._thresholds(contacts, margin_m, allowance_m)
+        thresholds = self.thresholds(contacts, margin_m, allowance_m)
         T = self._placement(T_world_object)
         self._place(q, T)
         return thresholds, T
