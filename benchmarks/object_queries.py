@@ -33,7 +33,15 @@ with the benchmark's per-object seed), solves each without and then with the obj
   finer pieces the joined ones replaced (one per band sector of a revolved solid, one prism per
   mesh triangle): whether joining the pieces let a solution through the finer geometry;
 * ``pieces``: the queries the IK made (with the joined pieces), timed with a checker of the
-  finer pieces and one of the joined pieces, query by query alternating, best of ``--repeats``.
+  finer pieces and one of the joined pieces, query by query alternating, best of ``--repeats``;
+* ``compiled``: the IK's acceptance tests and repair queries answered by coal alone
+  (``clearance_if_clear``; ``penetrations`` with one pair per link) and by the compiled
+  verdicts the IK uses (``Obstacle``: GJK, then coal's witnesses of the links it finds), best
+  of ``--repeats`` per kind; prints the mean CPU per query and how many answers differ
+  (verdict, closest link, clearance beyond 1e-6 m; repair pairs and depths).
+
+The modes that record the IK's queries solve with the compiled verdicts turned off, so that
+every query goes through ``HandObjectClearance`` (the same solves).
 
     python benchmarks/object_queries.py profile --sets 20
     python benchmarks/object_queries.py compare old.py --sets 20
@@ -44,6 +52,7 @@ with the benchmark's per-object seed), solves each without and then with the obj
     python benchmarks/object_queries.py verdicts --sets 20
     python benchmarks/object_queries.py finer --sets 200 --objects coffee_cup can mesh:mug.stl
     python benchmarks/object_queries.py pieces --sets 40 --repeats 3
+    python benchmarks/object_queries.py compiled --sets 40 --repeats 3 --objects can coffee_cup
 
 Objects: catalog names, or ``mesh:FILE`` for a file in examples/meshes (default: the coffee cup,
 the mug and the bottle meshes).
@@ -73,6 +82,7 @@ from sahgrasp.bench.grasps import (
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.ik import obstacle as obstacle_module
 from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle
 from sahgrasp.objects import GraspObject, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
@@ -181,13 +191,74 @@ def _queries(
     HandObjectClearance.penetrations = logged_penetrations  # type: ignore[method-assign]
     HandObjectClearance.clearance = logged("clearance", False)  # type: ignore[method-assign]
     HandObjectClearance.clearance_if_clear = logged("clearance_if_clear", True)  # type: ignore[method-assign]
+    # The IK asks the compiled verdicts when it can (docs/ik.md): without them it asks every
+    # query of these, and makes the same solves.
+    compiled = obstacle_module.pieces_of
+    obstacle_module.pieces_of = lambda checker: None  # type: ignore[assignment]
     try:
         for t in targets:
             solve_ik(hand, t, IKSettings(), obstacle=obj)
     finally:
         for name, method in originals.items():
             setattr(HandObjectClearance, name, method)
+        obstacle_module.pieces_of = compiled
     return log
+
+
+def _ask_all(pairs: list[tuple[Callable[[], Any], Callable[[], Any]]], side: int) -> None:
+    for pair in pairs:
+        pair[side]()
+
+
+def compiled(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
+    """The IK's queries answered by coal alone and by the compiled verdicts (docs/ik.md)."""
+    checker = HandObjectClearance(hand, obj)
+    obstacles: dict[tuple[str, ...], Obstacle] = {}
+    rows: dict[str, list[tuple[Callable[[], Any], Callable[[], Any]]]] = defaultdict(list)
+    differ: dict[str, int] = defaultdict(int)
+    for kind, q, contacts, arg in _queries(hand, obj, targets):
+        if kind == "clearance" and not arg:
+            continue  # the exact clearance of a result: not a verdict
+        obstacle = obstacles.setdefault(contacts, Obstacle(hand, obj, contacts, ALLOWANCE_M))
+        pieces = obstacle._pieces
+        assert pieces is not None, f"{obj.name}: the compiled verdicts do not know its pieces"
+        if kind == "clearance":
+            pair = (
+                lambda q=q, c=contacts: checker.clearance_if_clear(q, c, ALLOWANCE_M),
+                lambda q=q, o=obstacle, p=pieces: o._compiled_clearance(q, p),
+            )
+            coal_found, found = pair[0](), pair[1]()
+            same = (coal_found is None) == (found is None) and (
+                found is None
+                or (
+                    (coal_found.link == found.link)
+                    and abs(coal_found.distance_m - found.distance_m) <= 1e-6
+                )
+            )
+            rows["acceptance test"].append(pair)
+        else:
+            pair = (
+                lambda q=q, c=contacts, m=arg: checker.penetrations(
+                    q, m, c, ALLOWANCE_M, per_link=REPAIR_PAIRS_PER_LINK
+                ),
+                lambda q=q, o=obstacle, m=arg: o.penetrations(q, m),
+            )
+            same = [(p.joint_b, p.depth_m) for p in pair[0]()] == [
+                (p.joint_b, p.depth_m) for p in pair[1]()
+            ]
+            rows["repair query"].append(pair)
+        differ[kind] += not same
+    for label, pairs in rows.items():
+        best = np.full(2, np.inf)
+        for _ in range(repeats):
+            for j in range(2):
+                best[j] = min(best[j], _cpu(_ask_all, pairs, j)[0])
+        coal_us, compiled_us = best / len(pairs) * 1e6
+        print(
+            f"{obj.name:16s} {label:15s} {len(pairs):5d} queries: coal {coal_us:6.1f} us, "
+            f"compiled {compiled_us:6.1f} us; answers differing: "
+            f"{differ['clearance' if label == 'acceptance test' else 'penetrations']}"
+        )
 
 
 def _answer(checker: Any, kind: str, q: np.ndarray, contacts: tuple[str, ...], arg: Any) -> Any:
@@ -484,6 +555,7 @@ def main() -> None:
             "verdicts",
             "finer",
             "pieces",
+            "compiled",
         ),
     )
     parser.add_argument(
@@ -515,6 +587,8 @@ def main() -> None:
             solves(hand, obj, targets, args.old, args.repeats, args.new_first)
         elif args.mode == "sets":
             sets(hand, obj, targets)
+        elif args.mode == "compiled":
+            compiled(hand, obj, targets, args.repeats)
         elif args.mode == "alone":
             alone(hand, obj, targets)
         elif args.mode == "finer":

@@ -316,12 +316,13 @@ class GraspTarget:
 
     def check_fingers(self, valid: Sequence[str]) -> None:
         """Raise unless the grasp has exactly one contact for each of the ``valid`` fingers."""
-        unknown = [f for f in self.fingers if f not in valid]
+        fingers = self.fingers
+        unknown = [f for f in fingers if f not in valid]
         if unknown:
             raise InvalidTargetError(
                 f"grasp {self.name!r}: unknown finger(s) {unknown}; valid fingers are {list(valid)}"
             )
-        missing = [f for f in valid if f not in self.fingers]
+        missing = [f for f in valid if f not in fingers]
         if missing:
             raise InvalidTargetError(
                 f"grasp {self.name!r}: missing contact(s) for {missing}; "

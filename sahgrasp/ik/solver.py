@@ -264,10 +264,11 @@ class ContactProblem:
         self.target = target
         self.fingers = tuple(constrained)
         self.rows = np.array([hand.fingers.index(f) for f in constrained], dtype=np.intp)
-        contacts = [target.contact(f) for f in constrained]
+        by_finger = {c.finger: c for c in target.contacts}
+        contacts = [by_finger[f] for f in constrained]
         self.points = np.array([c.point for c in contacts])
         self.normals = np.array([c.normal for c in contacts])
-        self.centres = np.array([c.centre(hand.radius_m) for c in contacts])
+        self.centres = self.points + hand.radius_m * self.normals  # ContactTarget.centre, stacked
         # The targets in the order of Hand.contact_stack: (p_i*, r_i*) per constrained finger.
         self.target_stack = np.concatenate([self.points, self.centres], axis=1).ravel()
         self.obstacle = (
@@ -308,6 +309,14 @@ class ContactProblem:
             np.linalg.norm(state.points[self.rows] - self.points, axis=1),
             np.linalg.norm(state.centres[self.rows] - self.centres, axis=1),
         )
+
+    def errors_at(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """:meth:`errors` at ``q``, from the compiled tree's contact stack (one native call)."""
+        stack = np.empty(len(self.target_stack))
+        compiled_tree(self.hand).stack(q, self.rows, stack, None)
+        gaps = (stack - self.target_stack).reshape(-1, 2, 3)
+        norms = np.sqrt(np.einsum("fkc,fkc->fk", gaps, gaps))
+        return norms[:, 0], norms[:, 1]
 
     def residual(self, state: ContactState, rows: slice = slice(None)) -> NDArray[np.float64]:
         """``P* - P`` stacked as (p, r) per constrained finger, for the fingers in ``rows``."""
@@ -652,7 +661,7 @@ _FAILURE_REASONS: dict[str, Reason] = {
 def _result(
     hand: Hand, problem: ContactProblem, chosen: Attempt, attempts: list[Attempt], success: bool
 ) -> IKResult:
-    pos, cen = problem.errors(hand.contact_state(chosen.q))
+    pos, cen = problem.errors_at(chosen.q)
     reason: Reason
     if success:
         reason, collision_free = "converged", True
