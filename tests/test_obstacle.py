@@ -13,9 +13,9 @@ import pytest
 from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
 from sahgrasp.ik._lm import Pieces
-from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle, _describe, checker_of, pieces_of
+from sahgrasp.ik.compiled import describe_shape
+from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle, checker_of, pieces_of
 from sahgrasp.objects import GraspObject, load_mesh, load_object
-from sahgrasp.objects.collision import CollisionShape
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
 
 MUG = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
@@ -97,10 +97,9 @@ def test_the_compiled_repair_query_asks_coal_about_the_same_links(
 def test_pieces_of_unknown_kinds_leave_the_checks_to_coal(
     sah: Hand, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    cone = CollisionShape(coal.Cone(0.01, 0.02), np.eye(4), 0.02)
-    assert _describe(cone) is None
+    assert describe_shape(coal.Cone(0.01, 0.02)) is None
     checker = checker_of(sah, load_object("can"))
-    monkeypatch.setattr("sahgrasp.ik.obstacle._describe", lambda shape: None)
+    monkeypatch.setattr("sahgrasp.ik.obstacle.describe_shape", lambda geometry: None)
     assert pieces_of.__wrapped__(checker) is None
 
 

@@ -863,9 +863,9 @@ static PyObject *Tree_repair(Tree *self, PyObject *args) {
 /* ------------------------------------------------------------------ self-collision -- */
 
 /* set_shapes(joints, placements, kinds, sizes, balls, pairs): the hand's collision shapes
- * (tree joint, placement in it as 12 values, kind of _gjk.h, 4 sizes: box half extents or
- * cylinder radius and half length, then the inflation), their bounding balls (local centre,
- * radius) and the pairs to check. */
+ * (tree joint, placement in it as 12 values, kind of _gjk.h up to the ellipsoid, 4 sizes: box
+ * half extents, cylinder radius and half length or ellipsoid radii, then the inflation), their
+ * bounding balls (local centre, radius) and the pairs to check. */
 static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
     enum { JOINTS, PLACEMENTS, KINDS, SIZES, BALLS, PAIRS, N_ARGS };
     PyObject *o[N_ARGS];
@@ -886,7 +886,7 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
         int npairs = (int)(b[PAIRS].len / 16), bad = b[PAIRS].len % 16 != 0;
         for (int k = 0; k < ns; k++)
             bad |= joints[k] < 0 || joints[k] >= self->nj || kinds[k] < SHAPE_POINT ||
-                   kinds[k] > SHAPE_CYLINDER;
+                   kinds[k] > SHAPE_ELLIPSOID;
         for (int k = 0; k < 2 * npairs; k++) bad |= pairs[k] < 0 || pairs[k] >= ns;
         int *joint = malloc((size_t)ns * sizeof(int) + 1), *pair = malloc(2 * (size_t)npairs * sizeof(int) + 1);
         Pose *place = malloc((size_t)ns * sizeof(Pose) + 1);
@@ -999,16 +999,21 @@ typedef struct {
     int *cell_members;
 } Pieces;
 
+/* Free the arrays and leave the object uninitialised (shapes NULL). */
+static void pieces_clear(Pieces *self) {
+    void **arrays[] = {(void **)&self->shapes,     (void **)&self->ball,
+                       (void **)&self->vertices,   (void **)&self->first,
+                       (void **)&self->neighbours, (void **)&self->starts,
+                       (void **)&self->cell_ball,  (void **)&self->cell_start,
+                       (void **)&self->cell_members};
+    for (size_t k = 0; k < sizeof arrays / sizeof arrays[0]; k++) {
+        free(*arrays[k]);
+        *arrays[k] = NULL;
+    }
+}
+
 static void Pieces_dealloc(Pieces *self) {
-    free(self->shapes);
-    free(self->ball);
-    free(self->vertices);
-    free(self->first);
-    free(self->neighbours);
-    free(self->starts);
-    free(self->cell_ball);
-    free(self->cell_start);
-    free(self->cell_members);
+    pieces_clear(self);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -1133,14 +1138,7 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
     self->ncells = ncells;
     status = 0;
 out:
-    if (status < 0) { /* a failed init leaves an uninitialised object */
-        free(self->shapes), free(self->ball), free(self->vertices), free(self->first);
-        free(self->neighbours), free(self->cell_ball), free(self->cell_start);
-        free(self->cell_members), free(self->starts);
-        self->shapes = NULL, self->ball = NULL, self->vertices = NULL, self->first = NULL;
-        self->neighbours = NULL, self->cell_ball = NULL, self->cell_start = NULL;
-        self->cell_members = NULL, self->starts = NULL;
-    }
+    if (status < 0) pieces_clear(self); /* a failed init leaves an uninitialised object */
     release_buffers(b, held);
     return status;
 }

@@ -23,7 +23,20 @@ from sahgrasp.errors import HandModelError
 from sahgrasp.hand import Hand
 from sahgrasp.ik._lm import CONVERGED, MAX_ITERATIONS, NO_PROGRESS, Tree
 
-__all__ = ["OUTCOMES", "compiled_tree", "near_pairs", "self_collides"]
+__all__ = [
+    "BOX",
+    "CLIMB_ABOVE",
+    "CONVEX",
+    "CYLINDER",
+    "ELLIPSOID",
+    "OUTCOMES",
+    "POINT",
+    "ShapeDescription",
+    "compiled_tree",
+    "describe_shape",
+    "near_pairs",
+    "self_collides",
+]
 
 OUTCOMES: Final = {
     CONVERGED: "converged",
@@ -125,32 +138,67 @@ def _export(hand: Hand) -> Tree:
     return tree
 
 
-_SPHERE, _BOX, _CYLINDER = 0, 1, 2  # shape kinds of sahgrasp/_gjk.h
+POINT, BOX, CYLINDER, ELLIPSOID, CONVEX = range(5)
+"""Shape kinds of the compiled verdicts (``sahgrasp/_gjk.h``)."""
+
+CLIMB_ABOVE = 16
+"""Convex shapes with more vertices than this find their support points by hill climbing on
+the hull's edges (coal's vertex neighbours) instead of a scan of every vertex."""
+
+ShapeDescription = tuple[int, list[float], NDArray[np.float64], list[list[int]] | None]
+"""A shape's kind, sizes (3, then its inflation [m]), convex vertices (N, 3) and, for a hull of
+more than :data:`CLIMB_ABOVE` vertices, each vertex's neighbours."""
+
+
+def describe_shape(geometry: coal.CollisionGeometry) -> ShapeDescription | None:
+    """A coal shape as the compiled verdicts see it; None for a kind they do not know.
+
+    A sphere is an inflated point and a capsule an inflated segment (a cylinder of radius 0);
+    coal's swept-sphere radius adds to the inflation. Sizes: box half extents, cylinder radius
+    and half length, ellipsoid radii.
+    """
+    if not isinstance(geometry, coal.ShapeBase):  # a mesh (BVH) or an octree
+        return None
+    inflation = float(geometry.getSweptSphereRadius())
+    no_vertices = np.empty((0, 3))
+    if isinstance(geometry, coal.ConvexBase):
+        points = np.asarray(geometry.points(), dtype=np.float64)
+        climb = None
+        if len(points) > CLIMB_ABOVE:
+            climb = [list(geometry.neighbors(k)) for k in range(len(points))]
+        return CONVEX, [0.0, 0.0, 0.0, inflation], points, climb
+    if isinstance(geometry, coal.Box):
+        return BOX, [*np.asarray(geometry.halfSide).tolist(), inflation], no_vertices, None
+    if isinstance(geometry, coal.Ellipsoid):
+        return ELLIPSOID, [*np.asarray(geometry.radii).tolist(), inflation], no_vertices, None
+    if isinstance(geometry, coal.Sphere):
+        return POINT, [0.0, 0.0, 0.0, geometry.radius + inflation], no_vertices, None
+    if isinstance(geometry, coal.Cylinder):
+        sizes = [geometry.radius, geometry.halfLength, 0.0, inflation]
+        return CYLINDER, sizes, no_vertices, None
+    if isinstance(geometry, coal.Capsule):
+        sizes = [0.0, geometry.halfLength, 0.0, geometry.radius + inflation]
+        return CYLINDER, sizes, no_vertices, None
+    return None
 
 
 def _shapes(geometry_model: pin.GeometryModel) -> tuple[NDArray[Any], ...] | None:
-    """The arguments of :meth:`Tree.set_shapes`; None if a shape is not a primitive it knows."""
+    """The arguments of :meth:`Tree.set_shapes`, None if a shape cannot be compiled.
+
+    A hull, a shape of a kind :func:`describe_shape` does not know, or one that hangs from no
+    joint of the tree leaves the hand's verdicts to coal.
+    """
     joints, placements, kinds, sizes, balls = [], [], [], [], []
     for g in geometry_model.geometryObjects:
-        shape = g.geometry
-        if isinstance(shape, coal.Sphere):
-            kind, size = _SPHERE, [0.0, 0.0, 0.0, shape.radius]
-        elif isinstance(shape, coal.Box):
-            kind, size = _BOX, [*np.asarray(shape.halfSide).tolist(), 0.0]
-        elif isinstance(shape, coal.Cylinder):
-            kind, size = _CYLINDER, [shape.radius, shape.halfLength, 0.0, 0.0]
-        elif isinstance(shape, coal.Capsule):  # a segment inflated by the radius
-            kind, size = _CYLINDER, [0.0, shape.halfLength, 0.0, shape.radius]
-        else:
+        described = describe_shape(g.geometry)
+        if described is None or described[0] == CONVEX or g.parentJoint < 1:
             return None
-        if g.parentJoint < 1:
-            return None
-        shape.computeLocalAABB()
+        g.geometry.computeLocalAABB()
         joints.append(g.parentJoint - 1)
         placements.append(np.concatenate([g.placement.rotation.ravel(), g.placement.translation]))
-        kinds.append(kind)
-        sizes.append(size)
-        balls.append([*np.asarray(shape.aabb_center).tolist(), float(shape.aabb_radius)])
+        kinds.append(described[0])
+        sizes.append(described[1])
+        balls.append([*np.asarray(g.geometry.aabb_center).tolist(), float(g.geometry.aabb_radius)])
     pairs = [(p.first, p.second) for p in geometry_model.collisionPairs]
     return (
         np.array(joints, dtype=np.int64),

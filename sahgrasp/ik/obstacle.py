@@ -20,14 +20,13 @@ from sahgrasp.collision import Penetration
 from sahgrasp.errors import InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.ik._lm import Pieces
-from sahgrasp.ik.compiled import compiled_tree
+from sahgrasp.ik.compiled import CONVEX, compiled_tree, describe_shape
 
 # The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
 # solves with an obstacle need it.
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
     from sahgrasp.objects.clearance import Clearance, HandObjectClearance
-    from sahgrasp.objects.collision import CollisionShape
 
 __all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of", "pieces_of"]
 
@@ -62,12 +61,6 @@ def checker_of(hand: Hand, obj: GraspObject | None) -> HandObjectClearance:
     return HandObjectClearance(hand, obj)
 
 
-_POINT, _BOX, _CYLINDER, _ELLIPSOID, _CONVEX = range(5)  # shape kinds of sahgrasp/_gjk.h
-
-_CLIMB_ABOVE = 16
-"""Convex pieces with more vertices than this find their support points by hill climbing on
-the hull's edges (coal's neighbours) instead of a scan of every vertex."""
-
 _TIE_M = 1e-9
 """Links this close to their repair threshold [m] are left to coal to decide (GJK's and coal's
 tolerances differ in the last digits; a repair step puts links at the threshold)."""
@@ -78,15 +71,14 @@ def pieces_of(checker: HandObjectClearance) -> Pieces | None:
     """The checker's object pieces for the compiled verdicts, None if they cannot be compiled.
 
     The compiled verdicts (``Tree.object_clearance``, ``Tree.shapes_near``: GJK in
-    ``sahgrasp/_gjk.h``) know points, boxes, cylinders, capsules, ellipsoids and convex hulls,
-    inflated by coal's swept-sphere radius; another piece, or a hand whose own shapes are not
-    compiled, leaves every query to coal.
+    ``sahgrasp/_gjk.h``) know the kinds of :func:`~sahgrasp.ik.compiled.describe_shape`; a piece
+    of another kind, or a hand whose own shapes are not compiled, leaves every query to coal.
     """
     if not compiled_tree(checker.hand).shape_count:
         return None
     tree = checker.piece_tree
     shapes = checker.object.collision_shapes()
-    described = [_describe(shape) for shape in shapes]
+    described = [describe_shape(shape.geometry) for shape in shapes]
     if not shapes or any(d is None for d in described):
         return None
     kinds, sizes, vertices, neighbours = zip(*described, strict=True)
@@ -115,35 +107,6 @@ def pieces_of(checker: HandObjectClearance) -> Pieces | None:
     )
 
 
-def _describe(
-    shape: CollisionShape,
-) -> tuple[int, list[float], NDArray[np.float64], list[list[int]] | None] | None:
-    """A piece's kind, sizes (3, then the inflation [m]), convex vertices and their neighbours."""
-    import coal
-
-    g, none = shape.geometry, np.empty((0, 3))
-    inflation = float(g.getSweptSphereRadius())
-    if isinstance(g, coal.ConvexBase):
-        points = np.asarray(g.points(), dtype=np.float64)
-        climb = (
-            [list(g.neighbors(k)) for k in range(len(points))]
-            if len(points) > _CLIMB_ABOVE
-            else None
-        )
-        return _CONVEX, [0.0, 0.0, 0.0, inflation], points, climb
-    if isinstance(g, coal.Box):
-        return _BOX, [*np.asarray(g.halfSide).tolist(), inflation], none, None
-    if isinstance(g, coal.Ellipsoid):
-        return _ELLIPSOID, [*np.asarray(g.radii).tolist(), inflation], none, None
-    if isinstance(g, coal.Sphere):
-        return _POINT, [0.0, 0.0, 0.0, g.radius + inflation], none, None
-    if isinstance(g, coal.Cylinder):
-        return _CYLINDER, [g.radius, g.halfLength, 0.0, inflation], none, None
-    if isinstance(g, coal.Capsule):
-        return _CYLINDER, [0.0, g.halfLength, 0.0, g.radius + inflation], none, None
-    return None
-
-
 def _neighbour_offsets(
     kinds: tuple[int, ...], neighbours: tuple[list[list[int]] | None, ...]
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -151,7 +114,7 @@ def _neighbour_offsets(
     first: list[int] = []
     flat: list[int] = []
     for kind, piece in zip(kinds, neighbours, strict=True):
-        if kind != _CONVEX:
+        if kind != CONVEX:
             continue
         if piece is None:  # its vertices are scanned
             first.append(-1)
