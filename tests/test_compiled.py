@@ -376,3 +376,22 @@ def test_capsules_are_inflated_segments(sah: Hand) -> None:
         moved = np.array([placements[0], [*np.eye(3).ravel(), x_m, 0.0, 0.0]])
         tree.set_shapes(joints, moved, kinds, sizes, balls, pair)
         assert (tree.pairs_within(sah.configuration(), 0.0, out) == 1) is touching
+
+
+@pytest.mark.parametrize("fingers", FINGER_SETS)
+def test_errors_match_pinocchio(hand: Hand, fingers: list[int] | None) -> None:
+    tree, rows = compiled_tree(hand), _indices(hand, fingers)
+    target = np.random.default_rng(8128).normal(0.0, 0.1, 6 * len(rows))
+    for q in _configurations(hand, 5, 8129):
+        state = hand.contact_state(q)
+        points, centres = target.reshape(-1, 2, 3)[:, 0], target.reshape(-1, 2, 3)[:, 1]
+        out = np.empty(2 * len(rows))
+        tree.errors(q, target, rows, out)
+        np.testing.assert_allclose(
+            out[: len(rows)], np.linalg.norm(state.points[rows] - points, axis=1), atol=1e-12
+        )
+        np.testing.assert_allclose(
+            out[len(rows) :], np.linalg.norm(state.centres[rows] - centres, axis=1), atol=1e-12
+        )
+    with pytest.raises(ValueError, match="out"):
+        tree.errors(hand.configuration(), target, rows, np.empty(1))

@@ -720,6 +720,39 @@ static PyObject *Tree_stack(Tree *self, PyObject *args) {
     Py_RETURN_NONE;
 }
 
+/* errors(q, target, fingers, out): per finger, the distance [m] of its contact point from the
+ * target's (out[:nf]) and of its sphere centre from the target's (out[nf:]). */
+static PyObject *Tree_errors(Tree *self, PyObject *args) {
+    PyObject *q_obj, *target_obj, *fingers_obj, *out_obj;
+    if (!PyArg_ParseTuple(args, "OOOO:errors", &q_obj, &target_obj, &fingers_obj, &out_obj))
+        return NULL;
+    Py_buffer b[4];
+    int nf, ok = 0;
+    if (take_finger_buffers(self, q_obj, 0, fingers_obj, target_obj, 0, "target", b, &nf) < 0)
+        return NULL;
+    if (get_buffer(out_obj, &b[3], 2 * (Py_ssize_t)nf, 1, "d", "out") < 0) {
+        release_buffers(b, 3);
+        return NULL;
+    }
+    Work w;
+    if (work_init(&w, self, b[0].buf, nf, b[2].buf, 0) == 0) {
+        const double *target = b[2].buf;
+        double *out = b[3].buf;
+        forward(self, b[1].buf, w.M);
+        stack_of(self, w.M, b[0].buf, nf, w.stack);
+        for (int k = 0; k < 2 * nf; k++) {  /* stack: (p, r) per finger */
+            const double *a = w.stack + 3 * k, *t = target + 3 * k;
+            double d[3] = {a[0] - t[0], a[1] - t[1], a[2] - t[2]};
+            out[k % 2 == 0 ? k / 2 : nf + k / 2] = sqrt(dot(d, d, 3));
+        }
+        work_free(&w);
+        ok = 1;
+    }
+    release_buffers(b, 4);
+    if (!ok) return NULL;
+    Py_RETURN_NONE;
+}
+
 /* integrate(q, v, out, clamp): q (+) v, the joints clamped to their limits if clamp. */
 static PyObject *Tree_integrate(Tree *self, PyObject *args) {
     PyObject *q_obj, *v_obj, *out_obj;
@@ -1524,6 +1557,9 @@ static PyMethodDef Tree_methods[] = {
      "(outcome, iterations, error_m); q is updated in place."},
     {"stack", (PyCFunction)Tree_stack, METH_VARARGS,
      "stack(q, fingers, stack_out, jacobian_out_or_None): contact stack and its Jacobian."},
+    {"errors", (PyCFunction)Tree_errors, METH_VARARGS,
+     "errors(q, target, fingers, out): per finger, the contact point's and then the sphere "
+     "centre's distance from the target's [m]."},
     {"integrate", (PyCFunction)Tree_integrate, METH_VARARGS,
      "integrate(q, v, out, clamp): q (+) v, joints clamped to their limits if clamp."},
     {"repair", (PyCFunction)Tree_repair, METH_VARARGS,

@@ -313,11 +313,9 @@ class ContactProblem:
 
     def errors_at(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """:meth:`errors` at ``q``, from the compiled tree's contact stack (one native call)."""
-        stack = np.empty(len(self.target_stack))
-        compiled_tree(self.hand).stack(q, self.rows, stack, None)
-        gaps = (stack - self.target_stack).reshape(-1, 2, 3)
-        norms = np.sqrt(np.einsum("fkc,fkc->fk", gaps, gaps))
-        return norms[:, 0], norms[:, 1]
+        errors = np.empty(2 * len(self.rows))
+        compiled_tree(self.hand).errors(q, self.target_stack, self.rows, errors)
+        return errors[: len(self.rows)], errors[len(self.rows) :]
 
     def residual(self, state: ContactState, rows: slice = slice(None)) -> NDArray[np.float64]:
         """``P* - P`` stacked as (p, r) per constrained finger, for the fingers in ``rows``."""
