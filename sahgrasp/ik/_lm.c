@@ -1307,7 +1307,8 @@ static void clearance_of(const Pieces *P, GjkShape *shapes, const double *balls,
         if (thresholds[k] < 0.0) continue;
         double gap = gap_to_cells(P, balls + 4 * k);
         int at = n++;
-        for (; at > 0 && bounds[at - 1] > gap; at--) bounds[at] = bounds[at - 1], order[at] = order[at - 1];
+        for (; at > 0 && bounds[at - 1] > gap; at--)
+            bounds[at] = bounds[at - 1], order[at] = order[at - 1];
         bounds[at] = gap, order[at] = k;
     }
     for (int i = 0; i < n && !*inside && bounds[i] < *best; i++) {
@@ -1316,6 +1317,40 @@ static void clearance_of(const Pieces *P, GjkShape *shapes, const double *balls,
         *inside = d < thresholds[k];
         if (d < *best) *best = d, *closest = k;
     }
+}
+
+/* The hand's shapes of one object query, placed in the object frame, and the query's scratch. */
+typedef struct {
+    GjkShape *shapes;
+    double *balls;   /* bounding ball per shape, object frame: centre, radius */
+    double *gaps;    /* per cell */
+    double *bounds;  /* per shape */
+    int *order;      /* per shape */
+} ObjectQuery;
+
+static void object_query_free(ObjectQuery *Q) {
+    free(Q->shapes), free(Q->balls), free(Q->gaps), free(Q->bounds), free(Q->order);
+}
+
+/* Q for the tree at q and an object at the 4 x 4 row-major T_world_object: 0, or -1 with
+ * MemoryError and nothing held. */
+static int object_query_init(const Tree *T, const Pieces *P, const double *q,
+                             const double *T_world_object, ObjectQuery *Q) {
+    int ns = T->ns;
+    double placement[12];
+    Q->shapes = malloc((size_t)ns * sizeof(GjkShape));
+    Q->balls = malloc(4 * (size_t)ns * sizeof(double));
+    Q->gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
+    Q->bounds = malloc((size_t)ns * sizeof(double));
+    Q->order = malloc((size_t)ns * sizeof(int));
+    pose_values(T_world_object, placement);
+    if (!Q->shapes || !Q->balls || !Q->gaps || !Q->bounds || !Q->order ||
+        shapes_in_object(T, q, placement, Q->shapes, Q->balls) < 0) {
+        object_query_free(Q);
+        PyErr_NoMemory();
+        return -1;
+    }
+    return 0;
 }
 
 /* object_clearance(pieces, q, T_world_object, thresholds) -> (inside, distance_m, shape):
@@ -1329,25 +1364,16 @@ static PyObject *Tree_object_clearance(Tree *self, PyObject *args) {
     Py_buffer b[3];
     if (take_object_buffers(self, pieces, q_obj, T_obj, th_obj, b) < 0) return NULL;
     const Pieces *P = (const Pieces *)pieces;
-    int ns = self->ns;
-    int *order = malloc((size_t)ns * sizeof(int));
-    GjkShape *shapes = malloc((size_t)ns * sizeof(GjkShape));
-    double *balls = malloc(4 * (size_t)ns * sizeof(double)), placement[12];
-    double *bounds = malloc((size_t)ns * sizeof(double));
-    double *gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
+    ObjectQuery Q;
     PyObject *result = NULL;
-    pose_values(b[1].buf, placement);
-    if (!order || !shapes || !balls || !bounds || !gaps ||
-        shapes_in_object(self, b[0].buf, placement, shapes, balls) < 0) {
-        PyErr_NoMemory();
-    } else {
+    if (object_query_init(self, P, b[0].buf, b[1].buf, &Q) == 0) {
         int inside, closest;
         double best;
-        clearance_of(P, shapes, balls, ns, b[2].buf, order, bounds, gaps, &inside, &best,
-                     &closest);
+        clearance_of(P, Q.shapes, Q.balls, self->ns, b[2].buf, Q.order, Q.bounds, Q.gaps,
+                     &inside, &best, &closest);
         result = Py_BuildValue("Odi", inside ? Py_True : Py_False, best, closest);
+        object_query_free(&Q);
     }
-    free(order), free(shapes), free(balls), free(bounds), free(gaps);
     release_buffers(b, 3);
     return result;
 }
@@ -1367,23 +1393,17 @@ static PyObject *Tree_shapes_near(Tree *self, PyObject *args) {
     const Pieces *P = (const Pieces *)pieces;
     const double *thresholds = b[2].buf;
     long long *out = b[3].buf;
-    GjkShape *shapes = malloc((size_t)self->ns * sizeof(GjkShape));
-    double *balls = malloc(4 * (size_t)self->ns * sizeof(double)), placement[12];
-    double *gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
+    ObjectQuery Q;
     PyObject *result = NULL;
-    pose_values(b[1].buf, placement);
-    if (!shapes || !balls || !gaps ||
-        shapes_in_object(self, b[0].buf, placement, shapes, balls) < 0) {
-        PyErr_NoMemory();
-    } else {
+    if (object_query_init(self, P, b[0].buf, b[1].buf, &Q) == 0) {
         int count = 0;
         for (int k = 0; k < self->ns; k++)
-            if (shape_to_pieces(P, &shapes[k], balls + 4 * k, thresholds[k], thresholds[k],
-                                gaps) < thresholds[k])
+            if (shape_to_pieces(P, &Q.shapes[k], Q.balls + 4 * k, thresholds[k], thresholds[k],
+                                Q.gaps) < thresholds[k])
                 out[count++] = k;
         result = PyLong_FromLong(count);
+        object_query_free(&Q);
     }
-    free(shapes), free(balls), free(gaps);
     release_buffers(b, 4);
     return result;
 }

@@ -31,6 +31,7 @@ __all__ = [
     "ELLIPSOID",
     "OUTCOMES",
     "POINT",
+    "TIE_M",
     "ShapeDescription",
     "compiled_tree",
     "describe_shape",
@@ -62,13 +63,15 @@ def compiled_tree(hand: Hand) -> Tree:
 
 
 def self_collides(hand: Hand, q: NDArray[np.float64]) -> bool:
-    """True if the hand collides with itself at ``q``: :meth:`Hand.in_collision`'s verdict.
+    """True if the hand collides with itself at ``q``, the verdict of coal's distances.
 
     Compiled (GJK in ``sahgrasp/_gjk.h``, the shapes placed by the tree's own kinematics) when
-    every collision shape is a sphere, box, cylinder or capsule, as in the shipped hands: one
-    native call instead of Pinocchio's and coal's broad phase through Python (docs/ik.md,
-    "Compiled self-collision verdict"). coal answers for other shapes (meshes). The verdicts
-    differ only for pairs within GJK's tolerance of touching (about 1e-12 of their distance).
+    every collision shape is a sphere, box, cylinder, capsule or ellipsoid, as in the shipped
+    hands: one native call instead of Pinocchio's and coal's broad phase through Python
+    (docs/ik.md, "Compiled collision verdicts"). :meth:`Hand.in_collision` answers for other
+    shapes (meshes). It can differ from this verdict for pairs within GJK's tolerance of
+    touching, and where Pinocchio's collision request calls clear a pair that coal's distance
+    finds overlapping (docs/ik.md).
     """
     tree = compiled_tree(hand)
     if not tree.shape_count:
@@ -81,20 +84,21 @@ def near_pairs(hand: Hand, q: NDArray[np.float64], margin_m: float) -> NDArray[n
 
     Compiled: the pairs the IK's collision repair asks coal's witnesses of
     (:meth:`Hand.penetrations`), every pair closer than the margin and those within
-    :data:`_TIE_M` beyond it. None when the hand has shapes the compiled check does not know
+    :data:`TIE_M` beyond it. None when the hand has shapes the compiled check does not know
     (coal then finds them).
     """
     tree = compiled_tree(hand)
     if not tree.shape_count:
         return None
     found = np.empty(tree.pair_count, dtype=np.int64)
-    count = tree.pairs_within(q, margin_m + _TIE_M, found)
+    count = tree.pairs_within(q, margin_m + TIE_M, found)
     return found[:count].astype(np.intp)
 
 
-_TIE_M = 1e-9
-"""Pairs this close to the margin [m] are left to coal to decide: a repair step puts the pairs
-it separates at the margin up to rounding, where coal's test and GJK's tolerance may differ."""
+TIE_M = 1e-9
+"""Pairs (and links) this close beyond the repair's margin [m] are left to coal to decide: a
+repair step puts what it separates at the margin up to rounding, where coal's test and GJK's
+tolerance may differ."""
 
 
 def _export(hand: Hand) -> Tree:

@@ -20,7 +20,7 @@ from sahgrasp.collision import Penetration
 from sahgrasp.errors import InvalidTargetError
 from sahgrasp.hand import Hand
 from sahgrasp.ik._lm import Pieces
-from sahgrasp.ik.compiled import CONVEX, compiled_tree, describe_shape
+from sahgrasp.ik.compiled import CONVEX, TIE_M, compiled_tree, describe_shape
 
 # The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
 # solves with an obstacle need it.
@@ -59,11 +59,6 @@ def checker_of(hand: Hand, obj: GraspObject | None) -> HandObjectClearance:
     from sahgrasp.objects.clearance import HandObjectClearance
 
     return HandObjectClearance(hand, obj)
-
-
-_TIE_M = 1e-9
-"""Links this close to their repair threshold [m] are left to coal to decide (GJK's and coal's
-tolerances differ in the last digits; a repair step puts links at the threshold)."""
 
 
 @functools.lru_cache(maxsize=8)
@@ -180,7 +175,7 @@ class Obstacle:
         if self._pieces is not None:  # coal is asked about the links the compiled check finds
             thresholds = self.checker.thresholds(self.contacts, margin_m, self.allowance_m)
             T = self.checker.object.T_world_object
-            count = self._tree.shapes_near(self._pieces, q, T, thresholds + _TIE_M, self._near)
+            count = self._tree.shapes_near(self._pieces, q, T, thresholds + TIE_M, self._near)
             near = self._near[:count].tolist()
         return self.checker.penetrations(
             q, margin_m, self.contacts, self.allowance_m, per_link=REPAIR_PAIRS_PER_LINK,
