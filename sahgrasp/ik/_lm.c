@@ -594,15 +594,37 @@ static void work_free(Work *w) {
 }
 
 /* Buffers of one call (the costs of up to `iterations` steps), one allocation for the doubles. */
-static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
-                     const double *target, int iterations) {
-    int m = 6 * nf, nv = T->nv;
-    memset(w, 0, sizeof(Work));
+/* 0 if every finger index is one of the tree's, else -1 with a ValueError. */
+static int check_fingers(const Tree *T, const long long *fingers, int nf) {
     for (int b = 0; b < nf; b++)
         if (fingers[b] < 0 || fingers[b] >= T->nf) {
             PyErr_SetString(PyExc_ValueError, "finger index out of range");
             return -1;
         }
+    return 0;
+}
+
+/* The contact stack (p_i, r_i) of `fingers` at q into `stack` (6 nf values), without the loop's
+ * buffers: 0, or -1 with an exception. */
+static int stack_at(const Tree *T, const double *q, const long long *fingers, int nf,
+                    double *stack) {
+    if (check_fingers(T, fingers, nf) < 0) return -1;
+    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
+    if (M == NULL) {
+        PyErr_NoMemory();
+        return -1;
+    }
+    forward(T, q, M);
+    stack_of(T, M, fingers, nf, stack);
+    free(M);
+    return 0;
+}
+
+static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
+                     const double *target, int iterations) {
+    int m = 6 * nf, nv = T->nv;
+    memset(w, 0, sizeof(Work));
+    if (check_fingers(T, fingers, nf) < 0) return -1;
     *w = (Work){.T = T, .fingers = fingers, .nf = nf, .m = m, .nv = nv, .target = target};
     size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 3) + T->nq +
                      (size_t)iterations + 1;
@@ -734,20 +756,20 @@ static PyObject *Tree_errors(Tree *self, PyObject *args) {
         release_buffers(b, 3);
         return NULL;
     }
-    Work w;
-    if (work_init(&w, self, b[0].buf, nf, b[2].buf, 0) == 0) {
+    double *stack = malloc(6 * (size_t)nf * sizeof(double) + 1);
+    if (stack == NULL) {
+        PyErr_NoMemory();
+    } else if (stack_at(self, b[1].buf, b[0].buf, nf, stack) == 0) {
         const double *target = b[2].buf;
         double *out = b[3].buf;
-        forward(self, b[1].buf, w.M);
-        stack_of(self, w.M, b[0].buf, nf, w.stack);
         for (int k = 0; k < 2 * nf; k++) {  /* stack: (p, r) per finger */
-            const double *a = w.stack + 3 * k, *t = target + 3 * k;
+            const double *a = stack + 3 * k, *t = target + 3 * k;
             double d[3] = {a[0] - t[0], a[1] - t[1], a[2] - t[2]};
             out[k % 2 == 0 ? k / 2 : nf + k / 2] = sqrt(dot(d, d, 3));
         }
-        work_free(&w);
         ok = 1;
     }
+    free(stack);
     release_buffers(b, 4);
     if (!ok) return NULL;
     Py_RETURN_NONE;
@@ -1497,16 +1519,16 @@ static PyObject *Tree_align(Tree *self, PyObject *args) {
     int nf, ok = 0;
     if (take_finger_buffers(self, q_obj, 1, fingers_obj, goal_obj, 0, "goal", b, &nf) < 0)
         return NULL;
-    Work w;
+    double *stack = malloc(6 * (size_t)nf * sizeof(double) + 1);
     if (nf < 1) {
         PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
-    } else if (work_init(&w, self, b[0].buf, nf, b[2].buf, 0) == 0) {
-        forward(self, b[1].buf, w.M);
-        stack_of(self, w.M, b[0].buf, nf, w.stack);
-        align_wrist(b[1].buf, w.stack, b[2].buf, 2 * nf);
-        work_free(&w);
+    } else if (stack == NULL) {
+        PyErr_NoMemory();
+    } else if (stack_at(self, b[1].buf, b[0].buf, nf, stack) == 0) {
+        align_wrist(b[1].buf, stack, b[2].buf, 2 * nf);
         ok = 1;
     }
+    free(stack);
     release_buffers(b, 3);
     if (!ok) return NULL;
     Py_RETURN_NONE;
