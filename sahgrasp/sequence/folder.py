@@ -15,6 +15,7 @@ from __future__ import annotations
 import fcntl
 import os
 import re
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -92,7 +93,7 @@ def _lock(fd: int, folder: Path) -> None:
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
-        holder = re.sub(r"\D", "", os.pread(fd, 32, 0).decode("ascii", "replace")) or "unknown"
+        holder = _holder(fd)
         raise SequenceFileError(
             f"{folder} is in use by another search (pid {holder}); wait for it to end, or "
             "choose another --out"
@@ -104,3 +105,21 @@ def _lock(fd: int, folder: Path) -> None:
         ) from exc
     os.ftruncate(fd, 0)
     os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+
+
+_HOLDER_WAIT_S = 1.0
+"""How long a refused search waits for the lock's holder to write its pid [s]."""
+
+
+def _holder(fd: int) -> str:
+    """The pid the lock's holder wrote in the lock file, "unknown" if it wrote none.
+
+    The holder writes it just after taking the lock, so a search refused in between reads an
+    empty file: it waits for the pid a moment (polling) rather than name no holder.
+    """
+    deadline = time.monotonic() + _HOLDER_WAIT_S
+    while True:
+        pid = re.sub(r"\D", "", os.pread(fd, 32, 0).decode("ascii", "replace"))
+        if pid or time.monotonic() > deadline:
+            return pid or "unknown"
+        time.sleep(0.002)
