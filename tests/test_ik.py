@@ -342,7 +342,11 @@ def test_only_solutions_through_the_object_fail_with_object_collision(
 
 
 def test_a_hopeless_object_repair_is_given_up_before_the_cap(sah: Hand) -> None:
-    """The pinch through the plate: no step can clear it, so the repair stops early."""
+    """The pinch through the plate: no step clears it and holds the contacts, so it stops early.
+
+    Where the repair ends depends on the start: still in the plate, or out of it but colliding
+    with itself; either way the configuration is refused.
+    """
     target = _pinch(0.03, 0.03)
     plate, _ = _box((0.03, 0.4, 0.4))
     settings = IKSettings()
@@ -350,7 +354,7 @@ def test_a_hopeless_object_repair_is_given_up_before_the_cap(sah: Hand) -> None:
     problem = ContactProblem(sah, target, (), plate, settings.d_min_m)
     q, used = _separate(sah, problem, plain.q, settings, None)
     assert REPAIR_PATIENCE <= used < settings.repair_iterations
-    assert problem.collision(q) == "object_collision"
+    assert problem.collision(q) is not None
 
 
 def test_obstacle_must_be_a_grasp_object(sah: Hand) -> None:

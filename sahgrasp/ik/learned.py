@@ -14,7 +14,8 @@ The entries are of two kinds. *Random* entries are collision-free configurations
 solved by its own contacts, so no IK runs to build them. *Grasp* entries are solved grasps of
 contact sets that a grasp planner would draw (:mod:`sahgrasp.objects.grasp_sampler`) on random
 primitive solids -- cylinders, boxes, ellipsoids and capsules of graspable sizes, none of them a
-catalog object -- each solved by the IK from the searched sequence: a planner's contact sets lie
+catalog object -- each solved by the IK from the searched sequence, the solid as the obstacle
+(no link passes through it): a planner's contact sets lie
 far from every random entry's key, and nearest random entries started no better there than the
 sequence (docs/ik.md, "The learned start"). Grasp entries need the hand's reach, known for the
 SAH only. The seeds (:data:`LEARN_SEED`) are used nowhere else.
@@ -56,7 +57,9 @@ __all__ = [
     "contact_key",
     "default_database",
     "grasp_chunk",
+    "primitive_grasp_sets",
     "primitive_mesh",
+    "primitive_object",
     "rigid_features",
     "target_key",
 ]
@@ -317,32 +320,63 @@ def primitive_mesh(rng: np.random.Generator) -> Any:
     return trimesh.creation.capsule(radius=radius, height=height, count=[24, 24])
 
 
+def primitive_object(mesh: Any) -> Any:
+    """The convex ``trimesh.Trimesh`` of :func:`primitive_mesh` as a GraspObject (its own hull)."""
+    from sahgrasp.objects.body import GraspObject
+    from sahgrasp.objects.mesh_file import MeshSolid
+
+    solid = MeshSolid(
+        "primitive",
+        np.asarray(mesh.vertices, dtype=np.float64),
+        np.asarray(mesh.faces, dtype=np.int64),
+        collision="hull",
+    )
+    return GraspObject("primitive", (solid,), (0.6, 0.6, 0.6, 1.0))
+
+
+def primitive_grasp_sets(
+    hand: Hand, seed: int, chunk: int, primitives: int
+) -> Iterator[tuple[Any, list[GraspTarget]]]:
+    """The solids of grasp chunk ``chunk`` and the contact sets drawn on each (seeded).
+
+    Each of the ``primitives`` solids (:func:`primitive_mesh`) gets :data:`SETS_PER_PRIMITIVE`
+    contact sets from the grasp sampler with the hand's reach; a solid too large or too small for
+    it gives none and is skipped. Seeded by ``[seed, 1, chunk]``.
+    """
+    from sahgrasp.objects.grasp_sampler import GraspSamplingError, sample_contact_sets
+
+    reach = hand_reach(hand)
+    rng = np.random.default_rng([seed, _GRASP_STREAM, chunk])
+    for _ in range(primitives):
+        mesh, set_seed = primitive_mesh(rng), int(rng.integers(2**63))
+        try:
+            sets = sample_contact_sets(mesh, SETS_PER_PRIMITIVE, set_seed, reach)
+        except GraspSamplingError:
+            continue
+        yield mesh, sets
+
+
 def grasp_chunk(
     description: HandDescription, digest: str, seed: int, chunk: int, primitives: int
 ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """Grasp entries of chunk ``chunk``: contact sets on ``primitives`` random solids, solved.
 
-    Each solid (:func:`primitive_mesh`) gets :data:`SETS_PER_PRIMITIVE` contact sets from the
-    grasp sampler with the hand's reach (a solid too large for it gives none); each set is solved
-    by :func:`~sahgrasp.ik.solver.solve_ik` from the searched sequence, and the solved ones are
-    the entries. A pure function of its arguments (seeded by ``[seed, 1, chunk]``).
+    Each set of :func:`primitive_grasp_sets` is solved by :func:`~sahgrasp.ik.solver.solve_ik`
+    from the searched sequence with its solid as the obstacle (:func:`primitive_object`), and
+    the solved ones are the entries: grasps that do not pass through their solid. A pure
+    function of its arguments.
     """
     from sahgrasp.ik.batch import worker_hand
     from sahgrasp.ik.solver import IKSettings, solve_ik
-    from sahgrasp.objects.grasp_sampler import GraspSamplingError, sample_contact_sets
 
     hand = worker_hand(description, digest)
-    reach = hand_reach(hand)
-    rng = np.random.default_rng([seed, _GRASP_STREAM, chunk])
     settings = IKSettings(init="sequence", seed=seed)  # validated once, not per solve
     solved = []
-    for _ in range(primitives):
-        mesh, set_seed = primitive_mesh(rng), int(rng.integers(2**63))
-        try:
-            targets = sample_contact_sets(mesh, SETS_PER_PRIMITIVE, set_seed, reach)
-        except GraspSamplingError:  # too few sets within the reach: a solid too large or small
-            continue
-        results = (solve_ik(hand, t, settings) for t in targets)
+    for mesh, targets in primitive_grasp_sets(hand, seed, chunk, primitives):
+        # With the solid as obstacle: a start that passes through its own solid leads the IK
+        # into the user's object as well (docs/ik.md, "The learned start").
+        solid = primitive_object(mesh)
+        results = (solve_ik(hand, t, settings, obstacle=solid) for t in targets)
         solved += [r.q for r in results if r.success]
     return _entries(hand, np.array(solved).reshape(-1, hand.nq))
 
