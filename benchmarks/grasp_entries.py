@@ -18,12 +18,7 @@ from tqdm import tqdm
 from sahgrasp.cli.learn import LEARN_DEFAULTS
 from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, solve_ik
-from sahgrasp.ik.learned import (
-    PRIMITIVES_PER_CHUNK,
-    SETS_PER_PRIMITIVE,
-    primitive_grasp_sets,
-    primitive_object,
-)
+from sahgrasp.ik.learned import primitive_chunks, primitive_grasp_sets, primitive_object
 from sahgrasp.ik.solver import ContactProblem
 
 
@@ -34,11 +29,11 @@ def main() -> None:
     args = parser.parse_args()
     hand = load_hand("sah")
     settings = IKSettings(init="sequence", seed=args.seed)
-    solids = -(-args.grasps // SETS_PER_PRIMITIVE)
+    chunks = primitive_chunks(args.grasps)
+    solids = sum(chunks)
     plain = inside = with_solid = 0
     with tqdm(total=solids, unit="solid") as bar:
-        for chunk, first in enumerate(range(0, solids, PRIMITIVES_PER_CHUNK)):
-            count = min(PRIMITIVES_PER_CHUNK, solids - first)
+        for chunk, count in enumerate(chunks):
             for mesh, targets in primitive_grasp_sets(hand, args.seed, chunk, count):
                 solid = primitive_object(mesh)
                 for target in targets:

@@ -25,6 +25,7 @@ from sahgrasp.ik.learned import (
     rigid_features,
     target_key,
 )
+from sahgrasp.ik.solver import ContactProblem
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -198,6 +199,21 @@ def test_grasp_entries_are_solved_grasps_keyed_by_their_contacts(sah: Hand, tmp_
         # float32 storage: the keys agree to its precision.
         np.testing.assert_allclose(rigid_features(state.points, state.normals), key, atol=1e-5)
         assert not sah.in_collision(q.astype(np.float64))
+
+
+def test_grasp_entries_do_not_pass_through_their_solids(sah: Hand, tmp_path: Path) -> None:
+    db = build_database(sah, 1, tmp_path / "db.npz", seed=9, grasp_sets=10)
+    entries = db.configurations[1:].astype(np.float64)
+    matched = np.zeros(len(entries), dtype=bool)
+    for mesh, targets in learned.primitive_grasp_sets(sah, 9, 0, 2):
+        solid = learned.primitive_object(mesh)
+        for target in targets:
+            problem = ContactProblem(sah, target, obstacle=solid)
+            for i, q in enumerate(entries):
+                if max(np.max(e) for e in problem.errors_at(q)) < 1e-4:  # this set's grasp
+                    matched[i] = True
+                    assert problem.collision(q) is None
+    assert matched.all()
 
 
 def test_grasp_entries_need_a_known_reach(allegro: Hand, tmp_path: Path) -> None:

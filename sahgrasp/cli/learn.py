@@ -52,7 +52,7 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build (or resume building) the database."""
     from sahgrasp.hand import load_hand
-    from sahgrasp.ik.learned import SETS_PER_PRIMITIVE, build_database
+    from sahgrasp.ik.learned import build_database, primitive_chunks
     from sahgrasp.parallel import check_workers
     from sahgrasp.progress import StderrProgress
     from sahgrasp.sequence.executors import open_executor
@@ -64,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     grasp_sets = args.grasps
     if grasp_sets is None:
         grasp_sets = LEARN_DEFAULTS["grasp_sets"] if hand.description.name == "sah" else 0
-    solids = -(-grasp_sets // SETS_PER_PRIMITIVE)
+    solids = sum(primitive_chunks(grasp_sets))
     start = time.perf_counter()
     with StderrProgress() as bar, open_executor(args.scheduler, args.workers) as executor:
         db = build_database(

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -44,6 +44,9 @@ from sahgrasp.fileio import write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
 from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
+
+if TYPE_CHECKING:
+    from sahgrasp.objects.body import GraspObject
 
 __all__ = [
     "CHUNK_SAMPLES",
@@ -57,6 +60,7 @@ __all__ = [
     "contact_key",
     "default_database",
     "grasp_chunk",
+    "primitive_chunks",
     "primitive_grasp_sets",
     "primitive_mesh",
     "primitive_object",
@@ -320,7 +324,7 @@ def primitive_mesh(rng: np.random.Generator) -> Any:
     return trimesh.creation.capsule(radius=radius, height=height, count=[24, 24])
 
 
-def primitive_object(mesh: Any) -> Any:
+def primitive_object(mesh: Any) -> GraspObject:
     """The convex ``trimesh.Trimesh`` of :func:`primitive_mesh` as a GraspObject (its own hull)."""
     from sahgrasp.objects.body import GraspObject
     from sahgrasp.objects.mesh_file import MeshSolid
@@ -332,6 +336,11 @@ def primitive_object(mesh: Any) -> Any:
         collision="hull",
     )
     return GraspObject("primitive", (solid,), (0.6, 0.6, 0.6, 1.0))
+
+
+def primitive_chunks(grasp_sets: int) -> list[int]:
+    """Primitive solids per grasp chunk for ``grasp_sets`` contact sets (rounded up to solids)."""
+    return _split(-(-grasp_sets // SETS_PER_PRIMITIVE), PRIMITIVES_PER_CHUNK)
 
 
 def primitive_grasp_sets(
@@ -429,9 +438,8 @@ def build_database(
     if grasp_sets > 0:
         hand_reach(hand)
     digest = hand.description.digest()
-    solids = -(-grasp_sets // SETS_PER_PRIMITIVE)
     jobs = [(sample_chunk, "r", _split(samples, CHUNK_SAMPLES)),
-            (grasp_chunk, "g", _split(solids, PRIMITIVES_PER_CHUNK))]  # fmt: skip
+            (grasp_chunk, "g", primitive_chunks(grasp_sets))]  # fmt: skip
     tasks = [(fn, i, n, f"{seed}-{tag}{i}-{n}-{digest[:16]}.npz")
              for fn, tag, sizes in jobs for i, n in enumerate(sizes)]  # fmt: skip
     parts = Path(f"{out}.parts")
