@@ -14,6 +14,7 @@ from sahgrasp.contacts import (
     save_targets,
 )
 from sahgrasp.errors import InvalidTargetError
+from sahgrasp.hand import Hand
 
 FINGERS = ("thumb", "index", "middle", "ring")
 
@@ -445,3 +446,32 @@ def test_saved_targets_name_meshes_relative_to_their_folder(tmp_path: Path) -> N
     saved = json.loads((tmp_path / "saved.json").read_text())
     assert saved["problems"][0]["object"]["mesh"] == "mug.stl"
     assert load_targets(tmp_path / "saved.json").problems == (problem,)
+
+
+# --- Contacts for a subset of the fingers ---------------------------------------------------
+
+
+def test_a_three_finger_can_grasp_of_the_atlas_paper_solves_from_a_targets_file(
+    tmp_path: Path, sah: Hand
+) -> None:
+    """The can grasp (thumb, index, middle) as a targets file: the ring finger is free, clear."""
+    from sahgrasp.ik.batch import solve_many
+    from sahgrasp.objects import HandObjectClearance, can_patches, load_object
+
+    grasp = can_patches().target()
+    assert grasp.fingers == ("thumb", "index", "middle")
+    document = {"hand": "sah", "object": {"name": "can"}, "problems": [grasp.to_dict()]}
+    path = _write(tmp_path, document)
+    targets = load_targets(path)
+    (problem,) = targets.problems
+    assert problem.free_fingers(sah.fingers) == ("ring",)
+    (result,) = solve_many(sah, list(targets.problems))
+    assert result.success and result.collision_free, result.reason
+    assert result.fingers == ("thumb", "index", "middle")
+    can = load_object("can")
+    checker = HandObjectClearance(sah, can)
+    clearance = checker.clearance(result.q, contacts=grasp.fingers)
+    assert clearance.clear()  # no link inside the can, the contact tips within d_min
+    ring = [d for link, d in clearance.links_m.items() if link.startswith("ring")]
+    assert ring and min(ring) > 0.0  # the free finger keeps off the can
+    assert checker.place_free_fingers(result.q, ("ring",)).clear  # and off the other links
