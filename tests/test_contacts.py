@@ -350,6 +350,14 @@ def test_unreachable_mesh_paths_make_only_their_problem_invalid(tmp_path: Path) 
     for detail, reason in zip(details, expected, strict=True):
         assert re.search(reason, detail), detail
         assert len(detail) < 400 and "\n" not in detail
+    # The run goes on: each such problem is invalid input, the command ends with status 1.
+    from sahgrasp.cli import main
+
+    path = _targets(tmp_path, *meshes[:5])
+    assert main(["solve", str(path), "--json", str(tmp_path / "out.json")]) == 1
+    results = json.loads((tmp_path / "out.json").read_text())["results"]
+    assert [r["reason"] for r in results] == ["invalid_input"] * 5
+    assert "loop of symbolic links" in results[0]["detail"]
 
 
 def test_a_byte_order_mark_is_skipped_in_json_and_json_lines(tmp_path: Path) -> None:
