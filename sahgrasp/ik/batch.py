@@ -127,8 +127,9 @@ def worker_obstacle(obstacle: GraspObject | ObjectSpec, key: str) -> GraspObject
         if len(kept) >= _KEPT_OBSTACLES:
             del kept[next(iter(kept))]
         try:
-            loaded = obstacle.load(_CACHE.objects) if isinstance(obstacle, ObjectSpec) else None
-            kept[key] = obstacle if loaded is None else loaded
+            kept[key] = (
+                obstacle.load(_CACHE.objects) if isinstance(obstacle, ObjectSpec) else obstacle
+            )
         except SahGraspError as exc:
             kept[key] = f"object {obstacle}: {exc}"
     return kept[key]
