@@ -26,7 +26,7 @@ import re
 import reprlib
 import stat
 from collections import Counter, OrderedDict
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -88,21 +88,21 @@ def _clean_name(name: str) -> str:
     return _SURROGATE.sub("\ufffd", name)
 
 
-def _check_keys(data: dict[Any, Any], valid: Sequence[str], where: str) -> None:
+def _check_keys(data: dict[Any, Any], valid: Sequence[str], where: Callable[[], str]) -> None:
     """Raise naming each key of ``data`` not in ``valid`` (and the nearest valid key), if any.
 
     A misspelt key (``"Object"``, ``"objcet"``) must not be ignored: the problem would be solved
-    without what it names.
+    without what it names. ``where`` names the place for the message, built only then.
     """
-    unknown = [key for key in data if key not in valid]
-    if not unknown:
+    if data.keys() <= frozenset(valid):  # the usual case, at C speed
         return
+    unknown = [key for key in data if key not in valid]
     hints = []
     for key in map(str, unknown):
         near = difflib.get_close_matches(key.lower(), valid, n=1, cutoff=0.6)
         hints.append(f"{_preview(key)} (did you mean {near[0]!r}?)" if near else _preview(key))
     raise InvalidTargetError(
-        f"{where} has unknown key(s) {', '.join(hints)}; valid keys: {list(valid)}"
+        f"{where()} has unknown key(s) {', '.join(hints)}; valid keys: {list(valid)}"
     )
 
 
@@ -344,7 +344,7 @@ def object_spec(
             f"'object' must be an object with either 'name' (a catalog object) or 'mesh' (a mesh "
             f"file), and optional 'xyz' [m] and 'quat' [x, y, z, w], got {_preview(data)}"
         )
-    _check_keys(data, _OBJECT_KEYS, "'object'")
+    _check_keys(data, _OBJECT_KEYS, lambda: "'object'")
     xyz = _vector3(data.get("xyz", [0.0, 0.0, 0.0]), "object 'xyz'")
     quat = _vector3(data.get("quat", [0.0, 0.0, 0.0, 1.0]), "object 'quat'", 4, " [x, y, z, w]")
     norm = float(np.linalg.norm(quat))
@@ -412,44 +412,44 @@ def _mesh_path(mesh: Any, folder: Path, allow_outside: bool) -> str:
             f"object mesh path is {len(mesh)} characters long ({shown}); a path has at most "
             f"{MAX_PATH_CHARS}"
         )
-    if Path(mesh).suffix.lower() not in _MESH_SUFFIXES:
+    if os.path.splitext(mesh)[1].lower() not in _MESH_SUFFIXES:
         raise InvalidTargetError(
             f"object mesh {shown}: unsupported type; use one of {list(_MESH_SUFFIXES)}"
         )
-    looked_for = folder / mesh
+    # Strings and os.path rather than pathlib: a file of a million problems resolves a path each.
+    looked_for = os.path.join(folder, mesh)
     try:
-        resolved = Path(os.path.realpath(looked_for, strict=True))
+        resolved = os.path.realpath(looked_for, strict=True)
         info = os.stat(resolved)
+        base = os.path.realpath(folder)
     except OSError as exc:
         raise InvalidTargetError(_unreachable(shown, looked_for, exc)) from None
     except ValueError:  # a lone surrogate: not encodable as a file name
         raise InvalidTargetError(f"object mesh {shown} is not a valid file name") from None
-    if not allow_outside:
-        base = Path(os.path.realpath(folder))
-        if not resolved.is_relative_to(base):
-            raise InvalidTargetError(
-                f"object mesh {shown} resolves to {_preview(str(resolved))}, outside the targets "
-                f"file's folder {_preview(str(base))}; {_OUTSIDE_REMEDY}"
-            )
+    if not allow_outside and not resolved.startswith(base.rstrip(os.sep) + os.sep):
+        raise InvalidTargetError(
+            f"object mesh {shown} resolves to {_preview(resolved)}, outside the targets file's "
+            f"folder {_preview(base)}; {_OUTSIDE_REMEDY}"
+        )
     if not stat.S_ISREG(info.st_mode):
         raise InvalidTargetError(
             f"object mesh {shown} is not a regular file (a folder, pipe or device); give a mesh "
             "file"
         )
-    if resolved.suffix.lower() not in _MESH_SUFFIXES:
+    if os.path.splitext(resolved)[1].lower() not in _MESH_SUFFIXES:
         raise InvalidTargetError(
-            f"object mesh {shown} is a link to {_preview(str(resolved))}, of unsupported type; "
+            f"object mesh {shown} is a link to {_preview(resolved)}, of unsupported type; "
             f"use one of {list(_MESH_SUFFIXES)}"
         )
-    return str(resolved)
+    return resolved
 
 
-def _unreachable(shown: str, looked_for: Path, exc: OSError) -> str:
+def _unreachable(shown: str, looked_for: str, exc: OSError) -> str:
     """Why the mesh path ``shown`` cannot be resolved, in one line."""
     if exc.errno == errno.ELOOP:
         return f"object mesh {shown} is a loop of symbolic links; give the file itself"
     if exc.errno in (errno.ENOENT, errno.ENOTDIR):
-        return f"object mesh {shown} not found (looked for {_preview(str(looked_for))})"
+        return f"object mesh {shown} not found (looked for {_preview(looked_for)})"
     if exc.errno == errno.ENAMETOOLONG:
         return f"object mesh {shown}: a name in the path is too long for the file system"
     return f"object mesh {shown} cannot be read: {exc.strerror or exc}"
@@ -568,7 +568,7 @@ class GraspTarget:
         name = data.get("name", "unnamed")
         if not isinstance(name, str):
             raise InvalidTargetError(f"a problem's 'name' must be a string, got {_preview(name)}")
-        _check_keys(data, _PROBLEM_KEYS, f"problem {_clean_name(name)!r}")
+        _check_keys(data, _PROBLEM_KEYS, lambda: f"problem {_clean_name(name)!r}")
         raw = data["contacts"]
         if not isinstance(raw, list):
             raise InvalidTargetError(f"problem {_clean_name(name)!r}: 'contacts' must be a list")
@@ -587,7 +587,7 @@ def _contact_from_dict(item: Any, problem: str) -> ContactTarget:
             f"problem {_clean_name(problem)!r}: each contact needs 'finger', 'point' and 'normal', "
             f"got {_preview(item)}"
         )
-    _check_keys(item, _CONTACT_KEYS, f"problem {_clean_name(problem)!r}: a contact")
+    _check_keys(item, _CONTACT_KEYS, lambda: f"problem {_clean_name(problem)!r}: a contact")
     return ContactTarget(item["finger"], item["point"], item["normal"])
 
 
@@ -700,7 +700,7 @@ def read_problems(
         raise InvalidTargetError(
             f"targets file {path} must be an object with 'hand' and a 'problems' list"
         )
-    _check_keys(data, _DOCUMENT_KEYS, f"targets file {path}")
+    _check_keys(data, _DOCUMENT_KEYS, lambda: f"targets file {path}")
     hand = targets_hand(data, path)
     folder = path.parent
     default = object_spec(data.get("object"), folder, allow_outside_paths=allow_outside_paths)
