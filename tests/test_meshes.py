@@ -212,6 +212,11 @@ def test_mesh_paths_that_name_no_file_are_refused_in_one_line(tmp_path: Path) ->
         with pytest.raises(MeshFileError, match=reason) as error:
             load_mesh(tmp_path / name)
         assert len(_one_line(error)) < 400
+    for path in (None, "", 3):
+        with pytest.raises(MeshFileError, match="path must be the path of an STL, OBJ or PLY"):
+            load_mesh(path)  # type: ignore[arg-type]
+    with pytest.raises(MeshFileError, match="max_faces must be an integer >= 1"):
+        load_mesh(tmp_path / "pipe.stl", max_faces=0)
 
 
 def _bad_files(tmp_path: Path) -> dict[str, tuple[Path, str]]:

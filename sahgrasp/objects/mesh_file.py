@@ -42,6 +42,7 @@ import collections
 import errno
 import io
 import math
+import numbers
 import os
 import re
 import stat
@@ -330,17 +331,20 @@ def load_mesh(
             type, too large, unreadable, empty, not finite, open or not manifold after repair,
             of zero volume, larger than ``max_faces``, or not object-sized.
     """
+    if not isinstance(path, str | os.PathLike) or not str(path):
+        raise MeshFileError(f"path must be the path of an STL, OBJ or PLY file, got {path!r}")
     path = Path(path)
     if collision not in COLLISION_MODES:
         raise MeshFileError(
             f"unknown collision geometry {collision!r}; valid: {list(COLLISION_MODES)}"
         )
-    if isinstance(scale, bool) or not isinstance(scale, int | float) or not math.isfinite(scale):
+    real = isinstance(scale, numbers.Real) and not isinstance(scale, bool | np.bool_)
+    if not (real and math.isfinite(scale) and scale > 0):
         raise MeshFileError(f"scale must be a finite factor > 0 to metres, got {scale!r}")
-    if not scale > 0:
-        raise MeshFileError(f"scale must be a finite factor > 0 to metres, got {scale!r}")
-    if isinstance(max_faces, bool) or not isinstance(max_faces, int) or max_faces < 1:
+    whole = isinstance(max_faces, numbers.Integral) and not isinstance(max_faces, bool | np.bool_)
+    if not (whole and max_faces >= 1):
         raise MeshFileError(f"max_faces must be an integer >= 1, got {max_faces!r}")
+    max_faces = int(max_faces)
     mesh = _read(path, max_faces)
     if len(mesh.faces) > max_faces:
         raise MeshFileError(_too_many(path, len(mesh.faces), max_faces))
