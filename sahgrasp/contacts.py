@@ -218,9 +218,20 @@ class ObjectSpec:
         text = json.dumps(self.to_dict(), sort_keys=True)
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
-    def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of ``docs/formats.md`` (the mesh path absolute)."""
-        source: dict[str, Any] = {"name": self.name} if self.mesh is None else {"mesh": self.mesh}
+    def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
+        """Return the JSON form of ``docs/formats.md``.
+
+        Args:
+            relative_to: The folder of the file the form goes into: a mesh in it (or below) is
+                written relative to it, so that the file reads back without allowing outside
+                paths. Otherwise, and by default, the mesh path is absolute.
+        """
+        mesh = self.mesh
+        if mesh is not None and relative_to is not None:
+            base = os.path.realpath(relative_to).rstrip(os.sep) + os.sep
+            if mesh.startswith(base):
+                mesh = Path(mesh).relative_to(base).as_posix()
+        source: dict[str, Any] = {"name": self.name} if mesh is None else {"mesh": mesh}
         if self.mesh is not None and self.scale != 1.0:
             source["scale"] = self.scale
         return {**source, "xyz": list(self.xyz), "quat": list(self.quat)}
@@ -755,12 +766,11 @@ def save_targets(path: str | os.PathLike[str], hand: str, problems: Iterable[Gra
     reads back (and can be moved with its meshes); one elsewhere keeps its absolute path, which
     only a reader allowing outside paths accepts.
     """
-    base = Path(os.path.realpath(Path(path).parent))
+    folder = Path(path).parent
     entries = []
     for problem in problems:
         entry = problem.to_dict()
-        spec = problem.object_spec
-        if spec is not None and spec.mesh is not None and Path(spec.mesh).is_relative_to(base):
-            entry["object"]["mesh"] = Path(spec.mesh).relative_to(base).as_posix()
+        if problem.object_spec is not None:
+            entry["object"] = problem.object_spec.to_dict(relative_to=folder)
         entries.append(entry)
     write_json_atomic(path, {"hand": hand, "problems": entries})

@@ -454,6 +454,13 @@ def test_saved_targets_name_meshes_relative_to_their_folder(tmp_path: Path) -> N
     saved = json.loads((tmp_path / "saved.json").read_text())
     assert saved["problems"][0]["object"]["mesh"] == "mug.stl"
     assert load_targets(tmp_path / "saved.json").problems == (problem,)
+    assert spec is not None and spec.to_dict(relative_to=tmp_path.parent)["mesh"].endswith(
+        f"{tmp_path.name}/mug.stl"
+    )
+    (tmp_path / "elsewhere").mkdir()
+    save_targets(tmp_path / "elsewhere" / "saved.json", "sah", [problem])  # the mesh is outside
+    saved = json.loads((tmp_path / "elsewhere" / "saved.json").read_text())
+    assert saved["problems"][0]["object"]["mesh"] == str(tmp_path / "mug.stl")
 
 
 # --- Contacts for a subset of the fingers ---------------------------------------------------
