@@ -402,24 +402,33 @@ def _read(path: Path, max_faces: int) -> trimesh.Trimesh:
 
 
 def _read_bytes(path: Path, max_faces: int) -> bytes:
-    """The file's bytes, refused unread when it is not a regular file or too large."""
+    """The file's bytes, refused unread when it is not a regular file or too large.
+
+    The file is opened without blocking (a named pipe would otherwise wait for a writer) and
+    checked through the open descriptor, so that what is checked is what is read.
+    """
     limit = max_faces * MAX_BYTES_PER_FACE + _HEADER_BYTES
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
     try:
         if "\0" in str(path):
             raise ValueError("embedded null byte")
-        info = os.stat(path)
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise MeshFileError(_unreadable(path, exc)) from None
+    except ValueError:  # a NUL byte or a lone surrogate: no file has that name
+        raise MeshFileError(f"mesh path {_shown(path)} is not a valid file name") from None
+    with os.fdopen(fd, "rb") as stream:
+        info = os.fstat(fd)
         if not stat.S_ISREG(info.st_mode):
             raise MeshFileError(
                 f"{_shown(path)} is not a regular file (a folder, pipe or device); give a mesh file"
             )
         if info.st_size > limit:
             raise MeshFileError(_too_large(path, info.st_size, limit, max_faces))
-        with open(path, "rb") as stream:
+        try:
             data = stream.read(limit + 1)
-    except OSError as exc:
-        raise MeshFileError(_unreadable(path, exc)) from None
-    except ValueError:  # a NUL byte or a lone surrogate: no file has that name
-        raise MeshFileError(f"mesh path {_shown(path)} is not a valid file name") from None
+        except OSError as exc:
+            raise MeshFileError(_unreadable(path, exc)) from None
     if len(data) > limit:  # it grew since it was looked at
         raise MeshFileError(_too_large(path, len(data), limit, max_faces))
     return data
