@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.util
 import re
+import tempfile
 from pathlib import Path
 from types import ModuleType
 
@@ -12,6 +13,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sahgrasp.errors import SahGraspError
 from sahgrasp.hand import Hand
@@ -298,3 +301,22 @@ def test_mesh_example_grasp_checked_with_coal(sah: Hand) -> None:
             for p, T in pieces
         )
         assert nearest >= (-1.5e-3 if link in tips else -0.2e-3), link
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(
+    suffix=st.sampled_from([".stl", ".obj", ".ply"]),
+    head=st.sampled_from([b"", b"solid x\n", b"ply\nformat ascii 1.0\n", b"v 0 0 0\nf 1 1 1\n"]),
+    payload=st.binary(max_size=300),
+)
+def test_random_bytes_give_a_mesh_or_a_typed_error(
+    suffix: str, head: bytes, payload: bytes
+) -> None:
+    """Whatever a mesh file holds: an object or a one-line MeshFileError, never another error."""
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / f"random{suffix}"
+        path.write_bytes(head + payload)
+        try:
+            load_mesh(path, max_faces=200)
+        except MeshFileError as exc:
+            assert "\n" not in str(exc) and len(str(exc)) < 800
