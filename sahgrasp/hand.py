@@ -18,10 +18,12 @@ For the SAH this is the paper's 27 DoF: 6 wrist + 13 finger + 8 virtual.
 from __future__ import annotations
 
 import copy
+import errno
 import hashlib
 import json
 import math
 import os
+import stat
 import sys
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -39,11 +41,13 @@ from sahgrasp.errors import HandModelError, InvalidConfigurationError, SahGraspE
 from sahgrasp.hand_checks import (
     check_name,
     check_urdf,
+    native_message,
     native_stderr,
     number,
     numbers,
     read_json,
     shown,
+    shown_path,
 )
 
 __all__ = [
@@ -1143,7 +1147,7 @@ def _build_models(description: HandDescription, urdf: str) -> tuple[pin.Model, p
             failure = str(exc)
     errors = [shown(line.strip()) for line in log if line.startswith("Error:")]
     if failure or errors:
-        reasons = "; ".join(dict.fromkeys(errors[:4] + [shown(failure)] * bool(failure)))
+        reasons = "; ".join(dict.fromkeys(errors[:4] + [native_message(failure)] * bool(failure)))
         raise HandModelError(
             f"URDF {shown(description.urdf_path)} does not load in Pinocchio: {reasons}"
         )
@@ -1185,7 +1189,8 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
         hand: ``"sah"``, ``"allegro"``, a path to a description JSON, or a HandDescription.
 
     Raises:
-        HandModelError: Unknown name, missing or malformed description or URDF, missing tip link.
+        HandModelError: Unknown name, missing, unreachable (a loop of links, a name too long) or
+            malformed description or URDF, missing tip link.
     """
     if isinstance(hand, HandDescription):
         return Hand(hand)
@@ -1195,14 +1200,37 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
     if text == "allegro":
         return Hand(allegro_description())
     path = Path(text)
-    if not path.suffix or not path.exists():
+    if not path.suffix:
         raise HandModelError(
-            f"unknown hand {text!r}: use one of {list(BUILTIN_HANDS)} or the path of a hand "
-            "description JSON file"
+            f"unknown hand {shown(text)!r}: use one of {list(BUILTIN_HANDS)} or the path of a "
+            "hand description JSON file"
         )
+    _check_reachable(path)
     if path.suffix.lower() == ".urdf":
         raise HandModelError(
             f"{shown(path)} is a URDF; give the path of a hand description JSON that names it "
             "(its fingers, tip links and fingertip radius: see docs/hand.md)"
         )
     return Hand(HandDescription.from_json(path))
+
+
+def _check_reachable(path: Path) -> None:
+    """Raise unless ``path`` names an existing file, saying why not in one line."""
+    where = f"hand description {shown_path(path)}"
+    remedy = f"give {' or '.join(map(repr, BUILTIN_HANDS))} or the path of a hand description JSON"
+    try:
+        if "\0" in str(path):
+            raise ValueError("embedded null byte")
+        info = os.stat(path)
+    except ValueError:  # a NUL byte or a lone surrogate: no file has that name
+        raise HandModelError(f"{where} is not a valid file name; {remedy}") from None
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise HandModelError(f"{where} is a loop of symbolic links; {remedy}") from None
+        if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+            raise HandModelError(f"{where} not found; {remedy}") from None
+        if exc.errno == errno.ENAMETOOLONG:
+            raise HandModelError(f"{where} is a path too long for the file system") from None
+        raise HandModelError(f"cannot read {where}: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(info.st_mode):
+        raise HandModelError(f"{where} is not a regular file (a folder, pipe or device); {remedy}")

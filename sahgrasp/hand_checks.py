@@ -31,11 +31,13 @@ __all__ = [
     "MAX_XML_DEPTH",
     "check_name",
     "check_urdf",
+    "native_message",
     "native_stderr",
     "number",
     "numbers",
     "read_json",
     "shown",
+    "shown_path",
 ]
 
 MAX_XML_DEPTH = 32
@@ -106,10 +108,38 @@ def native_stderr() -> Iterator[list[str]]:
             lines.extend(log.read().decode("utf-8", "replace").splitlines())
 
 
+_NATIVE_SOURCE = ("From file:", "in function:", "at line:")
+
+
+def native_message(text: str) -> str:
+    r"""A native library's error text as one terminal-safe line, without where it was raised.
+
+    coal and Pinocchio raise multi-line messages that start with the C++ source file, function
+    and line (``From file: /project/src/mesh_loader/assimp.cpp``): of no use to a user, and
+    shown with literal ``\n`` once escaped. The remaining lines (``message: ...``, hints) are
+    joined with ``"; "``.
+    """
+    kept = []
+    for line in text.splitlines():
+        line = line.strip()
+        if line and not line.startswith(_NATIVE_SOURCE):
+            kept.append(line.removeprefix("message:").strip())
+    return shown("; ".join(kept))
+
+
 def shown(value: object) -> str:
     """``value`` as text safe for a terminal: itself if printable, else its escaped ``ascii``."""
     text = str(value)
     return text if text.isprintable() else ascii(text)
+
+
+def shown_path(path: object, limit: int = 120) -> str:
+    """A path for a message (:func:`shown`), its middle cut when longer than ``limit``."""
+    text = shown(path)
+    if len(text) <= limit:
+        return text
+    half = (limit - 30) // 2
+    return f"{text[:half]}...{text[-half:]} ({len(text)} characters)"
 
 
 def check_name(what: str, value: object) -> str:

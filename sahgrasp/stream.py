@@ -27,7 +27,7 @@ from sahgrasp.contacts import (
     InvalidProblem,
     ObjectSpec,
     object_spec,
-    problem_from_json,
+    problem_from_line,
     read_problems,
     targets_hand,
 )
@@ -74,8 +74,11 @@ class Targets:
     problems: Iterator[GraspTarget | InvalidProblem]
 
 
-def open_targets(path: str | os.PathLike[str]) -> Targets:
+def open_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = False) -> Targets:
     """Open a targets file: a JSON document (read whole) or a ``.jsonl`` file (read lazily).
+
+    ``allow_outside_paths``: accept object meshes outside the file's folder
+    (:func:`sahgrasp.contacts.read_problems`).
 
     Raises:
         InvalidTargetError: The file cannot be read, or its header (first line of a ``.jsonl``
@@ -83,7 +86,7 @@ def open_targets(path: str | os.PathLike[str]) -> Targets:
     """
     path = Path(path)
     if not is_jsonl(path):
-        hand, problems = read_problems(path)
+        hand, problems = read_problems(path, allow_outside_paths=allow_outside_paths)
         return Targets(hand, len(problems), iter(problems))
     try:
         stream = path.open("rb")
@@ -95,8 +98,12 @@ def open_targets(path: str | os.PathLike[str]) -> Targets:
         stream.seek(0)
     lines = _count_lines(path) - (header is not None)
     hand = targets_hand(header or {}, path)
-    default = object_spec(header.get("object"), path.parent) if header else None
-    return Targets(hand, lines, _problems(stream, path.parent, default))
+    default = (
+        object_spec(header.get("object"), path.parent, allow_outside_paths=allow_outside_paths)
+        if header
+        else None
+    )
+    return Targets(hand, lines, _problems(stream, path.parent, default, allow_outside_paths))
 
 
 def _read_line(stream: IO[bytes]) -> bytes | None:
@@ -142,28 +149,21 @@ def _count_lines(path: Path) -> int:
 
 
 def _problems(
-    stream: IO[bytes], folder: Path, default: ObjectSpec | None
+    stream: IO[bytes], folder: Path, default: ObjectSpec | None, allow_outside_paths: bool
 ) -> Iterator[GraspTarget | InvalidProblem]:
     with stream:
         index = 0
         while (line := _read_line(stream)) is not None:
-            yield _parse_line(line, index, folder, default)
+            yield _parse_line(line, index, folder, default, allow_outside_paths)
             index += 1
 
 
 def _parse_line(
-    line: bytes, index: int, folder: Path, default: ObjectSpec | None
+    line: bytes, index: int, folder: Path, default: ObjectSpec | None, allow_outside_paths: bool
 ) -> GraspTarget | InvalidProblem:
-    name = f"problem-{index}"
     if len(line) > MAX_LINE_BYTES:
-        return InvalidProblem(name, f"line longer than {MAX_LINE_BYTES} bytes")
-    try:
-        raw = json.loads(line.decode("utf-8"))
-    except UnicodeDecodeError:
-        return InvalidProblem(name, "line is not UTF-8 text")
-    except (ValueError, RecursionError) as exc:
-        return InvalidProblem(name, f"line is not a JSON value ({type(exc).__name__}: {exc})")
-    return problem_from_json(raw, index, folder, default)
+        return InvalidProblem(f"problem-{index}", f"line longer than {MAX_LINE_BYTES} bytes")
+    return problem_from_line(line, index, folder, default, allow_outside_paths=allow_outside_paths)
 
 
 def settings_header(

@@ -244,7 +244,7 @@ def _mixed(files: Path, folder: Path) -> Path:
         return problem
 
     missing = edit("missing")
-    missing["contacts"].pop()
+    missing["contacts"].pop(0)  # the thumb: the other fingers may be left free, not the thumb
     problems = [
         good,
         edit("huge", point=[10**400, 0, 0]),

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -200,6 +201,38 @@ def test_random_descriptions_give_typed_errors_or_working_hands(
         else:
             path.write_text(json.dumps(data, allow_nan=True))
         _typed_error_or_working_hand(path)
+
+
+def test_hand_paths_that_name_no_file_say_why(tmp_path: Path) -> None:
+    """A link loop, a NUL byte, a name too long: one line each, never "unknown hand"."""
+    (tmp_path / "a.json").symlink_to(tmp_path / "b.json")
+    (tmp_path / "b.json").symlink_to(tmp_path / "a.json")
+    cases = {
+        str(tmp_path / "a.json"): "is a loop of symbolic links",
+        "hand\0.json": "not a valid file name",
+        "h" * 5000 + ".json": r"\(5005 characters\) is a path too long",
+        str(tmp_path / "none.json"): "not found",
+        str(tmp_path): "unknown hand",  # no suffix: a name, not a file
+    }
+    for hand, reason in cases.items():
+        with pytest.raises(HandModelError, match=reason) as error:
+            load_hand(hand)
+        assert len(str(error.value)) < 400 and str(error.value).isprintable()
+
+
+def test_a_broken_hand_mesh_is_one_plain_line(tmp_path: Path) -> None:
+    """coal's multi-line error, without its source file and escaped newlines."""
+    urdf = sah_description().urdf_path.read_text()
+    collision = '<collision><geometry><mesh filename="broken.stl"/></geometry></collision>'
+    end = urdf.index("</link>")
+    (tmp_path / "hand.urdf").write_text(urdf[:end] + collision + urdf[end:])
+    (tmp_path / "broken.stl").write_bytes(b"solid x\nfacet normal garbage\n")
+    (tmp_path / "hand.json").write_text(json.dumps(_description("hand.urdf")))
+    with pytest.raises(HandModelError, match="does not load in Pinocchio") as error:
+        load_hand(tmp_path / "hand.json")
+    message = str(error.value)
+    assert "broken.stl" in message and message.isprintable()
+    assert "\\n" not in message and "From file" not in message and ".cpp" not in message
 
 
 if __name__ == "__main__":

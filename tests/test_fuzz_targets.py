@@ -25,7 +25,8 @@ from sahgrasp.hand import load_hand
 from sahgrasp.ik import random_problems
 
 ROOT = Path(__file__).resolve().parent.parent
-KEYS = ("hand", "problems", "name", "contacts", "finger", "point", "normal", "thumb", "index")
+KEYS = ("hand", "problems", "name", "contacts", "finger", "point", "normal", "thumb", "index",
+        "object", "mesh", "scale", "xyz", "quat", "can", "t.json", "..", "/")  # fmt: skip
 
 leaves = (
     st.none()

@@ -152,8 +152,10 @@ def test_attempts_are_frozen_and_a_colliding_one_is_refused_by_a_new_record(sah:
 
 def test_invalid_targets_raise(sah: Hand) -> None:
     problem = random_problems(sah, 1, seed=5)[0]
-    with pytest.raises(InvalidTargetError, match="missing"):
-        solve_ik(sah, GraspTarget("x", problem.contacts[:3]))
+    with pytest.raises(InvalidTargetError, match="missing contact for the thumb"):
+        solve_ik(sah, GraspTarget("x", problem.contacts[1:]))  # a finger may be free, not the thumb
+    with pytest.raises(InvalidTargetError, match="given as free fingers too"):
+        solve_ik(sah, problem, free_fingers=("ring",))
     pinky = [*problem.contacts[:3], ContactTarget("pinky", [0, 0, 0], [0, 0, 1])]
     with pytest.raises(InvalidTargetError, match="unknown finger"):
         solve_ik(sah, GraspTarget("x", pinky))

@@ -49,6 +49,7 @@ __all__ = [
     "add_command",
     "add_ik_arguments",
     "add_json_argument",
+    "add_mesh_path_argument",
     "check_json_inputs",
     "check_outputs",
     "emit_json",
@@ -105,6 +106,16 @@ def add_json_argument(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+def add_mesh_path_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--allow-any-mesh-path``: accept a targets file's meshes outside its folder."""
+    parser.add_argument(
+        "--allow-any-mesh-path",
+        action="store_true",
+        help="accept object meshes that a targets file names outside its own folder (absolute "
+        "paths, '..', links leading out); without it such a problem is refused as invalid input",
+    )
+
+
 def human_stream(json_out: str | None) -> TextIO:
     """Where the lines for a human go: stderr when stdout carries the JSON (``--json -``)."""
     return sys.stderr if json_out == "-" else sys.stdout
@@ -128,10 +139,18 @@ def check_json_inputs(hand: str | None = None, sequence: str | Path | None = Non
         HandModelError: The hand description is not UTF-8 JSON.
         SequenceFileError: The sequence file is not UTF-8 JSON.
     """
-    if hand is not None and Path(hand).suffix and Path(hand).is_file():
+    if hand is not None and Path(hand).suffix and _is_file(hand):
         read_json(hand, "hand description", HandModelError)
-    if sequence is not None and Path(sequence).is_file():
+    if sequence is not None and _is_file(sequence):
         read_json(sequence, "sequence file", SequenceFileError)
+
+
+def _is_file(path: str | Path) -> bool:
+    """Whether ``path`` is a file; a path no file can have (too long, a loop) is the loader's."""
+    try:
+        return Path(path).is_file()
+    except OSError:
+        return False
 
 
 def check_outputs(outputs: Iterable[str | None], inputs: Iterable[str | Path | None] = ()) -> None:

@@ -12,7 +12,12 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from sahgrasp.cli.common import add_command, check_json_inputs, check_outputs
+from sahgrasp.cli.common import (
+    add_command,
+    add_mesh_path_argument,
+    check_json_inputs,
+    check_outputs,
+)
 from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings
 
 __all__ = ["DEFAULT_HTML", "add_parser", "run"]
@@ -32,6 +37,7 @@ def add_parser(sub: Any) -> None:
         metavar="FILE",
         help="solve and show every problem of this targets file instead, each with its object",
     )
+    add_mesh_path_argument(p)
     p.add_argument(
         "--html", default=DEFAULT_HTML, metavar="OUT", help="write the scene to this HTML file"
     )
@@ -70,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         from sahgrasp.contacts import load_targets
 
-        targets = load_targets(args.targets)
+        targets = load_targets(args.targets, allow_outside_paths=args.allow_any_mesh_path)
         hand = load_hand(args.hand or targets.hand)
         problems = tqdm(targets.problems, desc="solving", unit="problem")
         grasps = solve_problems(hand, problems, settings)

@@ -19,6 +19,7 @@ from sahgrasp.cli.common import (
     MAX_INITS,
     METHOD_HELP,
     add_command,
+    add_mesh_path_argument,
     check_json_inputs,
     check_outputs,
     emit_json,
@@ -79,6 +80,7 @@ def add_parser(sub: Any) -> None:
         help="continue the JSON Lines results of a stopped run (--json OUT.jsonl)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_mesh_path_argument(p)
     p.add_argument("--json", default=None, metavar="OUT", help=JSON_HELP)
     p.set_defaults(run=run, on_interrupt=resume_hint)
 
@@ -214,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp solve``; 0 if every problem was solved, 1 otherwise."""
     from sahgrasp.stream import open_targets
 
-    targets = open_targets(args.targets)
+    targets = open_targets(args.targets, allow_outside_paths=args.allow_any_mesh_path)
     hand_name = args.hand or targets.hand
     _check_run(args, hand_name)
 

@@ -18,7 +18,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
+from sahgrasp.contacts import GraspTarget, ObjectCache
 from sahgrasp.hand import Hand
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
 from sahgrasp.objects import (
@@ -108,11 +108,12 @@ def solve_problems(
         InvalidTargetError: A problem the solver refuses (e.g. fingers the hand lacks).
     """
     objects: dict[str, GraspObject] = {}
+    built = ObjectCache()  # a mesh placed twice is built once
     solved = []
     for problem in problems:
         spec = problem.object_spec
         if spec is not None and spec.key() not in objects:
-            objects[spec.key()] = spec.load()
+            objects[spec.key()] = spec.load(built)
         obj = None if spec is None else objects[spec.key()]
         result = solve_ik(hand, problem, settings, obstacle=obj, record_history=True)
         solved.append(SolvedGrasp(problem.name, obj, problem, result))

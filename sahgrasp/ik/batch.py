@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectSpec
+from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
 from sahgrasp.errors import InvalidTargetError, SahGraspError, SequenceFileError
 from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 from sahgrasp.ik.initial import Sequence as PoseSequence
@@ -79,6 +79,7 @@ class _WorkerCache(threading.local):
     def __init__(self) -> None:
         self.hands: dict[str, Hand] = {}
         self.obstacles: dict[str, GraspObject | str] = {}
+        self.objects = ObjectCache()  # one build per mesh file, whatever its placements
 
 
 _CACHE = _WorkerCache()
@@ -118,14 +119,17 @@ def worker_obstacle(obstacle: GraspObject | ObjectSpec, key: str) -> GraspObject
 
     Every chunk carries its own unpickled copy; solving against one kept copy lets the solver
     reuse that object's collision pieces instead of building them for every problem. An
-    :class:`ObjectSpec` is loaded here, once per worker; a load error is kept as its message.
+    :class:`ObjectSpec` is loaded here, once per worker and source (a new placement of the
+    same mesh is the same solids moved); a load error is kept as its message.
     """
     kept = _CACHE.obstacles
     if key not in kept:
         if len(kept) >= _KEPT_OBSTACLES:
             del kept[next(iter(kept))]
         try:
-            kept[key] = obstacle.load() if isinstance(obstacle, ObjectSpec) else obstacle
+            kept[key] = (
+                obstacle.load(_CACHE.objects) if isinstance(obstacle, ObjectSpec) else obstacle
+            )
         except SahGraspError as exc:
             kept[key] = f"object {obstacle}: {exc}"
     return kept[key]

@@ -238,9 +238,11 @@ class ContactProblem:
 
     Args:
         hand: The hand.
-        target: One contact per finger, except the ``free_fingers``.
+        target: One contact per finger that touches the object (at least two, the thumb
+            among them when the hand has one, :meth:`GraspTarget.check_fingers`).
         free_fingers: Fingers deliberately left without a contact (e.g. the ring finger of a
-            three-finger grasp); any other missing finger is an error.
+            three-finger grasp); every finger without a contact in ``target`` is free anyway
+            (:attr:`free_fingers` holds them all, in hand order).
         obstacle: An object no link may enter (the constrained fingers' tips touch it).
         allowance_m: How deep a contact fingertip sphere may enter the obstacle [m].
     """
@@ -258,10 +260,15 @@ class ContactProblem:
             raise InvalidTargetError(
                 f"free finger(s) {unknown} unknown; valid: {list(hand.fingers)}"
             )
-        constrained = [f for f in hand.fingers if f not in free_fingers]
-        if len(constrained) < 2:
-            raise InvalidTargetError("a grasp needs contacts for at least two fingers")
-        target.check_fingers(constrained)
+        target.check_fingers(hand.fingers)
+        touching = [f for f in free_fingers if f in target.fingers]
+        if touching:
+            raise InvalidTargetError(
+                f"grasp {target.name!r}: finger(s) {touching} have a contact and are given as "
+                "free fingers too; a free finger has no contact"
+            )
+        constrained = [f for f in hand.fingers if f in target.fingers]
+        self.free_fingers = target.free_fingers(hand.fingers)
         self.hand = hand
         self.target = target
         self.fingers = tuple(constrained)
@@ -531,10 +538,13 @@ def solve_ik(
 
     Args:
         hand: The hand model.
-        target: One contact per finger of the hand.
+        target: One contact per finger that touches the object: at least two, the thumb
+            among them when the hand has one; the fingers without a contact are free, placed
+            clear of the object and of the other links.
         settings: Solver parameters (defaults: :class:`IKSettings`).
         sequence: Initial-pose sequence (default: the hand's shipped or Table-1 sequence).
-        free_fingers: Fingers left without a contact (a three-finger grasp leaves one free).
+        free_fingers: Fingers left without a contact, named explicitly (optional: every finger
+            without a contact in ``target`` is free).
         obstacle: The object being grasped, placed in the world: a solution must not put any
             link into it, except each contact fingertip sphere up to ``d_min`` (docs/ik.md).
             Its collision pieces are built once per (hand, object) and kept for the next solves.
@@ -547,7 +557,8 @@ def solve_ik(
         (``object_collision`` when the contacts were reached only through the obstacle).
 
     Raises:
-        InvalidTargetError: Unknown, missing or repeated fingers (NaN and non-unit normals are
+        InvalidTargetError: Unknown or repeated fingers, fewer than two contacts, no thumb
+            contact, a free finger with a contact (NaN and non-unit normals are
             refused when the target is built); an obstacle that is not a GraspObject.
         SequenceFileError: ``sequence`` was made for another hand (``database``: a
             :class:`~sahgrasp.ik.learned.GraspDatabaseError`).
@@ -580,6 +591,7 @@ def run_algorithm1(
         database = database or default_database(hand)
     start = time.perf_counter()  # the whole solve: the problem's set-up and the result too
     problem = ContactProblem(hand, target, free_fingers, obstacle, settings.d_min_m)
+    free_fingers = problem.free_fingers  # the given ones and every finger without a contact
     sequence.check_hand(hand)
     if settings.init == "learned" and database is not None:
         database.check_hand(hand)

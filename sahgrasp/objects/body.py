@@ -50,8 +50,20 @@ class GraspObject:
                 return s
         raise KeyError(f"{self.name} has no solid {name!r}; it has {[s.name for s in self.solids]}")
 
+    @property
+    def repairs(self) -> tuple[str, ...]:
+        """What loading changed in the solids' files, in words (empty: used as they are).
+
+        Only mesh files are repaired (:attr:`sahgrasp.objects.MeshSolid.repairs`).
+        """
+        return tuple(r for s in self.solids for r in getattr(s, "repairs", ()))
+
     def placed(self, T_world_object: Any) -> GraspObject:
-        """Return the same object at another placement in the world."""
+        """Return the same object at another placement in the world.
+
+        The solids are shared, not copied: their display meshes and collision pieces, built in
+        the object frame, serve every placement.
+        """
         return dataclasses.replace(self, T_world_object=as_placement(T_world_object))
 
     def mesh(self) -> Mesh:

@@ -21,18 +21,31 @@ Approximate convex decomposition (V-HACD through trimesh) was measured on the sh
 bottle: 1.3-34 s per mesh and a hull surface up to 2-8 mm off the mesh, too coarse beside the
 IK's 1.5 mm contact tolerance, so it is not offered.
 
-Repairs, all reported in :attr:`MeshSolid.repairs`: duplicate vertices merged, degenerate
-(zero-area) and duplicate triangles removed, unreferenced vertices dropped, winding made
-consistent and outward, small holes filled. A mesh still open after that, empty, with NaN/inf
+Before parsing, the file's size and, where the format states it cheaply, its triangle count are
+checked (:func:`load_mesh`): a file too large is refused unread. The file is read once and parsed
+from its bytes, so no other file (an OBJ's material library) is opened.
+
+Repairs, all made by trimesh and reported in :attr:`MeshSolid.repairs`: duplicate vertices merged,
+degenerate (zero-area) and duplicate triangles removed, unreferenced vertices dropped, holes of
+three or four edges filled, winding made consistent and outward (each body of a mesh of several
+separate bodies on its own; a cavity modelled as an inner shell is thus filled, which changes
+nothing outside the object). A mesh still open after that (with the number and size of its
+holes), not a manifold (edges of more than two triangles), not orientable, empty, with NaN/inf
 vertices, of zero volume, of more than ``max_faces`` triangles, or whose size is not that of a
-graspable object in metres gets a :class:`MeshFileError` naming the problem and the fix.
+graspable object in metres (a file in millimetres: give ``scale=1e-3``) gets a
+:class:`MeshFileError` naming the problem and what would be valid.
 """
 
 from __future__ import annotations
 
 import collections
+import errno
+import io
 import math
+import numbers
 import os
+import re
+import stat
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -52,6 +65,7 @@ from sahgrasp.objects.patches import Patch
 
 __all__ = [
     "COLLISION_MODES",
+    "MAX_BYTES_PER_FACE",
     "MAX_FACES",
     "MESH_SUFFIXES",
     "SIZE_RANGE_M",
@@ -65,6 +79,15 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply")
 
 MAX_FACES = 20_000
 """Default cap on the triangle count (one collision prism per triangle, before merging)."""
+
+MAX_BYTES_PER_FACE = 1024
+"""Largest file size per accepted triangle [bytes]: an ASCII STL takes about 250 per triangle,
+an OBJ with normals and texture coordinates about 350, a binary STL 50. A larger file is refused
+before it is read (``max_faces`` times this, plus :data:`_HEADER_BYTES`)."""
+
+_HEADER_BYTES = 1 << 16
+"""Bytes allowed besides the triangles' (headers, comments), and the most searched for a PLY's
+header."""
 
 SIZE_RANGE_M = (0.005, 2.0)
 """Accepted largest extent [m] of an object: outside it, the file's unit is probably not metres."""
@@ -286,33 +309,45 @@ def load_mesh(
 ) -> GraspObject:
     """Read an STL, OBJ or PLY file into a graspable object of one :class:`MeshSolid`.
 
+    The file's size, and its triangle count where the format states it cheaply (a binary STL's
+    header, a PLY's ``element face``, an OBJ's ``f`` lines, an ASCII STL's facets), are checked
+    before it is parsed, so that a file too large is refused without being read into memory.
+    The file is read once, as bytes, and parsed from them: nothing else is opened (an OBJ's
+    material library is not read). What the repairs changed is in the solid's
+    :attr:`MeshSolid.repairs` (and :attr:`GraspObject.repairs`).
+
     Args:
         path: The mesh file; its coordinates are the object frame.
         name: Object name (default: the file name without suffix).
-        scale: Factor to metres (e.g. ``1e-3`` for a file in millimetres).
+        scale: The file's unit in metres (e.g. ``1e-3`` for a file in millimetres).
         T_world_object: The object's placement in the world (identity if None).
         rgba: Display colour.
-        max_faces: Largest accepted triangle count.
+        max_faces: Largest accepted triangle count; files over :data:`MAX_BYTES_PER_FACE`
+            bytes per accepted triangle are refused unread.
         collision: ``"prisms"`` or ``"hull"`` (module docstring).
 
     Raises:
-        MeshFileError: The file is missing, of another type, unreadable, empty, not finite, open
-            after repair, of zero volume, larger than ``max_faces``, or not object-sized.
+        MeshFileError: The file is missing, a loop of links, not a regular file, of another
+            type, too large, unreadable, empty, not finite, open or not manifold after repair,
+            of zero volume, larger than ``max_faces``, or not object-sized.
     """
+    if not isinstance(path, str | os.PathLike) or not str(path):
+        raise MeshFileError(f"path must be the path of an STL, OBJ or PLY file, got {path!r}")
     path = Path(path)
     if collision not in COLLISION_MODES:
         raise MeshFileError(
             f"unknown collision geometry {collision!r}; valid: {list(COLLISION_MODES)}"
         )
-    if not (np.isfinite(scale) and scale > 0):
-        raise MeshFileError(f"scale must be a finite factor > 0 to metres, got {scale}")
-    mesh = _read(path)
+    real = isinstance(scale, numbers.Real) and not isinstance(scale, bool | np.bool_)
+    if not (real and math.isfinite(scale) and scale > 0):
+        raise MeshFileError(f"scale must be a finite factor > 0 to metres, got {scale!r}")
+    whole = isinstance(max_faces, numbers.Integral) and not isinstance(max_faces, bool | np.bool_)
+    if not (whole and max_faces >= 1):
+        raise MeshFileError(f"max_faces must be an integer >= 1, got {max_faces!r}")
+    max_faces = int(max_faces)
+    mesh = _read(path, max_faces)
     if len(mesh.faces) > max_faces:
-        raise MeshFileError(
-            f"{path} has {len(mesh.faces)} triangles, more than max_faces = {max_faces} (one "
-            "collision prism each); decimate it (e.g. MeshLab's quadric edge collapse) or raise "
-            "max_faces"
-        )
+        raise MeshFileError(_too_many(path, len(mesh.faces), max_faces))
     mesh.apply_scale(scale)
     repairs = _repair(mesh, path)
     _check_size(mesh, path, scale)
@@ -327,25 +362,124 @@ def load_mesh(
     return GraspObject(solid.name, (solid,), rgba, placement)
 
 
-def _read(path: Path) -> trimesh.Trimesh:
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise MeshFileError(f"{path}: unsupported mesh type; use one of {list(MESH_SUFFIXES)}")
-    if not path.is_file():
-        raise MeshFileError(f"mesh file not found: {path}")
+def _shown(path: Path) -> str:
+    """``path`` for a message: control characters escaped, at most about 120 characters."""
+    text = str(path)
+    text = text if text.isprintable() else ascii(text)[1:-1]
+    return text if len(text) <= 120 else f"{text[:60]}...{text[-57:]} ({len(text)} characters)"
+
+
+def _too_many(path: Path, faces: int, max_faces: int, what: str = "has") -> str:
+    return (
+        f"{_shown(path)} {what} {faces} triangles, more than max_faces = {max_faces} (one "
+        "collision prism each); decimate it (e.g. MeshLab's quadric edge collapse) or raise "
+        "max_faces"
+    )
+
+
+def _read(path: Path, max_faces: int) -> trimesh.Trimesh:
+    """The file's triangles as trimesh parses them, after the checks that need no parsing."""
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise MeshFileError(
+            f"{_shown(path)}: unsupported mesh type; use one of {list(MESH_SUFFIXES)}"
+        )
+    data = _read_bytes(path, max_faces)
+    counted = _face_count(data, suffix)
+    if counted is not None and counted > max_faces:
+        raise MeshFileError(_too_many(path, counted, max_faces, "declares"))
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        loaded = trimesh.load(io.BytesIO(data), file_type=suffix[1:], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on malformed files
-        raise MeshFileError(f"{path} is not a readable mesh ({type(exc).__name__}: {exc})") from exc
+        reason = " ".join(f"{type(exc).__name__}: {exc}".split())[:200]
+        raise MeshFileError(f"{_shown(path)} is not a readable mesh ({reason})") from None
     faces = getattr(loaded, "faces", None)
     if not isinstance(loaded, trimesh.Trimesh) or faces is None or len(faces) == 0:
-        raise MeshFileError(f"{path} holds no triangles; a closed triangle mesh is needed")
+        raise MeshFileError(f"{_shown(path)} holds no triangles; a closed triangle mesh is needed")
     if not np.all(np.isfinite(loaded.vertices)):
-        raise MeshFileError(f"{path} has NaN or inf vertex coordinates; all must be finite")
+        raise MeshFileError(f"{_shown(path)} has NaN or inf vertex coordinates; all must be finite")
     return loaded
 
 
+def _read_bytes(path: Path, max_faces: int) -> bytes:
+    """The file's bytes, refused unread when it is not a regular file or too large.
+
+    The file is opened without blocking (a named pipe would otherwise wait for a writer) and
+    checked through the open descriptor, so that what is checked is what is read.
+    """
+    limit = max_faces * MAX_BYTES_PER_FACE + _HEADER_BYTES
+    flags = os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        if "\0" in str(path):
+            raise ValueError("embedded null byte")
+        fd = os.open(path, flags)
+    except OSError as exc:
+        raise MeshFileError(_unreadable(path, exc)) from None
+    except ValueError:  # a NUL byte or a lone surrogate: no file has that name
+        raise MeshFileError(f"mesh path {_shown(path)} is not a valid file name") from None
+    with os.fdopen(fd, "rb") as stream:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise MeshFileError(
+                f"{_shown(path)} is not a regular file (a folder, pipe or device); give a mesh file"
+            )
+        if info.st_size > limit:
+            raise MeshFileError(_too_large(path, info.st_size, limit, max_faces))
+        try:
+            data = stream.read(limit + 1)
+        except OSError as exc:
+            raise MeshFileError(_unreadable(path, exc)) from None
+    if len(data) > limit:  # it grew since it was looked at
+        raise MeshFileError(_too_large(path, len(data), limit, max_faces))
+    return data
+
+
+def _too_large(path: Path, size: int, limit: int, max_faces: int) -> str:
+    return (
+        f"{_shown(path)} holds {size} bytes, more than {limit} for max_faces = {max_faces} "
+        f"triangles ({MAX_BYTES_PER_FACE} bytes each at most); it was not read: decimate it "
+        "(e.g. MeshLab's quadric edge collapse) or raise max_faces"
+    )
+
+
+def _unreadable(path: Path, exc: OSError) -> str:
+    if exc.errno == errno.ELOOP:
+        return f"mesh file {_shown(path)} is a loop of symbolic links; give the file itself"
+    if exc.errno in (errno.ENOENT, errno.ENOTDIR):
+        return f"mesh file not found: {_shown(path)}"
+    if exc.errno == errno.ENAMETOOLONG:
+        return f"mesh path {_shown(path)} is too long for the file system"
+    return f"cannot read mesh file {_shown(path)}: {exc.strerror or exc}"
+
+
+_PLY_FACES = re.compile(rb"^element\s+face\s+(\d+)\s*$", re.MULTILINE)
+_STL_FACETS = re.compile(rb"endfacet", re.IGNORECASE)
+_OBJ_FACES = re.compile(rb"^[ \t]*f[ \t]", re.MULTILINE)
+
+
+def _face_count(data: bytes, suffix: str) -> int | None:
+    """The triangle count a file states without being parsed (a lower bound for OBJ), or None.
+
+    A binary STL's header gives it (when the size agrees: 84 + 50 bytes per triangle), an ASCII
+    STL has one ``endfacet`` per triangle, a PLY's header declares ``element face N`` (polygons
+    may make more triangles), an OBJ has one ``f`` line per polygon.
+    """
+    if suffix == ".stl":
+        declared = int.from_bytes(data[80:84], "little") if len(data) >= 84 else None
+        if declared is not None and len(data) == 84 + 50 * declared:
+            return declared
+        if data.lstrip()[:5].lower() == b"solid":
+            return len(_STL_FACETS.findall(data))
+        return declared
+    if suffix == ".ply":
+        end = data.find(b"end_header")
+        found = _PLY_FACES.search(data, 0, end if end >= 0 else min(len(data), _HEADER_BYTES))
+        return int(found.group(1)) if found else None
+    return len(_OBJ_FACES.findall(data))
+
+
 def _repair(mesh: trimesh.Trimesh, path: Path) -> tuple[str, ...]:
-    """Fix what can be fixed in place; raise if the mesh stays open or has no volume."""
+    """Fix what trimesh can fix in place and say what; raise if the mesh cannot be an object."""
     repairs = []
     counts = (len(mesh.vertices), len(mesh.faces))
     mesh.merge_vertices()
@@ -357,35 +491,109 @@ def _repair(mesh: trimesh.Trimesh, path: Path) -> tuple[str, ...]:
         repairs.append(f"removed {int((~keep).sum())} degenerate or duplicate triangles")
         mesh.update_faces(keep)
     if len(mesh.faces) == 0:
-        raise MeshFileError(f"{path}: every triangle is degenerate (zero area)")
+        raise MeshFileError(f"{_shown(path)}: every triangle is degenerate (zero area)")
     unreferenced = len(mesh.vertices)
     mesh.remove_unreferenced_vertices()
     if len(mesh.vertices) < unreferenced:
         repairs.append(f"dropped {unreferenced - len(mesh.vertices)} unreferenced vertices")
     if not mesh.is_watertight:
-        trimesh.repair.fill_holes(mesh)
-        if not mesh.is_watertight:
-            open_edges = len(trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1))
-            raise MeshFileError(
-                f"{path} is not closed: {open_edges} edges bound one triangle only, and filling "
-                "holes did not close it; a graspable object needs a watertight surface (repair "
-                "it, e.g. MeshLab's 'close holes', or export it as a solid)"
-            )
+        _close(mesh, path)
         repairs.append("filled holes")
-    winding = mesh.faces.copy()
-    trimesh.repair.fix_normals(mesh)
-    if not np.array_equal(winding, mesh.faces):
-        repairs.append("made the triangle winding consistent and outward")
+    bodies = int(mesh.body_count)
+    given = mesh.faces.copy()
+    trimesh.repair.fix_winding(mesh)
+    if not mesh.is_winding_consistent:
+        raise MeshFileError(
+            f"{_shown(path)} is not orientable (no consistent inside and outside, like a Moebius "
+            "strip); a graspable object needs a closed surface bounding a solid"
+        )
+    trimesh.repair.fix_inversion(mesh, multibody=True)
+    flipped = int(np.count_nonzero(np.any(given != mesh.faces, axis=1)))
+    if flipped == len(mesh.faces):
+        repairs.append("turned the surface outward (its triangles faced inward)")
+    elif flipped:
+        repairs.append(
+            f"flipped {flipped} of {len(mesh.faces)} triangles to face outward (inconsistent "
+            "winding or a body inside out)"
+        )
+    if bodies > 1:
+        repairs.append(f"{bodies} separate bodies, each oriented outward, taken together")
     if not mesh.volume > 0:
-        raise MeshFileError(f"{path} encloses no volume ({mesh.volume:.3g} m^3): it is flat")
+        raise MeshFileError(
+            f"{_shown(path)} encloses no volume ({mesh.volume:.3g} m^3): it is flat"
+        )
     return tuple(repairs)
+
+
+def _close(mesh: trimesh.Trimesh, path: Path) -> None:
+    """Fill the holes trimesh fills (of three or four edges), or say why the mesh stays open.
+
+    Raises:
+        MeshFileError: Edges bound one triangle only (holes trimesh does not fill) or more than
+            two (a surface that is not a manifold: touching bodies, inner walls, fins).
+    """
+    edges, shared = _edge_use(mesh)
+    if not np.any(shared > 2):
+        trimesh.repair.fill_holes(mesh)
+        if mesh.is_watertight:
+            return
+        edges, shared = _edge_use(mesh)
+    problems = []
+    open_edges = edges[shared == 1]
+    if len(open_edges):
+        holes, largest = _loops(open_edges)
+        problems.append(
+            f"it is open: {_count(len(open_edges), 'edge')} bound one triangle only, in "
+            f"{_count(holes, 'hole')}, the largest of {_count(largest, 'edge')} (trimesh fills "
+            "holes of 3 or 4 edges only)"
+        )
+    crowded = int(np.count_nonzero(shared > 2))
+    if crowded:
+        problems.append(
+            f"it is not a manifold surface: {_count(crowded, 'edge')} shared by more than two "
+            "triangles each (bodies touching along an edge, inner walls or fins)"
+        )
+    raise MeshFileError(
+        f"{_shown(path)} cannot be a solid object: {'; '.join(problems)}. A graspable object "
+        "needs a closed surface whose every edge joins exactly two triangles: repair it (e.g. "
+        "MeshLab's 'Close Holes' and 'Repair non Manifold Edges', or Blender's 3D-Print "
+        "Toolbox) or export it as a solid"
+    )
+
+
+def _count(number: int, noun: str) -> str:
+    return f"{number} {noun}" if number == 1 else f"{number} {noun}s"
+
+
+def _edge_use(mesh: trimesh.Trimesh) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Each distinct edge (sorted vertex pair) and how many triangles share it."""
+    edges, counts = np.unique(mesh.edges_sorted, axis=0, return_counts=True)
+    return np.asarray(edges, dtype=np.int64), np.asarray(counts, dtype=np.int64)
+
+
+def _loops(edges: NDArray[np.int64]) -> tuple[int, int]:
+    """The number of connected pieces of a set of boundary edges and the edges of the largest."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nodes, local = np.unique(edges, return_inverse=True)
+    local = local.reshape(-1, 2)
+    graph = coo_matrix(
+        (np.ones(len(local)), (local[:, 0], local[:, 1])), shape=(len(nodes), len(nodes))
+    )
+    count, labels = connected_components(graph, directed=False)
+    per_piece = np.bincount(labels[local[:, 0]], minlength=count)
+    return int(count), int(per_piece.max())
 
 
 def _check_size(mesh: trimesh.Trimesh, path: Path, scale: float) -> None:
     extent = float(np.ptp(mesh.vertices, axis=0).max())
     lo, hi = SIZE_RANGE_M
     if not lo <= extent <= hi:
+        unit = " (is the file in millimetres?)" if extent > hi else ""
         raise MeshFileError(
-            f"{path} is {extent:.4g} m across (scale {scale:g}); a graspable object is "
-            f"{lo}-{hi} m: give scale=1e-3 for a file in millimetres, 1e-2 for centimetres"
+            f"{_shown(path)} is {extent:.4g} m across at scale {scale:g}{unit}; a graspable "
+            f"object is {lo}-{hi} m: give the file's unit in metres, scale=1e-3 for a file in "
+            'millimetres, 1e-2 for centimetres (in a targets file: "scale": 0.001 in its mesh '
+            "object)"
         )
