@@ -1,4 +1,4 @@
-"""Where a learned-start ``solve_ik`` spends its CPU time (docs/ik.md, "Third round").
+"""Where a learned-start ``solve_ik`` spends its CPU time.
 
 Wraps a few parts of the solver with ``time.process_time`` counters, solves seeded random SAH
 problems and prints each part's share of the total CPU time. The wrapping itself adds about 10 %.

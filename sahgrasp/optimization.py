@@ -41,7 +41,7 @@ from sahgrasp.errors import OptimizationError
 from sahgrasp.parallel import check_workers, process_pool
 from sahgrasp.progress import ProgressCallback
 from sahgrasp.quality import (
-    INDICES,
+    QUALITY_INDICES,
     IndexEvaluation,
     Manipulability,
     evaluate_index,
@@ -150,7 +150,7 @@ class OptimizationSettings:
     Attributes:
         radius: Chart radius ``r`` (in the units of ``x``).
         epsilon: Threshold of Eqs. (17)-(18).
-        index: Manipulability index to maximise (one of :data:`~sahgrasp.quality.INDICES`);
+        index: Manipulability index to maximise (:data:`~sahgrasp.quality.QUALITY_INDICES`);
             ignored when ``index_fn`` is given.
         index_fn: A user quality index instead of ``index`` (see :data:`IndexFunction`).
         max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
@@ -175,9 +175,9 @@ class OptimizationSettings:
     def __post_init__(self) -> None:
         if self.workers != 0 or isinstance(self.workers, bool):
             check_workers(self.workers)
-        if self.index_fn is None and self.index not in INDICES:
+        if self.index_fn is None and self.index not in QUALITY_INDICES:
             raise OptimizationError(
-                f"unknown index {self.index!r}; valid: {', '.join(INDICES)} or an index_fn"
+                f"unknown index {self.index!r}; valid: {', '.join(QUALITY_INDICES)} or an index_fn"
             )
 
     @property

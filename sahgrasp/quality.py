@@ -8,7 +8,9 @@ velocity compatible with the constraints, ``{B tau : |A tau| <= 1}``. With the t
 ``A = U S V^T`` it is the image of the unit ball by ``M = B V S^-1``, whose singular values are
 the ellipsoid's semi-axes. The atlas paper (Section V, Fig. 9) optimises three indices of it: the
 inverse condition number, the volume and the smallest semi-axis, and calls a grasp singular when
-the index falls below 1e-3, 1e-4 and 1e-3 respectively.
+the index falls below 1e-3, 1e-4 and 1e-3 respectively. Indices are registered objects (name,
+function, threshold, description: :mod:`sahgrasp.quality_indices`, whose names this module
+re-exports); :func:`register_index` adds one.
 
 Everything here is vectorised over leading axes (one entry per chart). ``evaluate_index``
 evaluates any index, built-in or user-supplied, at the centres of an atlas and picks the best and
@@ -29,29 +31,37 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.atlas._quality import orthogonal_tail
 from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
 from sahgrasp.errors import QualityError
+from sahgrasp.quality_indices import (
+    PAPER_INDICES,
+    QUALITY_INDICES,
+    SINGULAR_THRESHOLDS,
+    QualityIndex,
+    register_index,
+)
 
 __all__ = [
     "INDICES",
+    "QUALITY_INDICES",
     "SINGULAR_THRESHOLDS",
     "ChartCentres",
     "IndexEvaluation",
     "Manipulability",
+    "QualityIndex",
     "ellipsoid_indices",
     "evaluate_index",
     "full_rank_null_space",
     "manipulability",
     "null_space",
     "principal_projection",
+    "register_index",
     "semi_axes",
 ]
 
 FloatArray = NDArray[np.float64]
 
-INDICES = ("inverse_condition", "volume", "min_semiaxis")
-"""Names of the built-in manipulability indices, in the order of Fig. 9 (a)-(c)."""
-
-SINGULAR_THRESHOLDS = {"inverse_condition": 1e-3, "volume": 1e-4, "min_semiaxis": 1e-3}
-"""A grasp whose index is below its threshold is singular (Section V)."""
+INDICES = PAPER_INDICES
+"""Names of the atlas paper's indices, in the order of Fig. 9 (a)-(c); every registered index:
+:data:`QUALITY_INDICES` (and its thresholds, :data:`SINGULAR_THRESHOLDS`)."""
 
 _RANK_TOL = 1e-12  # relative singular value below which a matrix counts as rank deficient
 
@@ -75,17 +85,17 @@ class Manipulability:
     min_semiaxis: FloatArray
 
     def index(self, name: str) -> FloatArray:
-        """The index called ``name`` (one of :data:`INDICES`)."""
-        if name not in INDICES:
-            raise QualityError(
-                f"unknown manipulability index {name!r}; valid: {', '.join(INDICES)}"
-            )
-        values: FloatArray = getattr(self, name)
-        return values
+        """The values of the registered index ``name`` (:data:`QUALITY_INDICES`).
+
+        Raises:
+            QualityError: ``name`` is not registered (the message lists the valid names).
+        """
+        values = QUALITY_INDICES.lookup(name).function(self)
+        return np.asarray(values, dtype=np.float64)
 
     def singular(self, name: str) -> NDArray[np.bool_]:
         """True where index ``name`` is below its singularity threshold."""
-        return self.index(name) < SINGULAR_THRESHOLDS[name]
+        return self.index(name) < QUALITY_INDICES.lookup(name).singular_below
 
 
 def null_space(jac: ArrayLike, dim: int) -> FloatArray:

@@ -117,6 +117,7 @@ def _target_of(hand: Hand, q: np.ndarray) -> GraspTarget:
     )
 
 
+@pytest.mark.slow
 def test_bench_ik_command_without_pink_exits_cleanly(tmp_path: Path) -> None:
     fake = tmp_path / "site" / "pink"
     fake.mkdir(parents=True)
@@ -148,6 +149,7 @@ def test_bench_atlas_reports_each_case_and_tables_them() -> None:
         bench_atlas.run(cases=["S4"])
 
 
+@pytest.mark.slow
 def test_bench_atlas_times_a_whole_run_with_checking_workers(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:

@@ -21,10 +21,13 @@ ARTIFACTS = Path(__file__).parent / "artifacts"
 WINDOW = (800, 600)
 CONTROLS_BAR_PX = 30  # meshcat's "Open Controls" bar at the top: black with white text
 
-pytestmark = pytest.mark.skipif(
-    find_chromium() is None,
-    reason="chromium is not installed (apt-get install -y chromium); the browser test needs it",
-)
+pytestmark = [
+    pytest.mark.slow,  # starts Chromium: about 6 s
+    pytest.mark.skipif(
+        find_chromium() is None,
+        reason="chromium is not installed (apt-get install -y chromium); the browser test needs it",
+    ),
+]
 
 
 def rendered(html: Path, png: Path) -> NDArray[np.float64]:

@@ -74,7 +74,7 @@ def _tree_pairs(
     return found
 
 
-@pytest.mark.parametrize("name", ["coffee_cup", "can"])
+@pytest.mark.parametrize("name", [pytest.param("coffee_cup", marks=pytest.mark.slow), "can"])
 def test_repair_query_asks_the_tree_about_every_link_that_can_have_a_pair(
     sah: Hand, name: str
 ) -> None:

@@ -317,6 +317,7 @@ def test_dev_null_stays_a_device(files: Path) -> None:
     assert stat.S_ISCHR(Path(os.devnull).stat().st_mode)
 
 
+@pytest.mark.slow
 def test_relative_hand_path_is_read_from_the_targets_folder(files: Path, tmp_path: Path) -> None:
     sah = load_hand("sah").description
     hand = {
@@ -351,6 +352,7 @@ def _wait_for_workers(process: subprocess.Popen[str], count: int) -> list[psutil
     pytest.fail("the workers never started")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int) -> None:
     process = start("solve", "many.json", "--workers", "2", "--inits", "1000", cwd=files)
@@ -364,6 +366,7 @@ def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int
     assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
 
 
+@pytest.mark.slow
 def test_interrupted_sequence_prints_the_resume_command(tmp_path: Path) -> None:
     process = start("sequence", "--grid", "3", "--problems", "30", "--rounds", "2",
                     "--workers", "1", "--out", "out dir", cwd=tmp_path)  # fmt: skip
@@ -439,6 +442,7 @@ def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
 
 
+@pytest.mark.slow
 def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:
     done = sahgrasp("atlas", "planar", "--r", "0.3", "--plot", "p.png", "--json", "-", cwd=tmp_path)
     assert done.returncode == 0, done.stderr

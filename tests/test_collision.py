@@ -71,6 +71,7 @@ def _solve_after(prelude: str) -> list[object]:
     return list(json.loads(last_line))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("query", [_AXIS_BOX_QUERY, _TURNED_BOX_QUERY], ids=["axis", "turned"])
 def test_object_solve_is_the_same_after_an_earlier_box_query(query: str) -> None:
     assert _solve_after("import sahgrasp.collision\n" + query) == _solve_after("")

@@ -42,6 +42,7 @@ def _solve_in_orders(
     return forward, backward
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("init", ["learned", "sequence", "random"])
 def test_same_results_in_any_order_on_any_workers(problems: list[GraspTarget], init: str) -> None:
     hand = load_hand("sah")  # its own hand: the session's has solved other problems

@@ -119,6 +119,7 @@ def meshcat_servers(pid: int) -> list[psutil.Process]:
     return found
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
 def test_a_signal_on_a_live_example_stops_its_server(signum: int, tmp_path: Path) -> None:
     env = {**os.environ, "PYTHONPATH": str(EXAMPLES.parent), "BROWSER": "true"}  # no real browser

@@ -26,6 +26,8 @@ from hypothesis import strategies as st
 from sahgrasp.errors import HandModelError
 from sahgrasp.hand import load_hand, sah_description
 
+pytestmark = pytest.mark.slow  # random hands built and solved: several seconds
+
 ROOT = Path(__file__).resolve().parents[1]
 URDF_EXAMPLES = 200
 DESCRIPTION_EXAMPLES = 100

@@ -137,6 +137,7 @@ def test_random_bytes(payload: bytes) -> None:
         _check_loaders(path)
 
 
+@pytest.mark.slow
 @settings(
     max_examples=6,
     deadline=None,

@@ -242,6 +242,7 @@ def test_coordinate_scales_make_every_direction_move_alike(sah: Hand) -> None:
         coordinate_scales(system, 0.0)
 
 
+@pytest.mark.slow
 def test_chart_checks_on_worker_processes_are_those_of_this_process(
     sah: Hand, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -249,6 +249,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     )
 
 
+@pytest.mark.slow
 def test_learn_command_writes_a_database(sah: Hand, tmp_path: Path) -> None:
     out = tmp_path / "sah.npz"
     done = _cli("learn", "--hand", "sah", "--samples", "6", "--grasps", "5", "--seed", "8",

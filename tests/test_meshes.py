@@ -35,6 +35,7 @@ def _box_file(tmp_path: Path, name: str, mesh: trimesh.Trimesh | None = None) ->
     return path
 
 
+@pytest.mark.slow
 def test_shipped_meshes_are_small_and_closed(shipped: Path) -> None:
     assert shipped.stat().st_size < 200_000
     obj = load_mesh(shipped)
@@ -44,6 +45,7 @@ def test_shipped_meshes_are_small_and_closed(shipped: Path) -> None:
     assert obj.mesh().faces.shape == solid.faces.shape
 
 
+@pytest.mark.slow
 def test_signed_distance_matches_the_mesh(shipped: Path) -> None:
     """Outside: the distance to the triangles; inside: negative (checked with trimesh)."""
     obj = load_mesh(shipped)
@@ -270,6 +272,7 @@ def _example() -> ModuleType:
     return module
 
 
+@pytest.mark.slow
 def test_mesh_example_solves_a_clear_grasp(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

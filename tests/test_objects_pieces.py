@@ -96,6 +96,7 @@ def _mesh(name: str) -> MeshSolid:
     return solid
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["mug.stl", "bottle.obj"])
 def test_merged_prisms_hold_every_prism_and_stay_in_the_mesh(name: str) -> None:
     solid = _mesh(name)
@@ -123,6 +124,7 @@ def test_merged_prisms_hold_every_prism_and_stay_in_the_mesh(name: str) -> None:
     assert inside.min() > -(MERGE_TOLERANCE_M + 1e-5)
 
 
+@pytest.mark.slow
 def test_merging_is_deterministic() -> None:
     first = _mesh("bottle.obj").collision_shapes()
     again = load_mesh(MESHES / "bottle.obj").collision_shapes()
@@ -149,6 +151,7 @@ def test_a_convex_mesh_is_its_hull(tmp_path: Path) -> None:
     assert isinstance(solid, MeshSolid) and len(solid.collision_shapes()) == 1
 
 
+@pytest.mark.slow
 def test_the_merge_budget_leaves_the_rest_as_single_prisms(
     monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:

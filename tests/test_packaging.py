@@ -125,6 +125,7 @@ def _installed(distribution: str) -> bool:
     return True
 
 
+@pytest.mark.slow
 def test_every_library_import_is_a_declared_runtime_dependency() -> None:
     runtime, bench = _runtime(), _extra("bench")
     # Without the bench extra installed (CI installs dev and docs only), its modules cannot be

@@ -68,6 +68,7 @@ def _first_cell_done(out: Path) -> bool:
         return False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGTERM], ids=["kill-9", "term"])
 def test_sequence_workers_end_with_a_killed_parent(tmp_path: Path, signum: int) -> None:
     args = ["sequence", "--grid", "4", "--problems", "100", "--rounds", "3", "--workers", "2",

@@ -96,6 +96,7 @@ def test_reference_run_outputs(reference: tuple[SearchResult, Path], sah: Hand) 
     assert second.problem_indices[0] > first.problem_indices[-1]
 
 
+@pytest.mark.slow
 def test_two_local_workers_give_the_same_sequence(
     reference: tuple[SearchResult, Path], tmp_path: Path
 ) -> None:
@@ -106,6 +107,7 @@ def test_two_local_workers_give_the_same_sequence(
     ).read_bytes()
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_sequence_despite_a_dead_worker(
     reference: tuple[SearchResult, Path], tmp_path: Path
 ) -> None:
@@ -134,6 +136,7 @@ def test_dask_cluster_gives_the_same_sequence_despite_a_dead_worker(
     assert _signature(result) == _signature(reference[0])
 
 
+@pytest.mark.slow
 def test_resume_after_the_first_round(reference: tuple[SearchResult, Path], tmp_path: Path) -> None:
     with ThreadPoolExecutor(2) as pool:
         first = search_sequence("sah", replace(SMALL, rounds=1), tmp_path, executor=pool)
@@ -144,6 +147,7 @@ def test_resume_after_the_first_round(reference: tuple[SearchResult, Path], tmp_
     assert _signature(resumed) == _signature(reference[0])
 
 
+@pytest.mark.slow
 def test_resume_after_a_kill_in_the_middle_of_a_round(
     reference: tuple[SearchResult, Path], tmp_path: Path
 ) -> None:
@@ -452,6 +456,7 @@ with locked_folder(Path(sys.argv[1])):
 """
 
 
+@pytest.mark.slow
 def test_two_searches_started_together_never_share_a_folder(tmp_path: Path) -> None:
     args = ["sequence", "--grid", "2", "--problems", "4", "--rounds", "1", "--workers", "1",
             "--out", str(tmp_path / "out")]  # fmt: skip
@@ -511,6 +516,7 @@ def test_invalid_settings_are_refused(tmp_path: Path) -> None:
         search_sequence("sah", SMALL, tmp_path, executor=42)
 
 
+@pytest.mark.slow
 def test_cli_runs_a_tiny_search(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     parser = argparse.ArgumentParser()
     sequence_cli.add_parser(parser.add_subparsers())

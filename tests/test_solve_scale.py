@@ -87,6 +87,7 @@ def reference(targets: Path) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_to_the_uninterrupted_output(targets: Path, reference: Path) -> None:
     out = targets.parent / "killed.jsonl"
     part = out.with_name(out.name + ".part")
@@ -138,6 +139,7 @@ def _same(a: list[IKResult], b: list[IKResult]) -> None:
         np.testing.assert_array_equal(x.q, y.q)
 
 
+@pytest.mark.slow
 def test_same_results_on_one_worker_two_workers_and_dask(
     hand: Hand, problems: list[GraspTarget]
 ) -> None:
@@ -153,6 +155,7 @@ def test_same_results_on_one_worker_two_workers_and_dask(
         _same(one, solve_many(hand, subset, settings, executor=client))
 
 
+@pytest.mark.slow
 def test_a_killed_solve_leaves_no_worker(targets: Path) -> None:
     process = start("solve", targets, "--workers", "2", "--inits", "1000", cwd=targets.parent)
     for _ in range(600):
@@ -183,6 +186,7 @@ def _mug_grasp(xyz: list[float]) -> dict[str, Any]:
             "object": {"mesh": "meshes/mug.stl", "xyz": xyz, "quat": [0, 0, 0, 1]}}  # fmt: skip
 
 
+@pytest.mark.slow
 def test_targets_name_their_objects(tmp_path: Path) -> None:
     from sahgrasp.objects import paper_grasp
 

@@ -123,6 +123,7 @@ def listening(pid: int) -> set[str]:
     return {c.laddr.ip for c in psutil.Process(pid).net_connections() if c.status == "LISTEN"}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("signum", "mode", "code"),
     [
@@ -481,6 +482,7 @@ def page(tmp_path: Path) -> Path:
     return html
 
 
+@pytest.mark.slow
 def test_a_hanging_chromium_is_killed_whole_retried_then_one_error(
     tmp_path: Path, page: Path
 ) -> None:
@@ -497,6 +499,7 @@ def test_a_failing_chromium_reports_its_exit_code_and_last_line(tmp_path: Path, 
         screenshot(page, tmp_path / "out.png", attempts=1, chromium=chromium)
 
 
+@pytest.mark.slow
 def test_an_image_written_before_chromium_hangs_on_exit_is_kept(tmp_path: Path, page: Path) -> None:
     chromium = fake_chromium(tmp_path, f"{WRITE_SHOT}\nsleep 300")
     out = screenshot(page, tmp_path / "sub" / "out.png", timeout_s=30, chromium=chromium)

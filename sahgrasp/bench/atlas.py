@@ -56,7 +56,7 @@ BASELINES: dict[str, dict[str, float]] = {
 }
 """References and target times [s], r = 0.1 (spheres): CuikSuite's charts and its fastest and
 slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's,
-and ``whole_seconds`` the target of the atlas and the three indices together (issue 13)."""
+and ``whole_seconds`` the target of the atlas and the three indices together."""
 
 SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
     ("can", 2): {"t": 8, "charts": 4800, "seconds": 140.0},

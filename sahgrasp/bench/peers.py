@@ -23,7 +23,7 @@ from scipy.optimize import least_squares
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand
 from sahgrasp.ik.initial import hang_from_thumb
-from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings
+from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings, InnerSolver
 
 __all__ = ["BENCH_EXTRA", "PEERS", "PEER_MODULES", "available_peers", "pink_attempt",
            "scipy_attempt"]  # fmt: skip
@@ -98,8 +98,11 @@ def pink_attempt(
     return _finish(hand, problem, configuration.q, s.max_iterations, s)
 
 
-PEERS = {"scipy": scipy_attempt, "pink": pink_attempt}
-"""Peer name -> inner solver."""
+PEERS: dict[str, InnerSolver] = {
+    "scipy": InnerSolver(scipy_attempt),
+    "pink": InnerSolver(pink_attempt),
+}
+"""Peer name -> inner solver (from finger coordinates only: learned starts are not compared)."""
 
 PEER_MODULES: dict[str, tuple[str, ...]] = {
     "scipy": ("scipy.optimize",),

@@ -11,6 +11,8 @@ import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from sahgrasp.quality_indices import QUALITY_INDICES
+
 if TYPE_CHECKING:
     from sahgrasp.ik import IKSettings
 
@@ -44,8 +46,8 @@ ATLAS_DEFAULTS = {"planar": (0.125, 0.4), "can": (0.1, 0.5), "bottle": (0.1, 0.5
 """Per experiment: the chart radius ``r`` and ``epsilon`` used unless told otherwise (the one place
 they are set). Planar: the atlas paper's values; SAH: ours, as ``x`` mixes radians and metres."""
 
-INDEX_CHOICES = ("inverse_condition", "volume", "min_semiaxis")
-"""``sahgrasp.quality.INDICES``, spelled out so that building a parser needs no numpy."""
+INDEX_CHOICES = QUALITY_INDICES.names()
+"""Names of the registered quality indices (a live view: numpy-free, as the registry is)."""
 
 
 def _checked(kind: Callable[[str], Any], ok: Callable[[Any], bool], rule: str) -> Any:

@@ -14,7 +14,7 @@ import numpy as np
 from sahgrasp.grasp import SahGraspManifold
 from sahgrasp.optimization import OptimizationResult
 from sahgrasp.planar import PlanarGraspProblem
-from sahgrasp.quality import INDICES, SINGULAR_THRESHOLDS
+from sahgrasp.quality import QUALITY_INDICES, SINGULAR_THRESHOLDS
 
 __all__ = ["collision_notes", "describe_grasp", "result_lines", "summary"]
 
@@ -79,7 +79,7 @@ def summary(name: str, result: OptimizationResult) -> dict[str, Any]:
     if isinstance(problem, SahGraspManifold):
         out["retained_variance"] = problem.retained_variance
     if result.quality is not None:
-        out["indices"] = {name: _index_summary(result, name) for name in INDICES}
+        out["indices"] = {name: _index_summary(result, name) for name in QUALITY_INDICES}
     return out
 
 

@@ -1,12 +1,12 @@
-/* The auto method's Levenberg-Marquardt loop in one native call (docs/ik.md, "Compiled loop").
+/* The auto method's Levenberg-Marquardt loop in one native call (docs/ik.md, "The compiled loop").
  *
  * A Tree holds a hand's kinematic tree as exported from its Pinocchio model by sahgrasp/ik/compiled.py:
  * a free-flyer root (the wrist) and 1-DoF revolute or prismatic joints, mimic joints included
  * (a joint's value is scale * q[q_index] + offset). It evaluates the contact stack (p_i, r_i) of
  * the IK, its Jacobian with respect to v, Pinocchio's integration q (+) v, and the whole loop of
- * sahgrasp/ik/solver.py's `_lm_loop`. Python measured about 160 us per iteration, of which the
- * unavoidable calls alone were about 37 us (docs/ik.md, "Why 30 us per iteration is out of reach
- * in Python"); here an iteration is a few microseconds of arithmetic.
+ * sahgrasp/ik/solver.py's `_lm_loop`. In Python on Pinocchio the unavoidable calls of one
+ * iteration alone cost several times the whole compiled iteration, which is a few microseconds
+ * of arithmetic (docs/ik.md, "The compiled loop").
  *
  * Rotations are row-major 3 x 3. Buffers are C-contiguous float64 (int64 for finger indices).
  */

@@ -261,7 +261,7 @@ def cross3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     """``a x b`` of two 3-vectors.
 
     In Python floats: ``np.cross``'s wrapper, and even the fancy-indexed products that replaced
-    it, cost ten times the arithmetic on 3-vectors (docs/ik.md, "Where the time goes").
+    it, cost ten times the arithmetic on 3-vectors.
     """
     return np.array(cross_floats(a.tolist(), b.tolist()))
 

@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
 
 __all__ = [
+    "INNER_SOLVERS",
     "REASONS",
     "Attempt",
     "AttemptFn",
@@ -49,6 +50,7 @@ __all__ = [
     "IKResult",
     "IKSettings",
     "Init",
+    "InnerSolver",
     "Method",
     "Reason",
     "run_algorithm1",
@@ -521,7 +523,48 @@ def _separate(
 
 
 AttemptFn = Callable[[Hand, "ContactProblem", NDArray[np.float64], IKSettings], Attempt]
-"""An inner solver: from the initial coordinates of one start to an :class:`Attempt`."""
+"""One inner solve: from the initial coordinates (or configuration) of one start to an
+:class:`Attempt`."""
+
+
+@dataclass(frozen=True)
+class InnerSolver:
+    """An inner solver of Algorithm 1: how one start becomes an :class:`Attempt`.
+
+    Starts come as finger coordinates (a sequence's or random initial pose) or as whole
+    configurations, wrist included (the learned starts of a grasp database). A solver that can
+    use a whole configuration as it is says so with ``from_configuration``; any other receives
+    the configuration's finger coordinates and hangs the hand from the thumb (Eq. (3)) as it does
+    for every start.
+
+    Attributes:
+        from_coordinates: The attempt from finger coordinates.
+        from_configuration: The attempt from a whole configuration, or None (see above).
+    """
+
+    from_coordinates: AttemptFn
+    from_configuration: AttemptFn | None = None
+
+    def attempt(
+        self,
+        hand: Hand,
+        problem: ContactProblem,
+        kind: Literal["q", "coords"],
+        x: NDArray[np.float64],
+        s: IKSettings,
+    ) -> Attempt:
+        """The attempt from start ``x``: a configuration (``kind == "q"``) or coordinates."""
+        if kind == "q" and self.from_configuration is not None:
+            return self.from_configuration(hand, problem, x, s)
+        coords = x if kind == "coords" else hand.finger_part(x)
+        return self.from_coordinates(hand, problem, coords, s)
+
+
+INNER_SOLVERS: dict[Method, InnerSolver] = {
+    "auto": InnerSolver(_lm_attempt, _lm_from),
+    "paper": InnerSolver(_paper_attempt),
+}
+"""The inner solver of each :attr:`IKSettings.method`."""
 
 
 def solve_ik(
@@ -566,25 +609,27 @@ def solve_ik(
     s = settings
     if s is None or overrides:  # replace() validates the settings again: about 8 us a solve
         s = replace(settings or IKSettings(), **overrides)
-    attempt_fn = _paper_attempt if s.method == "paper" else _lm_attempt
-    return run_algorithm1(hand, target, attempt_fn, s, sequence, free_fingers, obstacle, database)
+    inner = INNER_SOLVERS[s.method]
+    return run_algorithm1(hand, target, inner, s, sequence, free_fingers, obstacle, database)
 
 
 def run_algorithm1(
     hand: Hand,
     target: GraspTarget,
-    attempt_fn: AttemptFn,
+    inner: InnerSolver | AttemptFn,
     settings: IKSettings,
     sequence: Sequence | None = None,
     free_fingers: tuple[str, ...] = (),
     obstacle: GraspObject | None = None,
     database: GraspDatabase | None = None,
 ) -> IKResult:
-    """The outer loop of Algorithm 1 around any inner solver (benchmarks plug peers in here).
+    """The outer loop of Algorithm 1 around any inner solver.
 
-    Learned starts (whole configurations) go to the auto method as they are; another inner
-    solver receives their finger coordinates and hangs the hand from the thumb as usual.
+    ``inner`` is an :class:`InnerSolver` (those of the methods: :data:`INNER_SOLVERS`) or an
+    :data:`AttemptFn` alone, which then starts from finger coordinates only. The other arguments
+    are those of :func:`solve_ik`.
     """
+    solver = inner if isinstance(inner, InnerSolver) else InnerSolver(inner)
     # The shipped sequence and database are loaded once per hand, on first use: not timed.
     sequence = sequence or default_sequence(hand)
     if settings.init == "learned":
@@ -597,12 +642,7 @@ def run_algorithm1(
         database.check_hand(hand)
     attempts: list[Attempt] = []
     for kind, x in _starts(hand, problem, settings, sequence, database):
-        if kind == "q" and attempt_fn is _lm_attempt:
-            attempt = _lm_from(hand, problem, x, settings)
-        else:
-            attempt = attempt_fn(
-                hand, problem, x if kind == "coords" else hand.finger_part(x), settings
-            )
+        attempt = solver.attempt(hand, problem, kind, x, settings)
         attempt = _checked(problem, attempt, free_fingers)
         attempt = replace(attempt, seconds=time.perf_counter() - start)
         attempts.append(attempt)
@@ -685,7 +725,7 @@ def _result(
         reason, collision_free = "converged", True
     else:
         collision_free = not self_collides(hand, chosen.q)
-        # An inner solver plugged in by a benchmark may name other outcomes: out of starts.
+        # An inner solver given by the caller may name other outcomes: out of starts.
         reason = _FAILURE_REASONS.get(chosen.outcome, "max_inits")
     clearance = problem.obstacle.clearance(chosen.q) if problem.obstacle is not None else None
     seconds = time.perf_counter() - start  # the final clearance is part of the solve's time

@@ -11,14 +11,17 @@ Lengths in metres, angles in radians.
 
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.catalog import (
+    CATALOG,
     GRASP_NAMES,
     OBJECT_NAMES,
     PAPER_IK_REPORT,
+    CatalogEntry,
     IKReport,
     bottle_patches,
     can_patches,
     load_object,
     paper_grasp,
+    register_object,
 )
 from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
 from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
@@ -37,12 +40,14 @@ from sahgrasp.objects.surfaces import (
 )
 
 __all__ = [
+    "CATALOG",
     "CONTACT_ALLOWANCE_M",
     "GRASP_NAMES",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
     "Arc",
     "BoxSolid",
+    "CatalogEntry",
     "Clearance",
     "CollisionShape",
     "ContactRegion",
@@ -73,6 +78,7 @@ __all__ = [
     "load_object",
     "paper_grasp",
     "placement",
+    "register_object",
     "rotation_about",
     "rounded_polyline",
     "sample_profile",

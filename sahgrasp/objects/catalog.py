@@ -15,7 +15,7 @@ surfaces; every paper grasp is solved by ``sahgrasp.ik.solve_ik`` (docs/objects.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -35,16 +35,21 @@ from sahgrasp.objects.patches import (
 from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline
 from sahgrasp.objects.solids import BoxSolid, EllipsoidSolid, RevolvedSolid
 from sahgrasp.objects.surfaces import RevolvedSurface, SurfaceJet
+from sahgrasp.registry import Registry
 
 __all__ = [
+    "CATALOG",
     "GRASP_NAMES",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
+    "CatalogEntry",
+    "CatalogObject",
     "IKReport",
     "bottle_patches",
     "can_patches",
     "load_object",
     "paper_grasp",
+    "register_object",
 ]
 
 MM = 1e-3
@@ -69,11 +74,63 @@ PAPER_IK_REPORT: dict[str, IKReport] = {
 
 
 @dataclass(frozen=True)
-class _Entry:
-    """An object at the identity placement and its paper grasp (finger -> jet, object frame)."""
+class CatalogEntry:
+    """A catalog object at the identity placement and its grasp (finger -> jet, object frame)."""
 
     object: GraspObject
     grasp: dict[str, SurfaceJet] | None = None
+
+
+@dataclass(frozen=True)
+class CatalogObject:
+    """How to build one object of the catalog.
+
+    Attributes:
+        name: The object's name (``load_object(name)``, ``{"name": ...}`` in a targets file).
+        build: Builds the object at the identity placement, with its grasp if it has one.
+        grasped: Whether ``build`` gives a grasp (then :func:`paper_grasp` knows the name).
+    """
+
+    name: str
+    build: Callable[[], CatalogEntry]
+    grasped: bool
+
+
+CATALOG: Registry[CatalogObject] = Registry("object", InvalidTargetError)
+"""Every catalog object by name, in the papers' order; :func:`register_object` adds one."""
+
+OBJECT_NAMES: Sequence[str] = CATALOG.names()
+"""Names accepted by :func:`load_object`, in the papers' order (a live view of :data:`CATALOG`)."""
+GRASP_NAMES: Sequence[str] = CATALOG.names(lambda entry: entry.grasped)
+"""Names accepted by :func:`paper_grasp`: the objects with a grasp, those of Claret & Suárez."""
+
+
+def register_object(
+    name: str, build: Callable[[], CatalogEntry], grasped: bool = False
+) -> CatalogObject:
+    """Add an object to the catalog: from then on every loader and targets file knows ``name``.
+
+    Args:
+        name: The object's name.
+        build: Builds the object at the identity placement (and its grasp: ``grasped``).
+        grasped: Whether ``build`` gives a grasp.
+
+    Raises:
+        InvalidTargetError: The name is empty or taken.
+    """
+    return CATALOG.register(name, CatalogObject(name, build, grasped))
+
+
+def _catalog(
+    name: str, grasped: bool = True
+) -> Callable[[Callable[[], CatalogEntry]], Callable[[], CatalogEntry]]:
+    """Decorator: register the builder below as catalog object ``name``."""
+
+    def add(build: Callable[[], CatalogEntry]) -> Callable[[], CatalogEntry]:
+        register_object(name, build, grasped)
+        return build
+
+    return add
 
 
 def _mm(*points: tuple[float, float]) -> list[tuple[float, float]]:
@@ -96,7 +153,8 @@ def _translation(x_mm: float, y_mm: float, z_mm: float) -> FloatArray:
 _FORK_HANDLE_MM = (55.0, 11.0, 2.5)
 
 
-def _fork() -> _Entry:
+@_catalog("fork")
+def _fork() -> CatalogEntry:
     a, _, _ = _FORK_HANDLE_MM
     handle = EllipsoidSolid("handle", _mm3(_FORK_HANDLE_MM), _translation(a, 0, 0))
     neck = BoxSolid("neck", (40 * MM, 7 * MM, 3 * MM), _translation(120, 0, 0))
@@ -117,11 +175,12 @@ def _fork() -> _Entry:
         "middle": edge(55, 1),
         "ring": edge(21, 1),
     }
-    return _Entry(fork, grasp)
+    return CatalogEntry(fork, grasp)
 
 
 # ----- cup (Fig. 7a) ----------------------------------------------------------------------------
-def _cup() -> _Entry:
+@_catalog("cup")
+def _cup() -> CatalogEntry:
     profile = rounded_polyline(
         _mm((0, 0), (30, 0), (36, 90), (32.5, 90), (26.8, 5), (0, 5)),
         [3 * MM, 1.5 * MM, 1.5 * MM, 4 * MM],
@@ -133,7 +192,7 @@ def _cup() -> _Entry:
         "middle": wall.outer_jet(0.0, 50 * MM),
         "ring": wall.outer_jet(0.0, 18 * MM),
     }
-    return _Entry(GraspObject("cup", (wall,), (0.55, 0.70, 0.85, 1.0)), grasp)
+    return CatalogEntry(GraspObject("cup", (wall,), (0.55, 0.70, 0.85, 1.0)), grasp)
 
 
 # ----- Buddha statuette (Fig. 7b) ---------------------------------------------------------------
@@ -142,7 +201,8 @@ _TORSO_RADII_MM = (22.0, 30.0, 33.0)
 _HEAD_CENTRE_Z_MM, _HEAD_RADIUS_MM = 100.0, 17.0
 
 
-def _buddha() -> _Entry:
+@_catalog("buddha")
+def _buddha() -> CatalogEntry:
     base = RevolvedSolid(
         "base", rounded_polyline(_mm((0, 0), (45, 0), (45, 14), (0, 14)), [2 * MM, 3 * MM])
     )
@@ -168,7 +228,7 @@ def _buddha() -> _Entry:
         "middle": on_torso(0.0, 68),
         "ring": on_torso(0.0, 42),
     }
-    return _Entry(buddha, grasp)
+    return CatalogEntry(buddha, grasp)
 
 
 # ----- cup of coffee with saucer (Fig. 7c) ------------------------------------------------------
@@ -179,7 +239,8 @@ _HANDLE_RING_MM = (38.5, 33.0, 15.0, 3.5)
 """Handle: ring centre (x, z) in the cup frame, ring radius, tube radius."""
 
 
-def _coffee_cup() -> _Entry:
+@_catalog("coffee_cup")
+def _coffee_cup() -> CatalogEntry:
     (r0, z0), (r1, z1) = _COFFEE_WALL_MM
     cup_profile = rounded_polyline(
         _mm((0, 0), (r0, z0), (r1, z1), (35.9, 62), (23.25, 6), (0, 6)),
@@ -202,7 +263,7 @@ def _coffee_cup() -> _Entry:
         "middle": cup.outer_jet(-math.pi / 2, 40 * MM),
         "ring": cup.outer_jet(-math.pi / 2 - 0.6, 22 * MM),
     }
-    return _Entry(coffee, grasp)
+    return CatalogEntry(coffee, grasp)
 
 
 def _handle(T_object_cup: FloatArray) -> tuple[RevolvedSolid, EllipsoidSolid, EllipsoidSolid]:
@@ -255,7 +316,8 @@ def _can_solid() -> RevolvedSolid:
     )
 
 
-def _can() -> _Entry:
+@_catalog("can")
+def _can() -> CatalogEntry:
     can = _can_solid()
     grasp = {
         "thumb": can.outer_jet(math.pi, _CAN_THUMB_MM * MM),
@@ -263,7 +325,7 @@ def _can() -> _Entry:
         "middle": can.outer_jet(0.0, _CAN_MIDDLE_MM * MM),
         "ring": can.outer_jet(0.0, 25 * MM),
     }
-    return _Entry(GraspObject("can", (can,), (0.80, 0.08, 0.10, 1.0)), grasp)
+    return CatalogEntry(GraspObject("can", (can,), (0.80, 0.08, 0.10, 1.0)), grasp)
 
 
 def _can_side_heights_m() -> tuple[float, float]:
@@ -327,7 +389,8 @@ def _bottle_cap_edge() -> RevolvedSurface:
     )
 
 
-def _bottle() -> _Entry:
+@_catalog("bottle", grasped=False)
+def _bottle() -> CatalogEntry:
     body = RevolvedSolid(
         "body", rounded_polyline(_mm(*_BOTTLE_POLYLINE_MM), [r * MM for r in _BOTTLE_CORNERS_MM])
     )
@@ -336,7 +399,7 @@ def _bottle() -> _Entry:
         rounded_polyline(_mm((0, 0), (3.5, 0), (3.5, 42), (0, 42)), [0.0, 1.5 * MM]),
         placement(rotation_about((0, 1, 0), math.radians(40.0)), (6 * MM, 0.0, 112 * MM)),
     )
-    return _Entry(GraspObject("bottle", (body, spout), (0.78, 0.85, 0.72, 1.0)))
+    return CatalogEntry(GraspObject("bottle", (body, spout), (0.78, 0.85, 0.72, 1.0)))
 
 
 def bottle_patches(T_world_object: Any = None) -> GraspPatches:
@@ -376,30 +439,15 @@ def bottle_patches(T_world_object: Any = None) -> GraspPatches:
     return _placed(GraspPatches("bottle", regions), T_world_object)
 
 
-# ----- registry ---------------------------------------------------------------------------------
-_BUILDERS: dict[str, Callable[[], _Entry]] = {
-    "fork": _fork,
-    "cup": _cup,
-    "buddha": _buddha,
-    "coffee_cup": _coffee_cup,
-    "can": _can,
-    "bottle": _bottle,
-}
-
-OBJECT_NAMES: tuple[str, ...] = tuple(_BUILDERS)
-"""Names accepted by :func:`load_object`, in the papers' order."""
-GRASP_NAMES: tuple[str, ...] = tuple(PAPER_IK_REPORT)
-"""Names accepted by :func:`paper_grasp`: the objects of Claret & Suárez."""
-
-
+# ----- lookups ----------------------------------------------------------------------------------
 def _placed(patches: GraspPatches, T_world_object: Any) -> GraspPatches:
     return patches if T_world_object is None else patches.placed(T_world_object)
 
 
-def _entry(name: str, valid: tuple[str, ...]) -> _Entry:
+def _entry(name: str, valid: Sequence[str]) -> CatalogEntry:
     if name not in valid:
         raise InvalidTargetError(f"unknown object {name!r}; valid names are {list(valid)}")
-    return _BUILDERS[name]()
+    return CATALOG[name].build()
 
 
 def load_object(name: str, T_world_object: Any = None) -> GraspObject:
@@ -427,7 +475,8 @@ def paper_grasp(name: str, T_world_object: Any = None) -> GraspTarget:
         InvalidTargetError: Unknown name; the message lists the valid ones.
     """
     grasp = _entry(name, GRASP_NAMES).grasp
-    assert grasp is not None
+    if grasp is None:
+        raise InvalidTargetError(f"object {name!r} is registered with a grasp, but built none")
     T = as_placement(np.eye(4) if T_world_object is None else T_world_object)
     contacts = []
     for finger, jet in grasp.items():
