@@ -14,7 +14,15 @@ bits, a new one gets the umask's. Other kinds of output path are handled as foll
   opened and written in place like a shell redirection, never replaced by a regular file;
 - a folder is refused with :class:`OutputPathError`;
 - a command's own input file is refused by :func:`check_output_path`, which every command calls on
-  its output paths before it starts working, so that a bad path fails at once.
+  its output paths before it starts working, so that a bad path fails at once. Every file a run
+  reads is an input, named on the command line or inside another file (a mesh in a targets file,
+  the URDF of a hand description); so are an output's side files (:func:`side_files`), which may
+  not be an input either.
+
+An output written over a long run (a ``.jsonl`` results file and its ``OUT.part``, a database and
+its ``OUT.parts`` folder) is locked by :func:`lock_output`: a second run writing the same output
+is refused at once instead of mixing its lines into the first one's. A write that fails (a full
+disk) raises :class:`OutputWriteError`, which names the file.
 
 Input: :func:`read_json` reads a UTF-8 JSON file and turns every way of failing (missing file, a
 folder, binary or UTF-16 bytes, invalid or too deeply nested JSON) into one typed error.
@@ -23,6 +31,9 @@ folder, binary or UTF-16 bytes, invalid or too deeply nested JSON) into one type
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
+import hashlib
 import json
 import math
 import os
@@ -36,12 +47,17 @@ from typing import Any
 from sahgrasp.errors import SahGraspError
 
 __all__ = [
+    "OutputLockedError",
     "OutputPathError",
+    "OutputWriteError",
     "atomic_path",
     "check_output_path",
+    "file_digest",
     "is_temporary",
     "json_safe",
+    "lock_output",
     "read_json",
+    "side_files",
     "write_bytes_atomic",
     "write_json_atomic",
 ]
@@ -54,6 +70,32 @@ PathLike = str | os.PathLike[str]
 
 class OutputPathError(SahGraspError):
     """An output path cannot be written: a folder, the command's own input, an unwritable place."""
+
+
+class OutputLockedError(OutputPathError):
+    """Another run is writing the same output (:func:`lock_output`)."""
+
+
+class OutputWriteError(OutputPathError):
+    """Writing an output failed (a full disk, an I/O error); the message names the file."""
+
+
+LOCK_SUFFIX = ".lock"
+"""The lock file of output ``OUT`` is ``OUT.lock``, beside the file ``OUT`` resolves to."""
+
+
+def side_files(path: PathLike, suffixes: Iterable[str] = (".part", LOCK_SUFFIX)) -> list[Path]:
+    """The files a long write to ``path`` creates beside it (links followed): ``OUT.part`` ...
+
+    They are outputs too: :func:`check_output_path` refuses them when they are an input.
+    """
+    target = Path(os.path.realpath(path))
+    return [target.with_name(target.name + suffix) for suffix in suffixes]
+
+
+def write_error(path: PathLike, exc: OSError) -> OutputWriteError:
+    """The error of a failed write to ``path``, naming it (``cannot write OUT: No space...``)."""
+    return OutputWriteError(f"cannot write {path}: {exc.strerror or exc}")
 
 
 def is_temporary(name: str) -> bool:
@@ -92,30 +134,43 @@ def _writable_folder(folder: Path, shown: PathLike) -> None:
 
 
 def check_output_path(
-    path: PathLike, inputs: Iterable[PathLike | None] = (), *, folder: bool = False
+    path: PathLike,
+    inputs: Iterable[PathLike | None] = (),
+    *,
+    folder: bool = False,
+    side: Iterable[PathLike] = (),
 ) -> Path:
     """Check that ``path`` can be written, before any work is done.
 
     Args:
         path: An output file (or, with ``folder``, an output folder, created if missing).
-        inputs: The command's input files (None entries are ignored): the output may not be one.
+        inputs: Every file the command reads (None entries are ignored): the output may not be
+            one.
         folder: ``path`` is a folder rather than a file.
+        side: The side files the write creates (:func:`side_files`): none may be an input.
 
     Returns:
         ``path`` as a Path.
 
     Raises:
-        OutputPathError: ``path`` is empty, one of ``inputs``, a folder (a file for ``folder``),
-            or in a place that cannot be written.
+        OutputPathError: ``path`` is empty, one of ``inputs`` (or a side file is), a folder (a
+            file for ``folder``), or in a place that cannot be written.
     """
     if not str(path):
         raise OutputPathError("the output path is empty; give a file name")
     out = Path(path)
-    for given in inputs:
-        if given is not None and _same_file(out, Path(given)):
+    extras = [Path(extra) for extra in side]
+    for given in [Path(given) for given in inputs if given is not None and str(given)]:
+        if _same_file(out, given):
             raise OutputPathError(
                 f"output {out} is the input file {given}; choose another output path"
             )
+        for extra in extras:
+            if _same_file(extra, given):
+                raise OutputPathError(
+                    f"output {out} would write {extra}, which is the input file {given}; "
+                    "choose another output path"
+                )
     target = Path(os.path.realpath(out))
     info = _stat(target)
     if folder:
@@ -165,12 +220,16 @@ def write_bytes_atomic(path: PathLike, payload: bytes) -> None:
 
     Raises:
         OutputPathError: ``path`` is a folder.
-        OSError: The folder cannot be written, the disk is full, ...
+        OutputWriteError: Writing the bytes failed (the disk is full, ...); names ``path``.
+        OSError: The folder cannot be created or written into.
     """
     target, info = _target(path)
     if _is_special(info):
-        with open(target, "wb") as f:
-            f.write(payload)
+        try:
+            with open(target, "wb") as f:
+                f.write(payload)
+        except OSError as exc:
+            raise write_error(path, exc) from exc
         return
     tmp, fd = _create_temporary(target, info, "")
     try:
@@ -179,6 +238,9 @@ def write_bytes_atomic(path: PathLike, payload: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise write_error(path, exc) from exc
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
@@ -209,6 +271,92 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             os.replace(tmp, target)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def lock_output(path: PathLike) -> Iterator[Path]:
+    """Hold the lock of output ``path`` (``OUT.lock``, beside the file it resolves to).
+
+    The lock is an advisory ``flock`` on the lock file, released by the kernel when the process
+    ends, however it ends: a killed run leaves at most an unlocked file, which the next run takes
+    over. The file holds the holder's process id, for the message of a refused run, and is
+    removed on release. A run that opens the file just as its holder removes it finds another
+    file at the name and tries again, so two runs never both hold the lock.
+
+    Yields:
+        The lock file.
+
+    Raises:
+        OutputLockedError: Another process holds the lock.
+        OutputPathError: The lock file is a symbolic link or cannot be created.
+    """
+    lock = side_files(path, (LOCK_SUFFIX,))[0]
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    while True:
+        try:
+            fd = os.open(lock, flags, 0o644)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                raise OutputPathError(
+                    f"cannot lock {path}: its lock file {lock} is a symbolic link; remove it"
+                ) from None
+            raise OutputPathError(f"cannot lock {path}: {exc.strerror or exc}: {lock}") from None
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode("ascii", "replace").strip() or "unknown"
+            os.close(fd)
+            raise OutputLockedError(
+                f"output {path} is being written by another sahgrasp run (process {holder}, "
+                f"lock {lock}); wait for it to end or choose another output"
+            ) from None
+        try:
+            now = os.stat(lock, follow_symlinks=False)
+        except FileNotFoundError:
+            now = None
+        held = os.fstat(fd)
+        if now is not None and (now.st_dev, now.st_ino) == (held.st_dev, held.st_ino):
+            break
+        os.close(fd)  # removed by its holder since we opened it: lock the new one
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+        yield lock
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            lock.unlink()  # while still locked: the next run creates a fresh one
+        os.close(fd)
+
+
+_DIGESTS: dict[tuple[str, int, int, int], str] = {}
+_KEPT_DIGESTS = 256
+
+
+def file_digest(path: PathLike) -> str:
+    """SHA-256 of a file's content, computed once per file version (path, size, change time).
+
+    A file that cannot be read gets the digest of its error message, so that a problem naming a
+    missing file is still told apart from one naming another missing file.
+    """
+    real = os.path.realpath(path)
+    try:
+        info = os.stat(real)
+    except OSError as exc:
+        return hashlib.sha256(f"unreadable: {exc.strerror}".encode()).hexdigest()
+    key = (real, info.st_size, info.st_mtime_ns, info.st_ino)
+    if key not in _DIGESTS:
+        digest = hashlib.sha256()
+        try:
+            with open(real, "rb") as f:
+                while block := f.read(1 << 20):
+                    digest.update(block)
+        except OSError as exc:
+            return hashlib.sha256(f"unreadable: {exc.strerror}".encode()).hexdigest()
+        if len(_DIGESTS) >= _KEPT_DIGESTS:
+            del _DIGESTS[next(iter(_DIGESTS))]
+        _DIGESTS[key] = digest.hexdigest()
+    return _DIGESTS[key]
 
 
 def json_safe(data: Any) -> Any:

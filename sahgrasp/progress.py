@@ -27,7 +27,9 @@ class ProgressCallback(Protocol):
 class StderrProgress:
     """A :data:`ProgressCallback` drawing one tqdm bar per stage on a stream (stderr by default).
 
-    Use it as a context manager, or call :meth:`close`, to end the last bar cleanly.
+    Bars are drawn on a terminal only: on a stream that is not one (a log file, a pipe) nothing
+    is written, so that logs hold no carriage returns. Use it as a context manager, or call
+    :meth:`close`, to end the last bar cleanly.
 
     Args:
         stream: Where the bars go.
@@ -45,7 +47,9 @@ class StderrProgress:
             from tqdm import tqdm  # only front ends draw: imported when a bar is first needed
 
             self._stage = stage
-            self._bar = tqdm(desc=stage, total=total, file=self._stream or sys.stderr, leave=True)
+            self._bar = tqdm(
+                desc=stage, total=total, file=self._stream or sys.stderr, leave=True, disable=None
+            )
         self._bar.total = total
         self._bar.update(done - self._bar.n)
 

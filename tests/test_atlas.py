@@ -171,7 +171,10 @@ def test_progress_hears_of_every_chart() -> None:
     assert {(stage, total) for stage, _, total in heard} == {("atlas charts", 30)}
 
 
-def test_progress_setting_draws_a_bar_on_stderr(capsys: pytest.CaptureFixture[str]) -> None:
+def test_progress_setting_draws_a_bar_on_stderr(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # bars are drawn on a terminal only
     settings = AtlasSettings(radius=0.5, progress=True)
     build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings)
     captured = capsys.readouterr()

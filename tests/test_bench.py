@@ -53,7 +53,10 @@ def test_markdown_table_and_cell_formats() -> None:
         format_table(("a", "b"), [("x",)])
 
 
-def test_stderr_progress_draws_one_bar_per_stage(capsys: pytest.CaptureFixture[str]) -> None:
+def test_stderr_progress_draws_one_bar_per_stage(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # bars are drawn on a terminal only
     with StderrProgress() as bar:
         for done in range(1, 4):
             bar("first", done, 3)
@@ -176,8 +179,9 @@ def test_stage_profile_gives_nested_shares_of_one_build() -> None:
 
 
 def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
-    capsys: pytest.CaptureFixture[str],
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # bars are drawn on a terminal only
     bench_atlas.run(repeats=1, cases=["S2"])
     assert "bench atlas: cases" in capsys.readouterr().err
     bench_atlas.run(repeats=1, cases=["S2"], quiet=True)

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import psutil
 import pytest
 
@@ -462,3 +463,334 @@ def test_package_exports_load_lazily() -> None:
     subprocess.run(
         [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(ROOT)}
     )
+
+
+# Losing or mis-reading files: every file a run reads is an input that no output may replace.
+
+
+def _jsonl(files: Path, folder: Path, count: int = 3, name: str = "t.jsonl") -> Path:
+    """``folder/NAME``: a JSON Lines targets file of ``count`` problems of ``many.json``."""
+    problems = json.loads((files / "many.json").read_text())["problems"][:count]
+    path = folder / name
+    path.write_text("".join(json.dumps(p) + "\n" for p in problems))
+    return path
+
+
+def _my_hand(folder: Path) -> tuple[Path, Path]:
+    """A hand description ``folder/mysah.json`` naming its own copy ``folder/mysah.urdf``."""
+    sah = load_hand("sah").description
+    urdf = folder / "mysah.urdf"
+    urdf.write_bytes(sah.urdf_path.read_bytes())
+    hand = {
+        "name": "mysah", "urdf": str(urdf),
+        "fingertip_radius_m": sah.fingertip_radius_m,
+        "contact_pitch_limits_rad": list(sah.contact_pitch_limits_rad),
+        "contact_yaw_limits_rad": list(sah.contact_yaw_limits_rad),
+        "fingers": [{"name": f.name, "tip_link": f.tip_link, "tip_axis": list(f.tip_axis),
+                     "pad_axis": list(f.pad_axis)} for f in sah.fingers],
+    }  # fmt: skip
+    (folder / "mysah.json").write_text(json.dumps(hand))
+    return folder / "mysah.json", urdf
+
+
+def test_a_second_solve_writing_the_same_output_is_refused(files: Path, tmp_path: Path) -> None:
+    """The first run reads a pipe, so it is still writing when the second one starts."""
+    fifo = tmp_path / "pipe.jsonl"
+    os.mkfifo(fifo)
+    lines = _jsonl(files, tmp_path, 4).read_text().splitlines(keepends=True)
+    first = start("solve", fifo, "--json", "r.jsonl", cwd=tmp_path)
+    try:
+        with fifo.open("w") as feed:
+            feed.write(lines[0])
+            feed.flush()
+            for _ in range(600):  # the output is locked before the first problem is solved
+                if (tmp_path / "r.jsonl.lock").exists():
+                    break
+                time.sleep(0.1)
+            second = sahgrasp("solve", _jsonl(files, tmp_path, 2, "other.jsonl"), "--json",
+                              "r.jsonl", cwd=tmp_path)  # fmt: skip
+            one_line_error(second, r"r\.jsonl is being written by another sahgrasp run")
+            feed.writelines(lines[1:])
+        _, err = first.communicate(timeout=300)
+    finally:
+        first.kill()
+    assert first.returncode == 0, err
+    results = (tmp_path / "r.jsonl").read_text().splitlines()
+    assert [json.loads(line)["name"] for line in results[1:]] == [
+        json.loads(line)["name"] for line in lines
+    ]
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith("r.")) == ["r.jsonl"]
+
+
+def test_side_files_never_replace_an_input(files: Path, tmp_path: Path) -> None:
+    part = tmp_path / "r.jsonl.part"  # a JSON document, whatever its name
+    part.write_bytes((files / "one.json").read_bytes())
+    before = part.read_bytes()
+    done = sahgrasp("solve", part, "--json", "r.jsonl", cwd=tmp_path)
+    one_line_error(done, r"r\.jsonl\.part, which is the input file")
+    assert part.read_bytes() == before
+    source = _jsonl(files, tmp_path, 2)
+    (tmp_path / "o.jsonl.part").symlink_to(source)
+    done = sahgrasp("solve", source, "--json", "o.jsonl", cwd=tmp_path)
+    one_line_error(done, r"o\.jsonl\.part, which is the input file")
+    assert len(source.read_text().splitlines()) == 2
+
+
+def test_files_named_inside_the_inputs_are_inputs(files: Path, tmp_path: Path) -> None:
+    import shutil
+
+    shutil.copy(ROOT / "examples" / "meshes" / "mug.stl", tmp_path / "mybox.stl")
+    mesh = (tmp_path / "mybox.stl").read_bytes()
+    problem = json.loads((files / "one.json").read_text())["problems"][0]
+    _, urdf = _my_hand(tmp_path)
+    targets = {"hand": "mysah.json", "object": {"mesh": "mybox.stl"}, "problems": [problem]}
+    (tmp_path / "tm.json").write_text(json.dumps(targets))
+    done = sahgrasp("solve", "tm.json", "--json", "mybox.stl", cwd=tmp_path)
+    one_line_error(done, r"output mybox\.stl is the input file .*mybox\.stl")
+    assert (tmp_path / "mybox.stl").read_bytes() == mesh
+    original = urdf.read_bytes()
+    done = sahgrasp("solve", "tm.json", "--json", "mysah.urdf", cwd=tmp_path)
+    one_line_error(done, r"output mysah\.urdf is the input file .*mysah\.urdf")
+    assert urdf.read_bytes() == original
+    # A JSON Lines targets file names its meshes line by line: a line naming the output is not
+    # read, and the output is not published over it.
+    line = {**problem, "object": {"mesh": "late.stl"}}
+    shutil.copy(tmp_path / "mybox.stl", tmp_path / "late.stl")
+    (tmp_path / "tm.jsonl").write_text(json.dumps(line) + "\n")
+    done = sahgrasp("solve", "tm.jsonl", "--json", "late.stl", cwd=tmp_path)
+    one_line_error(done, r"name the output late\.stl .* an input is never replaced")
+    assert (tmp_path / "late.stl").read_bytes() == mesh
+
+
+def test_a_fifo_of_problems_loses_none(files: Path, tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe.jsonl"
+    os.mkfifo(fifo)
+    text = json.dumps({"hand": "sah"}) + "\n" + _jsonl(files, tmp_path, 40).read_text()
+    run = start("solve", fifo, "--init", "random", "--inits", "1", "--json", "r.jsonl",
+                cwd=tmp_path)  # fmt: skip
+    try:
+        with fifo.open("w") as feed:
+            feed.write(text)
+        _, err = run.communicate(timeout=300)
+    finally:
+        run.kill()
+    assert run.returncode in (0, 1) and "Traceback" not in err, err
+    assert len((tmp_path / "r.jsonl").read_text().splitlines()) == 1 + 40
+
+
+def test_a_refused_resume_leaves_the_finished_output(files: Path, tmp_path: Path) -> None:
+    targets = _jsonl(files, tmp_path, 2)
+    done = sahgrasp("solve", targets, "--inits", "1", "--json", "r.jsonl", cwd=tmp_path)
+    assert done.returncode in (0, 1), done.stderr
+    before = (tmp_path / "r.jsonl").read_bytes()
+    again = sahgrasp("solve", targets, "--inits", "2", "--json", "r.jsonl", "--resume",
+                     cwd=tmp_path)  # fmt: skip
+    one_line_error(again, "other settings")
+    assert (tmp_path / "r.jsonl").read_bytes() == before
+    # The same problems under another default object: another targets file, refused.
+    other = tmp_path / "other.jsonl"
+    other.write_text(json.dumps({"object": {"name": "can"}}) + "\n" + targets.read_text())
+    again = sahgrasp("solve", other, "--inits", "1", "--json", "r.jsonl", "--resume",
+                     cwd=tmp_path)  # fmt: skip
+    one_line_error(again, "another hand or default object")
+    assert (tmp_path / "r.jsonl").read_bytes() == before
+    assert not (tmp_path / "r.jsonl.part").exists()
+
+
+def _resumed(done: subprocess.CompletedProcess[str]) -> int:
+    match = re.search(r"(\d+) resumed", done.stdout)
+    assert match, done.stdout + done.stderr
+    return int(match.group(1))
+
+
+def test_resume_matches_results_by_problem_not_by_name(files: Path, tmp_path: Path) -> None:
+    targets = _jsonl(files, tmp_path, 3)
+    solve = ("solve", targets, "--inits", "1", "--json", "r.jsonl")
+    assert sahgrasp(*solve, cwd=tmp_path).returncode in (0, 1)
+    problems = [json.loads(line) for line in targets.read_text().splitlines()]
+    moved = problems[1]["contacts"][0]
+    moved["point"] = [x + 0.002 for x in moved["point"]]  # same name, another problem
+    targets.write_text("".join(json.dumps(p) + "\n" for p in problems))
+    done = sahgrasp(*solve, "--resume", cwd=tmp_path)
+    assert done.returncode in (0, 1) and _resumed(done) == 1, done.stdout + done.stderr
+    assert "differs from the one" in done.stdout
+    from sahgrasp.contacts import problem_from_json
+    from sahgrasp.stream import problem_digest
+
+    lines = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()[1:]]
+    assert [e["problem_digest"] for e in lines] == [
+        problem_digest(problem_from_json(p, i, tmp_path)) for i, p in enumerate(problems)
+    ]
+    # Another file of unnamed problems is not "resumed": its problems are solved.
+    unnamed = [{"contacts": p["contacts"]} for p in json.loads(
+        (files / "many.json").read_text())["problems"][3:6]]  # fmt: skip
+    (tmp_path / "u.jsonl").write_text("".join(json.dumps(p) + "\n" for p in unnamed))
+    assert sahgrasp("solve", "u.jsonl", "--inits", "1", "--json", "u_r.jsonl",
+                    cwd=tmp_path).returncode in (0, 1)  # fmt: skip
+    (tmp_path / "u.jsonl").write_text("".join(json.dumps(p) + "\n" for p in unnamed[::-1]))
+    done = sahgrasp("solve", "u.jsonl", "--inits", "1", "--json", "u_r.jsonl", "--resume",
+                    cwd=tmp_path)  # fmt: skip
+    assert _resumed(done) == 0, done.stdout
+
+
+def test_a_full_disk_names_the_file(files: Path) -> None:
+    if not Path("/dev/full").exists():
+        pytest.skip("no /dev/full")
+    done = sahgrasp("solve", "one.json", "--json", "/dev/full", cwd=files)
+    one_line_error(done, r"cannot write /dev/full: No space left on device")
+
+
+def test_a_jsonl_output_in_a_missing_folder_is_made_before_the_work(
+    files: Path, tmp_path: Path
+) -> None:
+    done = sahgrasp("solve", files / "one.json", "--json", "new/sub/r.jsonl", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert len((tmp_path / "new" / "sub" / "r.jsonl").read_text().splitlines()) == 2
+
+
+def test_learn_refuses_its_inputs_and_a_locked_output(tmp_path: Path) -> None:
+    from sahgrasp.fileio import lock_output
+
+    description, _ = _my_hand(tmp_path)
+    before = description.read_bytes()
+    for out in ("mysah.json", "mysah.urdf"):
+        done = sahgrasp("learn", "--hand", "mysah.json", "--samples", "1", "--grasps", "0",
+                        "--workers", "1", "--out", out, cwd=tmp_path)  # fmt: skip
+        one_line_error(done, rf"output {out} is the input file")
+    assert description.read_bytes() == before
+    with lock_output(tmp_path / "db.npz"):
+        done = sahgrasp("learn", "--samples", "1", "--grasps", "0", "--workers", "1",
+                        "--out", "db.npz", cwd=tmp_path)  # fmt: skip
+        one_line_error(done, r"db\.npz is being written by another sahgrasp run")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mysah.json", "mysah.urdf"]
+
+
+@pytest.mark.slow
+def test_concurrent_learns_leave_one_database_and_no_parts(tmp_path: Path) -> None:
+    args = ("learn", "--samples", "40", "--grasps", "0", "--workers", "1", "--out", "db.npz")
+    runs = [start(*args, cwd=tmp_path) for _ in range(3)]
+    outcomes = [(run.wait(timeout=300), run.communicate()[1]) for run in runs]
+    assert all(code in (0, 2) for code, _ in outcomes), outcomes
+    assert any(code == 0 for code, _ in outcomes)
+    for code, err in outcomes:
+        assert code == 0 or "being written by another sahgrasp run" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["db.npz"]
+
+
+def test_solve_uses_a_database_made_by_learn(files: Path, tmp_path: Path) -> None:
+    from sahgrasp.ik.learned import default_database
+
+    sah = default_database(load_hand("sah"))
+    assert sah is not None
+    from dataclasses import replace
+
+    small = replace(sah, configurations=sah.configurations[:50], features=sah.features[:50],
+                    grasp_entries=0)  # fmt: skip
+    small.save(tmp_path / "db.npz")
+    done = sahgrasp("solve", files / "one.json", "--database", "db.npz", "--json", "r.jsonl",
+                    cwd=tmp_path)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    header = json.loads((tmp_path / "r.jsonl").read_text().splitlines()[0])
+    import hashlib
+
+    assert (
+        header["database_digest"] == hashlib.sha256((tmp_path / "db.npz").read_bytes()).hexdigest()
+    )
+    done = sahgrasp("solve", files / "one.json", "--hand", "allegro", "--database", "db.npz",
+                    cwd=tmp_path)  # fmt: skip
+    one_line_error(done, "made for")
+    done = sahgrasp("solve", files / "one.json", "--init", "sequence", "--database", "db.npz",
+                    cwd=tmp_path)  # fmt: skip
+    one_line_error(done, "--database is the database of --init learned")
+
+
+def test_demo_and_solve_share_one_code_path(tmp_path: Path) -> None:
+    """The same starts and solutions; a bad problem is marked invalid, the others are shown."""
+    from sahgrasp.objects import paper_grasp
+
+    can = paper_grasp("can").to_dict()
+    problems = [{**can, "name": "can"}, {**can, "name": "bad", "contacts": can["contacts"][:2]}]
+    (tmp_path / "t.json").write_text(
+        json.dumps({"hand": "sah", "object": {"name": "can"}, "problems": problems})
+    )
+    solved = sahgrasp("solve", "t.json", "--json", "r.json", cwd=tmp_path)
+    assert solved.returncode == 1, solved.stderr
+    entries = json.loads((tmp_path / "r.json").read_text())["results"]
+    shown = sahgrasp("demo", "--targets", "t.json", "--html", "d.html", cwd=tmp_path)
+    assert shown.returncode == 1 and "Traceback" not in shown.stderr, shown.stderr
+    assert (tmp_path / "d.html").is_file()
+    row = next(line.split() for line in shown.stdout.splitlines() if line.startswith("can "))
+    assert row[2] == "yes" and entries[0]["success"]
+    assert [int(row[3]), int(row[4])] == [entries[0]["inits_used"], entries[0]["iterations"]]
+    assert "bad: invalid input: " in shown.stdout and entries[1]["reason"] == "invalid_input"
+
+
+def test_time_ms_is_the_solve_and_setup_ms_the_object(
+    files: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Building an object's collision pieces is set-up, reported apart from the solve."""
+    from sahgrasp.cli.solve import results_document
+    from sahgrasp.contacts import GraspTarget, ObjectSpec
+    from sahgrasp.ik.batch import solve_chunks
+    from sahgrasp.objects import paper_grasp
+    from sahgrasp.objects.clearance import HandObjectClearance
+
+    built = HandObjectClearance.__init__
+
+    def slow(self: HandObjectClearance, *args: Any, **kwargs: Any) -> None:
+        time.sleep(0.4)
+        built(self, *args, **kwargs)
+
+    monkeypatch.setattr(HandObjectClearance, "__init__", slow)
+    hand = load_hand("sah")
+    spec = ObjectSpec("can", None, (0.0, 0.0, 0.123456))  # a placement no other test builds
+    T = np.eye(4)
+    T[:3, 3] = spec.xyz
+    grasp = paper_grasp("can", T)
+    problems = [GraspTarget(n, grasp.contacts, spec) for n in ("first", "second")]
+    items = [(p, spec, spec.key()) for p in problems]
+    entries = [e for chunk in solve_chunks(hand, items, IKSettings()) for e in chunk]
+    assert isinstance(entries[0], dict) and isinstance(entries[1], dict)
+    assert entries[0]["setup_ms"] >= 400.0 > entries[0]["time_ms"]
+    assert entries[1]["setup_ms"] < 400.0  # the second problem reuses the object
+    summary = results_document("sah", entries)["summary"]  # type: ignore[arg-type]
+    assert summary["setup_ms"] == pytest.approx(entries[0]["setup_ms"] + entries[1]["setup_ms"])
+    assert summary["median_time_ms"] < 400.0
+
+
+def test_solve_lines_and_its_bar_do_not_interleave_on_a_terminal(files: Path) -> None:
+    """On a terminal each problem's line starts on a cleared line; off one, no bar at all."""
+    import fcntl
+    import pty
+    import struct
+    import termios
+
+    leader, follower = pty.openpty()
+    fcntl.ioctl(follower, termios.TIOCSWINSZ, struct.pack("HHHH", 24, 100, 0, 0))  # 100 columns
+    try:
+        run = subprocess.Popen(
+            [sys.executable, "-m", "sahgrasp", "solve", "many.json", "--inits", "1", "--json",
+             os.devnull], stdout=follower, stderr=follower, cwd=files,
+            env={**os.environ, "PYTHONPATH": str(ROOT)},
+        )  # fmt: skip
+        os.close(follower)
+        chunks = []
+        while True:
+            try:
+                data = os.read(leader, 65536)
+            except OSError:  # the other side is closed
+                break
+            if not data:
+                break
+            chunks.append(data)
+        run.wait(timeout=300)
+    finally:
+        os.close(leader)
+    screen = b"".join(chunks).decode("utf-8", "replace")
+    names = {p["name"] for p in json.loads((files / "many.json").read_text())["problems"]}
+    lines = [line for line in screen.split("\n") if re.search(r": (solved|FAILED)", line)]
+    assert len(lines) == 60, screen[-2000:]
+    for line in lines:  # what follows the last carriage return is the problem's line alone
+        assert line.rstrip("\r").rsplit("\r", 1)[-1].split(":")[0] in names, repr(line)
+    piped = sahgrasp("solve", "many.json", "--inits", "1", "--json", os.devnull, cwd=files)
+    assert "\r" not in piped.stderr and "\r" not in piped.stdout

@@ -11,11 +11,15 @@ import pytest
 
 from sahgrasp.errors import InvalidTargetError
 from sahgrasp.fileio import (
+    OutputLockedError,
     OutputPathError,
+    OutputWriteError,
     atomic_path,
     check_output_path,
     is_temporary,
+    lock_output,
     read_json,
+    side_files,
     write_bytes_atomic,
     write_json_atomic,
 )
@@ -100,7 +104,7 @@ def test_temporary_file_removed_when_the_rename_fails(
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(os, "replace", fail)
-    with pytest.raises(OSError, match="No space"):
+    with pytest.raises(OutputWriteError, match=f"cannot write {out}: No space"):
         write_bytes_atomic(out, b"new")
     assert out.read_text() == "old"
     assert _leftovers(tmp_path) == []
@@ -198,3 +202,62 @@ def test_read_json_missing_file_folder_and_bom(tmp_path: Path) -> None:
     bom = tmp_path / "bom.json"
     bom.write_bytes(b"\xef\xbb\xbf[1]")
     assert read_json(bom, "targets file", InvalidTargetError) == [1]
+
+
+def test_an_output_lock_refuses_a_second_writer_and_is_removed(tmp_path: Path) -> None:
+    out = tmp_path / "r.jsonl"
+    with lock_output(out) as lock:
+        assert lock == tmp_path / "r.jsonl.lock"
+        assert lock.read_text().strip() == str(os.getpid())
+        held = rf"being written by .*process {os.getpid()}"
+        with pytest.raises(OutputLockedError, match=held), lock_output(out):
+            pass
+        link = tmp_path / "link.jsonl"  # another name of the same output: the same lock
+        link.symlink_to(out)
+        out.write_text("")
+        with pytest.raises(OutputLockedError), lock_output(link):
+            pass
+    assert not lock.exists()
+    with lock_output(out):  # released: the next run takes it
+        pass
+
+
+def test_a_stale_lock_file_is_taken_over(tmp_path: Path) -> None:
+    (tmp_path / "r.jsonl.lock").write_text("12345\n")  # left by a killed run: not locked
+    with lock_output(tmp_path / "r.jsonl"):
+        pass
+    assert not (tmp_path / "r.jsonl.lock").exists()
+
+
+def test_a_lock_file_that_is_a_link_is_refused(tmp_path: Path) -> None:
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    (tmp_path / "r.jsonl.lock").symlink_to(precious)
+    with pytest.raises(OutputPathError, match="symbolic link"), lock_output(tmp_path / "r.jsonl"):
+        pass
+    assert precious.read_text() == "keep"
+
+
+def test_side_files_that_are_inputs_are_refused(tmp_path: Path) -> None:
+    source = tmp_path / "r.jsonl.part"
+    source.write_text("{}")
+    out = tmp_path / "r.jsonl"
+    with pytest.raises(OutputPathError, match=r"r\.jsonl\.part, which is the input"):
+        check_output_path(out, [source], side=side_files(out))
+    other = tmp_path / "t.jsonl"
+    other.write_text("{}")
+    (tmp_path / "o.jsonl.part").symlink_to(other)
+    with pytest.raises(OutputPathError, match="which is the input file"):
+        check_output_path(tmp_path / "o.jsonl", [other], side=side_files(tmp_path / "o.jsonl"))
+    assert other.read_text() == "{}"
+
+
+def test_a_failed_write_names_the_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def full(fd: int) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(os, "fsync", full)
+    out = tmp_path / "big.json"
+    with pytest.raises(OutputWriteError, match=rf"cannot write {out}: No space left on device"):
+        write_bytes_atomic(out, b"x")
+    assert not out.exists() and _leftovers(tmp_path) == []

@@ -32,6 +32,10 @@ BENCH = PACKAGE / "bench"
 # Loaded only when a command or function that needs them runs.
 LAZY = ("matplotlib", "meshcat", "dask", "trimesh", "pinocchio.visualize")
 
+# Declared runtime dependencies that sahgrasp never imports itself: trimesh imports them, only
+# when the mesh path needs them (trimesh declares neither in its base requirements).
+BACKENDS = {"rtree": "trimesh's ray and bounds-tree code", "networkx": "trimesh.repair"}
+
 
 def _normalize(name: str) -> str:
     """PEP 503 name: lower case, runs of ``-_.`` as one ``-``."""
@@ -146,7 +150,7 @@ def test_every_library_import_is_a_declared_runtime_dependency() -> None:
 
 
 def test_every_runtime_dependency_is_used_by_the_library() -> None:
-    used: set[str] = set()
+    used: set[str] = set(BACKENDS)
     for path in _sources():
         used.update(_distribution_lookups(path))
         for module, _ in _third_party_imports(path):
@@ -197,3 +201,34 @@ def test_cli_help_loads_no_optional_layer() -> None:
         "    main(['--help'])"
     )
     assert _loaded_after(code) == []
+
+
+def test_the_mesh_path_back_ends_are_declared_and_used(tmp_path: Path) -> None:
+    """A mesh that needs repairs, then a ray query: trimesh loads its back-ends, all declared.
+
+    ``pip install .`` alone must handle meshes: a back-end that trimesh imports here and that
+    pyproject.toml does not declare is missing on a fresh machine (ModuleNotFoundError). trimesh
+    also imports whatever optional module happens to be installed (embreex, shapely...), so only
+    a fresh install proves that nothing else is needed: CI's install-only stage (.ci/run).
+    """
+    assert set(BACKENDS) <= _runtime()
+    code = f"""
+import numpy as np, trimesh
+from sahgrasp.objects import load_mesh
+box = trimesh.creation.box((0.06, 0.06, 0.08))
+faces = box.faces[1:].copy()
+faces[0] = faces[0][::-1]  # a hole and a flipped triangle: both repaired on loading
+trimesh.Trimesh(box.vertices, faces, process=False).export({str(tmp_path / "b.stl")!r})
+solid = load_mesh({str(tmp_path / "b.stl")!r}).solids[0]
+assert solid.repairs, solid.repairs
+solid.trimesh.ray.intersects_location(np.zeros((1, 3)), [[1.0, 0.0, 0.0]])
+"""
+    report = "import sys, json; print(json.dumps(sorted(m for m in sys.modules if '.' not in m)))"
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    out = subprocess.run(
+        [sys.executable, "-c", f"{code}\n{report}"], env=env, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    loaded = set(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert set(BACKENDS) <= loaded, f"not loaded by the mesh path: {set(BACKENDS) - loaded}"

@@ -52,6 +52,7 @@ def lines(path: Path) -> list[dict[str, Any]]:
     out = [json.loads(line) for line in path.read_text().splitlines()]
     for entry in out:
         entry.pop("time_ms", None)
+        entry.pop("setup_ms", None)
     return out
 
 

@@ -22,7 +22,8 @@ def add_parser(sub: Any) -> None:
     p = add_command(
         sub, "learn", "build the grasp database of the learned IK start",
         "Build a database of solved grasps keyed by the contacts' rigid-invariant features. "
-        "Finished chunks are kept in FILE.parts, so an interrupted build continues when rerun.",
+        "Finished chunks are kept in FILE.parts, so an interrupted build continues when rerun; "
+        "FILE is locked while it is built (FILE.lock), a second build of it is refused.",
     )  # fmt: skip
     p.add_argument("--hand", default="sah", help=HAND_HELP)
     p.add_argument(
@@ -51,16 +52,23 @@ def add_parser(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build (or resume building) the database."""
+    from sahgrasp.cli.solve import hand_inputs
+    from sahgrasp.fileio import check_output_path, side_files
     from sahgrasp.hand import load_hand
     from sahgrasp.ik.learned import build_database, primitive_chunks
     from sahgrasp.parallel import check_workers
     from sahgrasp.progress import StderrProgress
     from sahgrasp.sequence.executors import open_executor
 
+    # Every file the run reads is an input: the hand description and its URDF. The database's
+    # side files (FILE.parts, FILE.lock) are outputs too.
+    side = side_files(args.out, (".parts", ".lock"))
+    check_output_path(args.out, hand_inputs(args.hand), side=side)
     check_outputs([args.out])
     if args.workers is not None:
         check_workers(args.workers)
     hand = load_hand(args.hand)
+    check_output_path(args.out, hand_inputs(args.hand, hand), side=side)
     grasp_sets = args.grasps
     if grasp_sets is None:
         grasp_sets = LEARN_DEFAULTS["grasp_sets"] if hand.description.name == "sah" else 0

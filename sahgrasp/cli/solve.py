@@ -21,7 +21,6 @@ from sahgrasp.cli.common import (
     add_command,
     add_mesh_path_argument,
     check_json_inputs,
-    check_outputs,
     emit_json,
     human_stream,
     int_in_range,
@@ -31,12 +30,23 @@ from sahgrasp.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from collections.abc import Iterator
+    from collections.abc import Iterable, Iterator
 
     from sahgrasp.contacts import GraspTarget, InvalidProblem
+    from sahgrasp.hand import Hand
+    from sahgrasp.ik.learned import GraspDatabase
     from sahgrasp.stream import ResultsWriter
 
-__all__ = ["Summary", "add_parser", "results_document", "run"]
+__all__ = [
+    "Summary",
+    "add_parser",
+    "check_run_outputs",
+    "hand_inputs",
+    "load_database",
+    "results_document",
+    "run",
+    "solve_items",
+]
 
 TARGETS_HELP = "targets file: a JSON document, or JSON Lines (.jsonl) read line by line"
 JSON_HELP = (
@@ -69,6 +79,14 @@ def add_parser(sub: Any) -> None:
         help="sequence file of initial poses (default: the one shipped for the hand)",
     )
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
+    p.add_argument(
+        "--database",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="grasp database of --init learned, made by `sahgrasp learn` (default: the one "
+        "shipped for the hand)",
+    )
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
     where.add_argument(
@@ -103,12 +121,17 @@ def _line(entry: dict[str, Any]) -> str:
         return f"{name}: invalid input: {printable(entry.get('detail', 'refused by the solver'))}"
     status = "solved" if entry["success"] else f"FAILED ({entry['reason']})"
     error_mm = max(entry["max_position_error_mm"], entry["max_centre_error_mm"])
+    setup = f" (set-up {entry['setup_ms']:.0f} ms)" if entry.get("setup_ms", 0.0) >= 1.0 else ""
     return (f"{name}: {status}, inits {entry['inits_used']}, iterations {entry['iterations']}, "
-            f"{entry['time_ms']:.2f} ms, max error {error_mm:.3f} mm")  # fmt: skip
+            f"{entry['time_ms']:.2f} ms{setup}, max error {error_mm:.3f} mm")  # fmt: skip
 
 
 def results_document(hand_name: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
-    """The results file (``docs/formats.md``) from the results entries, in problem order."""
+    """The results file (``docs/formats.md``) from the results entries, in problem order.
+
+    The summary's times are of the solves alone; the set-up (loading objects, building their
+    collision pieces) is summed apart in ``setup_ms``.
+    """
     times = [e["time_ms"] for e in entries if e["reason"] != "invalid_input"] or [0.0]
     solved = sum(e["success"] for e in entries)
     return {
@@ -121,6 +144,7 @@ def results_document(hand_name: str, entries: list[dict[str, Any]]) -> dict[str,
             "success_rate": solved / len(entries) if entries else 0.0,
             "median_time_ms": median(times),
             "mean_time_ms": mean(times),
+            "setup_ms": sum(float(e.get("setup_ms") or 0.0) for e in entries),
         },
     }
 
@@ -161,20 +185,42 @@ class Summary:
 
 
 def _skip_finished(
-    writer: ResultsWriter, problems: Iterator[GraspTarget | InvalidProblem], summary: Summary
-) -> None:
-    """Count the results a resumed output already holds, and skip their problems."""
-    from sahgrasp.errors import InvalidSettingsError
+    writer: ResultsWriter,
+    problems: Iterator[GraspTarget | InvalidProblem],
+    summary: Summary,
+    out: Any,
+) -> Iterator[GraspTarget | InvalidProblem]:
+    """Count the results a resumed output holds for unchanged problems; the problems left.
 
-    for index, entry in enumerate(writer.finished()):
-        problem = next(problems, None)
-        if problem is None or problem.name != entry.get("name"):
-            raise InvalidSettingsError(
-                f"cannot resume {writer.part}: its result {index} ({entry.get('name')!r}) is not "
-                f"for problem {index} of the targets file "
-                f"({problem.name if problem else 'none'!r}); was it made from another file?"
-            )
-        summary.add(entry, resumed=True)
+    A result is kept while its ``problem_digest`` is the digest of the problem at its place in
+    the targets file; from the first changed problem on (or the first result without a
+    digest), the problems are solved again and the file is cut there.
+    """
+    import itertools
+
+    from sahgrasp.stream import problem_digest
+
+    changed: GraspTarget | InvalidProblem | None = None
+    finished = writer.finished()  # a generator: closing it keeps the entry it stopped at out
+    try:
+        for entry in finished:
+            problem = next(problems, None)
+            if problem is None:
+                break  # the targets file is shorter now: the extra results are cut
+            if entry.get("problem_digest") != problem_digest(problem):
+                changed = problem
+                break
+            summary.add(entry, resumed=True)
+    finally:
+        finished.close()  # the entry it stopped at is not kept
+    if changed is None:
+        return problems
+    print(
+        f"{printable(changed.name)} (problem {summary.resumed}) differs from the one "
+        f"{writer.shown} was solved for: kept {summary.resumed} results, solving again from there",
+        file=out,
+    )
+    return itertools.chain([changed], problems)
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -190,7 +236,7 @@ def _executor(args: argparse.Namespace) -> Any:
     return process_pool(args.workers)
 
 
-def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
+def _chunking(args: argparse.Namespace, total: int | None) -> tuple[int, int]:
     """Problems per chunk and chunks in flight: all workers busy, scheduling cost under 1%."""
     from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT, CLUSTER_CHUNK_SIZE
 
@@ -198,15 +244,98 @@ def _chunking(args: argparse.Namespace, total: int) -> tuple[int, int]:
         return CLUSTER_CHUNK_SIZE, DISPATCH_CHUNKS_IN_FLIGHT
     if args.workers <= 1:  # solved here: each chunk written as soon as it is solved
         return CHUNK_SIZE, 1
+    if total is None:  # a pipe: its length is not known
+        return CHUNK_SIZE, CHUNKS_IN_FLIGHT * args.workers
     per_worker = math.ceil(total / (CHUNKS_IN_FLIGHT * args.workers))
     return max(1, min(CHUNK_SIZE, per_worker)), CHUNKS_IN_FLIGHT * args.workers
 
 
-def _check_run(args: argparse.Namespace, hand_name: str) -> None:
+def hand_inputs(hand_name: str, hand: Hand | None = None) -> list[Path]:
+    """The files a hand is read from: its description file (if a path) and its URDF."""
+    files = [Path(hand_name)] if Path(hand_name).suffix and Path(hand_name).is_file() else []
+    if hand is not None:
+        files.append(hand.description.urdf_path)
+    return files
+
+
+def check_run_outputs(out: str | None, inputs: Iterable[str | Path | None]) -> None:
+    """Check an output and, for JSON Lines, its side files against every input of the run.
+
+    Raises:
+        OutputPathError: The output, ``OUT.part`` or ``OUT.lock`` is an input, or the output
+            cannot be written.
+    """
+    from sahgrasp.fileio import check_output_path, side_files
+    from sahgrasp.stream import is_jsonl
+
+    if out is None or out == "-":
+        return
+    check_output_path(out, inputs, side=side_files(out) if is_jsonl(out) else ())
+
+
+def load_database(path: Path | None, hand: Hand, init: str) -> GraspDatabase | None:
+    """The grasp database of ``--database`` (None: the hand's shipped one), made for ``hand``.
+
+    Raises:
+        InvalidSettingsError: A database with an ``init`` other than ``learned``.
+        GraspDatabaseError: Not a database file, or one made for another hand.
+    """
+    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.ik.learned import GraspDatabase
+
+    if path is None:
+        return None
+    if init != "learned":
+        raise InvalidSettingsError(
+            f"--database is the database of --init learned, not of --init {init}; drop one"
+        )
+    database = GraspDatabase.load(path)
+    database.check_hand(hand)
+    return database
+
+
+def solve_items(
+    problems: Iterable[GraspTarget | InvalidProblem],
+    outputs: Iterable[Path],
+    named: list[str],
+    digests: Any = None,
+) -> Iterator[tuple[GraspTarget | InvalidProblem, Any, str]]:
+    """The ``(problem, object, key)`` items of :func:`sahgrasp.ik.batch.solve_chunks`.
+
+    A problem whose mesh is one of ``outputs`` is not read: it becomes an invalid problem and
+    its name is appended to ``named`` (the run must then not publish that output).
+
+    Args:
+        problems: The problems, in file order.
+        outputs: The files the run writes (side files included).
+        named: Receives the names of the problems that name an output.
+        digests: A deque that receives each problem's :func:`~sahgrasp.stream.problem_digest`
+            (None: not computed).
+    """
+    import os
+
+    from sahgrasp.contacts import InvalidProblem
+    from sahgrasp.stream import problem_digest
+
+    written = {os.path.realpath(p) for p in outputs}
+    for problem in problems:
+        spec = getattr(problem, "object_spec", None)
+        if spec is not None and spec.mesh is not None and os.path.realpath(spec.mesh) in written:
+            named.append(problem.name)
+            problem = InvalidProblem(
+                problem.name, f"its mesh {spec.mesh} is a file this run writes; not read"
+            )
+            spec = None
+        if digests is not None:
+            digests.append(problem_digest(problem))
+        yield problem, spec, "" if spec is None else spec.key()
+
+
+def _check_run(args: argparse.Namespace, hand_name: str, inputs: list[Any]) -> None:
     from sahgrasp.errors import InvalidSettingsError
     from sahgrasp.stream import is_jsonl
 
-    check_outputs([args.json], inputs=[args.targets, args.sequence, hand_name])
+    check_run_outputs(args.json, inputs)
     check_json_inputs(hand_name, args.sequence)
     if args.resume and not is_jsonl(args.json):
         raise InvalidSettingsError("--resume continues a JSON Lines output: give --json OUT.jsonl")
@@ -218,46 +347,67 @@ def run(args: argparse.Namespace) -> int:
 
     targets = open_targets(args.targets, allow_outside_paths=args.allow_any_mesh_path)
     hand_name = args.hand or targets.hand
-    _check_run(args, hand_name)
+    inputs = [args.targets, args.sequence, args.database, *targets.files, *hand_inputs(hand_name)]
+    _check_run(args, hand_name, inputs)
 
+    from collections import deque
+
+    from sahgrasp.fileio import OutputPathError, file_digest, side_files
     from sahgrasp.hand import load_hand
     from sahgrasp.ik import IKSettings, Sequence, default_sequence
     from sahgrasp.ik.batch import solve_chunks
     from sahgrasp.stream import ResultsWriter, is_jsonl, settings_header
 
     hand = load_hand(hand_name)
+    check_run_outputs(args.json, hand_inputs(hand_name, hand))  # the URDF the description names
+    database = load_database(args.database, hand, args.init)
     settings = IKSettings(method=args.method, init=args.init, max_inits=args.inits, seed=args.seed)
     sequence = Sequence.load(args.sequence) if args.sequence else None
     summary = Summary()
-    writer = None
-    if is_jsonl(args.json):
-        used = sequence or default_sequence(hand)
-        header = settings_header(hand, settings, used.to_dict(), args.targets)
-        writer = ResultsWriter(args.json, header, args.resume)
-        _skip_finished(writer, targets.problems, summary)
-    items = ((p, getattr(p, "object_spec", None), _key(p)) for p in targets.problems)
     out = human_stream(args.json)
-    size, in_flight = _chunking(args, targets.total - summary.resumed)
+    writer = None
+    outputs = [] if args.json in (None, "-") else [Path(args.json), *side_files(args.json)]
+    named: list[str] = []
     entries: list[dict[str, Any]] = []
     complete = False
     try:
+        problems = targets.problems
+        if is_jsonl(args.json):
+            used = sequence or default_sequence(hand)
+            header = settings_header(
+                hand, settings, used.to_dict(), args.targets, targets.digest,
+                None if args.database is None else file_digest(args.database),
+            )  # fmt: skip
+            writer = ResultsWriter(args.json, header, args.resume)
+            problems = _skip_finished(writer, problems, summary, out)
+        digests: deque[str] = deque()
+        items = solve_items(problems, outputs, named, digests)
+        total = None if targets.total is None else targets.total - summary.resumed
+        size, in_flight = _chunking(args, total)
         with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
             for chunk in solve_chunks(
-                hand, items, settings, sequence, pool, "entry", size, in_flight
+                hand, items, settings, sequence, pool, "entry", size, in_flight, database
             ):
                 done: list[dict[str, Any]] = chunk  # type: ignore[assignment]
                 for entry in done:
+                    entry["problem_digest"] = digests.popleft()
                     summary.add(entry)
                 bar.update(len(done))
                 if writer is not None:
                     writer.write(done)
                 else:  # a document: written at the end, each problem shown as it is solved
                     entries += done
-                    print("\n".join(map(_line, done)), file=out)
+                    bar.write("\n".join(map(_line, done)), file=out)
         complete = True
     finally:
         if writer is not None:
-            writer.close(complete)
+            writer.close(complete, publish=not named)
+    if named:
+        kept = f"; the results are in {args.json}.part" if writer is not None else ""
+        raise OutputPathError(
+            f"problem(s) {', '.join(map(repr, named[:3]))} name the output {args.json} (or its "
+            f"side files) as their mesh: an input is never replaced{kept}"
+        )
     print(summary.line(), file=out)
     if writer is None and args.json:
         emit_json(results_document(hand.description.name, entries), args.json)
@@ -266,12 +416,7 @@ def run(args: argparse.Namespace) -> int:
     return 0 if summary.solved == summary.problems else 1
 
 
-def _key(problem: GraspTarget | InvalidProblem) -> str:
-    spec = getattr(problem, "object_spec", None)
-    return spec.key() if spec is not None else ""
-
-
-def _bar(args: argparse.Namespace, total: int, done: int) -> Any:
+def _bar(args: argparse.Namespace, total: int | None, done: int) -> Any:
     """A tqdm bar on stderr (problems/s and ETA), shown on a terminal unless ``--quiet``."""
     from tqdm import tqdm
 

@@ -12,7 +12,10 @@ seed and the problem's content (:func:`sahgrasp.ik.starts.problem_seed`), and th
 queries carry no state between problems, so a result depends neither on which worker solved it
 nor on the problems solved before it. Each problem may carry its own obstacle: a
 :class:`GraspObject`, or an :class:`ObjectSpec` of a targets file that the worker loads; a worker
-keeps the first copy of each distinct object (by content) with its collision pieces.
+keeps the first copy of each distinct object (by content) with its collision pieces. Loading an
+object and building its collision pieces is the problem's set-up, timed apart from its solve: a
+results entry's ``time_ms`` is the solve alone, its ``setup_ms`` the set-up it paid for (zero
+when the worker had the object already).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import hashlib
 import math
 import pickle
 import threading
+import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Sequence
 from concurrent.futures import Executor, Future
@@ -33,7 +37,8 @@ from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSp
 from sahgrasp.errors import InvalidTargetError, SahGraspError, SequenceFileError
 from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 from sahgrasp.ik.initial import Sequence as PoseSequence
-from sahgrasp.ik.obstacle import check_obstacle
+from sahgrasp.ik.learned import GraspDatabase
+from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
 
 if TYPE_CHECKING:
@@ -67,8 +72,8 @@ CHUNKS_IN_FLIGHT = 4
 
 INVALID_ENTRY: dict[str, Any] = {
     "success": False, "reason": "invalid_input", "inits_used": 0, "iterations": 0, "time_ms": 0.0,
-    "max_position_error_mm": None, "max_centre_error_mm": None, "collision_free": None,
-    "wrist": None, "joints": None, "contact_params": None,
+    "setup_ms": 0.0, "max_position_error_mm": None, "max_centre_error_mm": None,
+    "collision_free": None, "wrist": None, "joints": None, "contact_params": None,
 }  # fmt: skip
 """The results entry of a problem refused as invalid input, besides its name and detail."""
 
@@ -152,13 +157,17 @@ def invalid_entry(name: str, detail: str) -> dict[str, Any]:
 
 @dataclass(frozen=True)
 class Job:
-    """What every chunk of one run shares: the hand, the settings and the pose sequence."""
+    """What every chunk of one run shares: hand, settings, pose sequence and grasp database.
+
+    ``database`` is the grasp database of the learned start (None: the hand's shipped one).
+    """
 
     description: HandDescription
     digest: str
     settings: IKSettings
     sequence: PoseSequence | None
     output: Output
+    database: GraspDatabase | None = None
 
 
 Item = tuple["GraspTarget | InvalidProblem", Any, str]
@@ -171,18 +180,35 @@ def _invalid(job: Job, hand: Hand, name: str, detail: str) -> IKResult | dict[st
     return invalid_result(hand, name)
 
 
+def _set_up(hand: Hand, obstacle: Any, key: str) -> GraspObject | str | None:
+    """The problem's object, loaded and with its collision pieces built (kept for the next)."""
+    obj = None if obstacle is None else worker_obstacle(obstacle, key)
+    if obj is not None and not isinstance(obj, str):
+        pieces_of(checker_of(hand, obj))  # the solver's own cached queries: built here, not timed
+    return obj
+
+
 def _solve_item(job: Job, hand: Hand, item: Item) -> IKResult | dict[str, Any]:
     problem, obstacle, key = item
     assert isinstance(problem, GraspTarget)
-    obj = None if obstacle is None else worker_obstacle(obstacle, key)
+    start = time.perf_counter()
+    obj = _set_up(hand, obstacle, key)
+    setup_ms = (time.perf_counter() - start) * 1e3
     if isinstance(obj, str):
-        return _invalid(job, hand, problem.name, obj)
+        invalid = _invalid(job, hand, problem.name, obj)
+        if isinstance(invalid, dict):
+            invalid["setup_ms"] = setup_ms
+        return invalid
     try:
         problem.check_fingers(hand.fingers)
-        result = solve_ik(hand, problem, job.settings, job.sequence, obstacle=obj)
+        result = solve_ik(
+            hand, problem, job.settings, job.sequence, obstacle=obj, database=job.database
+        )
     except InvalidTargetError as exc:
         return _invalid(job, hand, problem.name, str(exc))
-    return result.to_dict(hand) if job.output == "entry" else result
+    if job.output == "result":
+        return result
+    return {**result.to_dict(hand), "setup_ms": setup_ms}
 
 
 def _solve_chunk(job: Job, items: list[Item]) -> list[IKResult | dict[str, Any]]:
@@ -253,6 +279,7 @@ def solve_chunks(
     output: Output = "entry",
     chunk_size: int = CHUNK_SIZE,
     in_flight: int = 2 * CHUNKS_IN_FLIGHT,
+    database: GraspDatabase | None = None,
 ) -> Iterator[list[IKResult | dict[str, Any]]]:
     """Solve ``items`` lazily, yielding the results in input order, a chunk at a time.
 
@@ -271,8 +298,9 @@ def solve_chunks(
         output: ``"entry"`` yields results-file entries (dicts), ``"result"`` IKResults.
         chunk_size: Problems per task.
         in_flight: Chunks submitted ahead of the oldest uncollected one.
+        database: Grasp database of ``init="learned"`` (None: the hand's shipped one).
     """
-    job = Job(hand.description, hand.description.digest(), settings, sequence, output)
+    job = Job(hand.description, hand.description.digest(), settings, sequence, output, database)
     _CACHE.hands.setdefault(job.digest, hand)
     pending: deque[_Batch] = deque()
     try:

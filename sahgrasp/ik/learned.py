@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import write_bytes_atomic
+from sahgrasp.fileio import lock_output, write_bytes_atomic
 from sahgrasp.hand import Hand, HandDescription, check_made_for
 from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
@@ -168,6 +168,12 @@ class GraspDatabase:
     def tree(self) -> cKDTree:
         """The k-d tree of the features, built on first use."""
         return cKDTree(self.features.astype(np.float64))  # float64 queries are faster
+
+    def __getstate__(self) -> dict[str, Any]:
+        """The fields without the k-d tree: a worker rebuilds it rather than unpickle it."""
+        state = dict(self.__dict__)
+        state.pop("tree", None)
+        return state
 
     def check_hand(self, hand: Hand) -> None:
         """Raise :class:`GraspDatabaseError` unless this database was made for ``hand``."""
@@ -421,6 +427,8 @@ def build_database(
     :data:`PRIMITIVES_PER_CHUNK` primitive solids); each finished chunk is saved in
     ``<out>.parts/`` and a rerun with the same arguments skips it, so an interrupted build
     resumes where it stopped. The result does not depend on the executor or on interruptions.
+    ``out`` is locked while it is built (:func:`sahgrasp.fileio.lock_output`): a second build of
+    the same file is refused, so that one build never removes the parts of another.
 
     Args:
         hand: The hand.
@@ -434,9 +442,24 @@ def build_database(
 
     Raises:
         GraspDatabaseError: Grasp entries asked for a hand whose reach is unknown.
+        OutputLockedError: Another build is writing ``out``.
     """
     if grasp_sets > 0:
         hand_reach(hand)
+    with lock_output(out):
+        return _build_locked(hand, samples, out, seed, executor, progress, grasp_sets)
+
+
+def _build_locked(
+    hand: Hand,
+    samples: int,
+    out: str | os.PathLike[str],
+    seed: int,
+    executor: Executor | None,
+    progress: Any,
+    grasp_sets: int,
+) -> GraspDatabase:
+    """:func:`build_database` with ``out`` locked."""
     digest = hand.description.digest()
     jobs = [(sample_chunk, "r", _split(samples, CHUNK_SAMPLES)),
             (grasp_chunk, "g", primitive_chunks(grasp_sets))]  # fmt: skip
