@@ -709,7 +709,7 @@ def test_demo_and_solve_share_one_code_path(tmp_path: Path) -> None:
     from sahgrasp.objects import paper_grasp
 
     can = paper_grasp("can").to_dict()
-    problems = [{**can, "name": "can"}, {**can, "name": "bad", "contacts": can["contacts"][:2]}]
+    problems = [{**can, "name": "can"}, {**can, "name": "bad", "contacts": can["contacts"][1:3]}]
     (tmp_path / "t.json").write_text(
         json.dumps({"hand": "sah", "object": {"name": "can"}, "problems": problems})
     )
