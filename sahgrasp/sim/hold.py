@@ -458,6 +458,8 @@ class HoldTester:
         R_world_palm = self.hand.wrist_pose(q).rotation
         results: list[DirectionResult] = []
         for label, axis in DIRECTIONS:
+            if label not in s.directions:
+                continue
             mujoco.mj_setState(m, d, self._state, self._state_spec)
             d.xfrc_applied[sim.object_body, :3] = weight * (R_world_palm.T @ np.array(axis))
             moved, turned, seconds, finite = self._run(s.pull_s, settled, stop)
@@ -473,8 +475,9 @@ class HoldTester:
             ))  # fmt: skip
             if s.stop_at_first_failure and not results[-1].holds:
                 break
-        holds = settled_ok and all(r.holds for r in results) and len(results) == len(DIRECTIONS)
-        holds_bodex = all(r.holds_bodex for r in results) and len(results) == len(DIRECTIONS)
+        complete = len(results) == len(s.directions)
+        holds = settled_ok and complete and all(r.holds for r in results)
+        holds_bodex = complete and all(r.holds_bodex for r in results)
         if holds:
             return finish("holds", "", tuple(results), settle, simulated, True, True)
         if not settled_ok:

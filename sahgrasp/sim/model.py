@@ -242,16 +242,19 @@ def model_xml(hand: Hand, obj: GraspObject, settings: HoldSettings) -> str:
     ET.SubElement(root, "option", {
         "timestep": repr(settings.timestep_s), "integrator": "implicitfast", "cone": "elliptic",
         "solver": "Newton", "iterations": str(settings.solver_iterations),
+        "noslip_iterations": str(settings.noslip_iterations),
         "ls_iterations": "10", "impratio": repr(settings.impratio), "gravity": "0 0 0",
     })  # fmt: skip
     ET.SubElement(root, "size", {"memory": "20M"})
     default = ET.SubElement(root, "default")
-    # condim 3: hard-finger point contacts (Coulomb friction only); 4 adds torsional, 6 rolling
-    # friction (a soft fingertip's contact patch).
-    condim = 6 if settings.rolling_friction_m > 0 else 4 if settings.torsional_friction_m > 0 else 3
-    friction = [settings.friction, settings.torsional_friction_m, settings.rolling_friction_m]
+    # condim 3: hard-finger point contacts (Coulomb friction only); 4: soft-finger contacts,
+    # torsional friction of a uniformly pressed disk of the patch radius.
+    torsional_m = 2.0 / 3.0 * settings.friction * settings.patch_radius_m
     ET.SubElement(default, "geom", {
-        "condim": str(condim), "friction": _fmt(friction), "margin": "0",
+        "condim": "4" if torsional_m > 0 else "3",
+        "friction": _fmt([settings.friction, torsional_m, 0.0]), "margin": "0",
+        "solref": _fmt([settings.contact_timeconst_s, 1.0]),
+        "solimp": _fmt([min(0.9, settings.contact_impedance), settings.contact_impedance, 0.001]),
     })  # fmt: skip
     assets = ET.SubElement(root, "asset")
     world = ET.SubElement(root, "worldbody")
@@ -316,8 +319,7 @@ def build_model(hand: Hand, obj: GraspObject, settings: HoldSettings | None = No
         [g for g in range(model.ngeom) if model.geom_bodyid[g] != body], dtype=np.intp
     )
     object_geoms = np.flatnonzero(model.geom_bodyid == body)
-    com = np.zeros(3)
-    mujoco.mj_forward(model, data)
+    mujoco.mj_kinematics(model, data)  # no collision pass: the object sits in the palm here
     com = data.xipos[body].copy()
     size = float(
         np.max(

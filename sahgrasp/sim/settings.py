@@ -29,11 +29,10 @@ class HoldSettings:
 
     Attributes:
         friction: Coulomb friction coefficient of every hand-object contact.
-        torsional_friction_m: Torsional friction [m] of a fingertip's contact patch (a moment
-            up to this times the normal force resists turning about the normal); with
-            ``rolling_friction_m`` zero too, contacts are hard-finger point contacts.
-        rolling_friction_m: Rolling friction [m] of the contact patch (a moment up to this times
-            the normal force resists rolling).
+        patch_radius_m: Radius [m] of a fingertip's contact patch (soft-finger contacts: a
+            moment up to ``2/3 * friction * patch_radius_m`` times the normal force resists
+            turning about the normal, the torsional friction of a uniformly pressed disk);
+            0: hard-finger point contacts.
         density_kg_m3: Object density [kg/m^3], used when ``mass_kg`` is None.
         mass_kg: Object mass [kg]; None: from ``density_kg_m3`` and the pieces' volume.
         squeeze_n: Mean normal force [N] each contact finger presses with while settling.
@@ -49,18 +48,24 @@ class HoldSettings:
         damping_nms_rad: Servo damping [N m s/rad] (velocity feedback).
         armature_kg_m2: Reflected rotor inertia of every hand joint [kg m^2].
         timestep_s: Simulation time step [s].
+        contact_timeconst_s: Time constant [s] of MuJoCo's soft contacts (``solref``; at least
+            twice ``timestep_s``).
+        contact_impedance: MuJoCo's contact impedance beyond 1 mm of penetration (``solimp``
+            dmax, in (0, 1): nearer 1, less penetration under a force).
         solver_iterations: Newton iterations of MuJoCo's constraint solver per step.
+        noslip_iterations: Iterations of MuJoCo's no-slip post-solver (0: off).
         impratio: Ratio of the friction to the normal constraint impedance (MuJoCo).
         balance_friction: Share of ``friction`` the squeeze may use to balance its forces.
+        directions: The pulls to run, a subset of :data:`DIRECTIONS`' labels (all six by
+            default; the grasp holds only if it holds in all six).
         stop_at_first_failure: Stop at the first direction that fails (the others unreported).
     """
 
     friction: float = 0.6
-    torsional_friction_m: float = 0.0
-    rolling_friction_m: float = 0.0
+    patch_radius_m: float = 0.0025
     density_kg_m3: float = 1000.0
     mass_kg: float | None = None
-    squeeze_n: float = 5.0
+    squeeze_n: float = 10.0
     settle_s: float = 0.3
     pull_s: float = 1.0
     gravity_m_s2: float = 9.81
@@ -72,17 +77,20 @@ class HoldSettings:
     stiffness_nm_rad: float = 10.0
     damping_nms_rad: float = 0.3
     armature_kg_m2: float = 0.005
-    timestep_s: float = 0.004
+    timestep_s: float = 0.005
+    contact_timeconst_s: float = 0.01
+    contact_impedance: float = 0.99
     solver_iterations: int = 20
+    noslip_iterations: int = 5
     impratio: float = 1.0
     balance_friction: float = 0.5
+    directions: tuple[str, ...] = tuple(label for label, _ in DIRECTIONS)
     stop_at_first_failure: bool = False
 
     def __post_init__(self) -> None:
         nonnegative = {
             "friction": self.friction,
-            "torsional_friction_m": self.torsional_friction_m,
-            "rolling_friction_m": self.rolling_friction_m,
+            "patch_radius_m": self.patch_radius_m,
             "settle_s": self.settle_s,
         }
         positive = {
@@ -99,6 +107,7 @@ class HoldSettings:
             "damping_nms_rad": self.damping_nms_rad,
             "armature_kg_m2": self.armature_kg_m2,
             "timestep_s": self.timestep_s,
+            "contact_timeconst_s": self.contact_timeconst_s,
             "impratio": self.impratio,
         }
         if self.mass_kg is not None:
@@ -120,8 +129,33 @@ class HoldSettings:
                 f"hold setting timestep_s must be at most 0.01 s (contacts stay stable), got "
                 f"{self.timestep_s!r}"
             )
+        if not 0.0 < self.contact_impedance < 1.0:
+            raise InvalidSettingsError(
+                f"hold setting contact_impedance must be in (0, 1), got {self.contact_impedance!r}"
+            )
+        if not self.contact_timeconst_s >= 2.0 * self.timestep_s:
+            raise InvalidSettingsError(
+                f"hold setting contact_timeconst_s must be at least twice timestep_s "
+                f"({2.0 * self.timestep_s!r} s), got {self.contact_timeconst_s!r}"
+            )
         if self.settle_s + self.pull_s > 60.0:
             raise InvalidSettingsError("hold settings settle_s + pull_s must be at most 60 s")
+        labels = [label for label, _ in DIRECTIONS]
+        if (
+            not isinstance(self.directions, tuple)
+            or not self.directions
+            or any(d not in labels for d in self.directions)
+            or len(set(self.directions)) != len(self.directions)
+        ):
+            raise InvalidSettingsError(
+                f"hold setting directions must be distinct labels among {labels}, "
+                f"got {self.directions!r}"
+            )
+        noslip = self.noslip_iterations
+        if isinstance(noslip, bool) or not isinstance(noslip, int) or not 0 <= noslip <= 1000:
+            raise InvalidSettingsError(
+                f"hold setting noslip_iterations must be an integer in [0, 1000], got {noslip!r}"
+            )
         iterations = self.solver_iterations
         if (
             isinstance(iterations, bool)
