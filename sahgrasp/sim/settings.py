@@ -77,8 +77,8 @@ class HoldSettings:
     stiffness_nm_rad: float = 10.0
     damping_nms_rad: float = 0.3
     armature_kg_m2: float = 0.005
-    timestep_s: float = 0.005
-    contact_timeconst_s: float = 0.01
+    timestep_s: float = 0.01
+    contact_timeconst_s: float = 0.02
     contact_impedance: float = 0.99
     solver_iterations: int = 20
     noslip_iterations: int = 5
