@@ -123,7 +123,7 @@ def run(
                 "light": _rates(out["light"]),
                 "paper_grasp_holds": paper or None,
             })  # fmt: skip
-    all_cpu = [r["check_cpu_mean_ms"] for r in rows if r["check_cpu_mean_ms"] is not None]
+    all_cpu = [float(r["check_cpu_mean_ms"]) for r in rows if r["check_cpu_mean_ms"] is not None]
     document: dict[str, Any] = {
         "benchmark": "check",
         "hand": hand.description.name,
