@@ -138,3 +138,20 @@ def test_same_results_on_one_and_two_workers(files: Path) -> None:
     two = check_grasps("sah", grasps, settings, workers=2)
     strip = [{**r.to_dict(), "time_s": 0} for r in one if not isinstance(r, str)]
     assert strip == [{**r.to_dict(), "time_s": 0} for r in two if not isinstance(r, str)]
+
+
+def test_without_mujoco_one_line_names_the_extra(tmp_path: Path) -> None:
+    blocked = "import sys; sys.modules['mujoco'] = None; "
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    imported = subprocess.run(
+        [sys.executable, "-c", blocked + "import sahgrasp; import sahgrasp.sim"],
+        capture_output=True, text=True, env=env,
+    )  # fmt: skip
+    assert imported.returncode == 1
+    assert 'pip install "sahgrasp[sim]"' in imported.stderr.strip().splitlines()[-1]
+    run = "from sahgrasp.cli import main; sys.exit(main(['check', 't.json', 'r.json']))"
+    done = subprocess.run(
+        [sys.executable, "-c", blocked + run], capture_output=True, text=True, env=env,
+        cwd=tmp_path,
+    )  # fmt: skip
+    one_line_error(done, r'needs MuJoCo: pip install "sahgrasp\[sim\]"')

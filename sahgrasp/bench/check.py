@@ -73,7 +73,7 @@ def run(
     default_sequence(hand)
     settings = HoldSettings()
     light = dataclasses.replace(settings, squeeze_n=LIGHT_SQUEEZE_N)
-    rows = []
+    rows: list[dict[str, Any]] = []
     with progress_reporter(progress, quiet) as report:
         for name in objects:
             obj = load_object(name)

@@ -122,15 +122,15 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp check``; 0 if every grasp holds, 1 otherwise."""
     from sahgrasp.errors import InvalidSettingsError
 
+    try:
+        import sahgrasp.sim  # noqa: F401
+    except ImportError as exc:  # the optional extra is missing: one line that names it
+        raise InvalidSettingsError(str(exc)) from None
     files = [args.targets] if args.results is None else [args.targets, args.results]
     targets, results_path = (None, args.targets) if args.results is None else files
     hand_name = _hand_name(args, targets)
     check_outputs([args.json], inputs=[*files, hand_name])
     check_json_inputs(hand_name)
-    try:
-        import sahgrasp.sim  # noqa: F401
-    except ImportError as exc:
-        raise InvalidSettingsError(str(exc)) from None
 
     from sahgrasp.hand import load_hand
     from sahgrasp.sim import HoldResult
