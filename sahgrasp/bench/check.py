@@ -151,7 +151,9 @@ def format_table(document: dict[str, Any]) -> str:
 
     def pct(rates: dict[str, Any], key: str) -> str:
         value = rates[key]
-        return "-" if value is None else f"{100 * value:.0f}% ({rates['holds']}/{rates['checked']})"
+        if value is None:
+            return "-"
+        return f"{100 * value:.0f}% ({round(value * rates['checked'])}/{rates['checked']})"
 
     for row in document["objects"]:
         paper = row["paper_grasp_holds"]
