@@ -167,3 +167,13 @@ def test_pinch_slips_at_coulombs_limit(squeeze_n: float, friction: float) -> Non
     # the other way; over the four tangential pulls that evens out.
     assert np.mean(slips) == pytest.approx(predicted_kg, rel=0.15)
     assert all(abs(m / predicted_kg - 1) < 0.3 for m in slips), slips
+
+
+@pytest.mark.slow
+def test_allegro_can_grasp_is_simulated() -> None:
+    allegro = load_hand("allegro")
+    result = solve_ik(allegro, paper_grasp("can"), obstacle=load_object("can"))
+    assert result.success
+    held = hold_test(allegro, result, load_object("can"))
+    assert held.contact_fingers == ("thumb", "index", "middle", "ring")
+    assert held.holds, held.detail

@@ -5,13 +5,19 @@ BODex's benchmark way; :class:`HoldTester` tests many grasps of one object with 
 model. docs/physics.md describes the model, its parameters and the criterion.
 """
 
-from sahgrasp.errors import SahGraspError
-
 try:
     import mujoco  # noqa: F401
 except ImportError as exc:  # the optional extra is missing
     raise ImportError('sahgrasp.sim needs MuJoCo: pip install "sahgrasp[sim]"') from exc
 
+from sahgrasp.sim.batch import (
+    GraspToCheck,
+    ResultsFileError,
+    check_grasps,
+    grasp_configuration,
+    read_grasps,
+    summarize,
+)
 from sahgrasp.sim.hold import REASONS, DirectionResult, HoldResult, HoldTester, Squeeze, hold_test
 from sahgrasp.sim.model import SimModel, SimModelError, build_model
 from sahgrasp.sim.settings import DIRECTIONS, LIGHT_SQUEEZE_N, HoldSettings
@@ -21,13 +27,18 @@ __all__ = [
     "LIGHT_SQUEEZE_N",
     "REASONS",
     "DirectionResult",
+    "GraspToCheck",
     "HoldResult",
     "HoldSettings",
     "HoldTester",
-    "SahGraspError",
+    "ResultsFileError",
     "SimModel",
     "SimModelError",
     "Squeeze",
     "build_model",
+    "check_grasps",
+    "grasp_configuration",
     "hold_test",
+    "read_grasps",
+    "summarize",
 ]
