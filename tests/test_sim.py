@@ -177,3 +177,36 @@ def test_allegro_can_grasp_is_simulated() -> None:
     held = hold_test(allegro, result, load_object("can"))
     assert held.contact_fingers == ("thumb", "index", "middle", "ring")
     assert held.holds, held.detail
+
+
+def test_contact_jacobian_matches_finite_differences() -> None:
+    import mujoco
+
+    tester = _tester("can")
+    squeeze, _, _, _ = tester.squeeze(_solved("can").q)
+    sim, m, d = tester.sim, tester.sim.model, tester.sim.data
+    J = tester.contact_jacobian(squeeze.fingers, squeeze.points_m)
+    # The points fixed to their fingertip bodies, in each body's frame.
+    bodies = [sim.fingertip_bodies[f] for f in squeeze.fingers]
+    pairs = zip(bodies, squeeze.points_m, strict=True)
+    local = [d.xmat[b].reshape(3, 3).T @ (p - d.xpos[b]) for b, p in pairs]
+    qpos0 = d.qpos.copy()
+    followers = {leader: (dof, k) for dof, leader, k in sim.mimic}
+
+    def points(column: int, step: float) -> np.ndarray:
+        d.qpos[:] = qpos0
+        d.qpos[m.jnt_qposadr[m.dof_jntid[sim.actuated_dofs[column]]]] += step
+        if column in followers:  # a coupled joint turns with its leader
+            dof, k = followers[column]
+            d.qpos[m.jnt_qposadr[m.dof_jntid[dof]]] += k * step
+        mujoco.mj_kinematics(m, d)
+        return np.concatenate(
+            [d.xpos[b] + d.xmat[b].reshape(3, 3) @ x for b, x in zip(bodies, local, strict=True)]
+        )
+
+    h = 1e-6
+    numeric = np.column_stack([(points(c, h) - points(c, -h)) / (2 * h) for c in range(m.nu)])
+    d.qpos[:] = qpos0
+    mujoco.mj_kinematics(m, d)
+    assert np.abs(numeric).max() > 0.01  # the fingers do move their contacts
+    np.testing.assert_allclose(J, numeric, atol=1e-7)

@@ -303,6 +303,26 @@ class HoldTester:
                 nearest[finger] = (dist, np.array(c.pos), normal)
         return nearest, depth, deepest
 
+    def contact_jacobian(
+        self, fingers: tuple[str, ...], points_m: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Jacobian (3F, actuators) of points fixed to the fingertips w.r.t. the servoed joints.
+
+        At the model's current state; ``points_m`` (F, 3) in the palm frame [m]. A coupled joint
+        turns with its leader, so its column is folded into the leader's (times the multiplier):
+        the columns are the joints the servos move.
+        """
+        sim, m, d = self.sim, self.sim.model, self.sim.data
+        J = np.zeros((3 * len(fingers), m.nu))
+        jacp = np.zeros((3, m.nv))
+        for i, f in enumerate(fingers):
+            mujoco.mj_jac(m, d, jacp, None, points_m[i], sim.fingertip_bodies[f])
+            block = jacp[:, sim.actuated_dofs].copy()
+            for dof, leader, multiplier in sim.mimic:
+                block[:, leader] += multiplier * jacp[:, dof]
+            J[3 * i : 3 * i + 3] = block
+        return J
+
     def squeeze(self, q: ArrayLike) -> tuple[Squeeze, NDArray[np.float64], float, str | None]:
         """The balanced squeeze of grasp ``q`` and the servo targets that apply it.
 
@@ -338,14 +358,7 @@ class HoldTester:
                                  s.balance_friction * s.friction)  # fmt: skip
         net = forces.sum(axis=0)
         moment = np.cross(points - centre, forces).sum(axis=0)
-        J = np.zeros((3 * len(fingers), m.nu))
-        jacp = np.zeros((3, m.nv))
-        for i, f in enumerate(fingers):
-            mujoco.mj_jac(m, d, jacp, None, points[i], sim.fingertip_bodies[f])
-            block = jacp[:, sim.actuated_dofs].copy()
-            for dof, leader, multiplier in sim.mimic:
-                block[:, leader] += multiplier * jacp[:, dof]
-            J[3 * i : 3 * i + 3] = block
+        J = self.contact_jacobian(fingers, points)
         moves = (gaps[:, None] * normals).ravel()
         close = np.linalg.lstsq(J, moves, rcond=1e-6)[0]
         torques = J.T @ forces.ravel()
@@ -424,11 +437,17 @@ class HoldTester:
             torque_limited=squeeze.torque_limited,
         )  # fmt: skip
 
+        def explained(detail: str) -> str:
+            if depth <= 1e-3 or not detail:
+                return detail
+            return (f"{detail}; at the start {deepest} is {depth * 1e3:.1f} mm inside the "
+                    "object")  # fmt: skip
+
         def finish(reason: str, detail: str, directions: tuple[DirectionResult, ...],
                    settle: tuple[float, float], simulated: float, holds: bool,
                    holds_bodex: bool) -> HoldResult:  # fmt: skip
             return HoldResult(
-                reason=reason, detail=detail, directions=directions, holds=holds,
+                reason=reason, detail=explained(detail), directions=directions, holds=holds,
                 holds_bodex=holds_bodex, settle_displacement_m=settle[0],
                 settle_rotation_deg=settle[1], simulated_s=simulated,
                 time_s=time.perf_counter() - started, **base,  # type: ignore[arg-type]
