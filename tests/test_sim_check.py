@@ -124,6 +124,20 @@ def test_mismatched_names_are_refused(
     one_line_error(done, r"result 1 is 'other' but problem 1 .* is 'can off'")
 
 
+def test_a_mesh_named_in_the_targets_is_an_input(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, tmp_path: Path, files: Path
+) -> None:
+    mesh = tmp_path / "mug.stl"
+    mesh.write_bytes((ROOT / "examples" / "meshes" / "mug.stl").read_bytes())
+    targets = json.loads((files / "one.json").read_text())
+    targets["problems"][0]["object"] = {"mesh": "mug.stl"}
+    (tmp_path / "targets.json").write_text(json.dumps(targets))
+    (tmp_path / "results.json").write_text((files / "results.json").read_text())
+    args = ("check", "targets.json", "results.json", "--json", "mug.stl")
+    one_line_error(in_process(capsys, monkeypatch, tmp_path, *args), r"input")
+    assert mesh.read_bytes() == (ROOT / "examples" / "meshes" / "mug.stl").read_bytes()
+
+
 def _light(files: Path) -> list[Any]:
     hand = load_hand("sah")
     grasps = read_grasps(hand, files / "results.json", files / "targets.json")

@@ -118,6 +118,27 @@ def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> st
     return "\n".join(lines)
 
 
+def _named_inputs(targets: Path | None, results: Path) -> list[str]:
+    """The mesh files the targets file or a planner's results name: inputs too."""
+    from sahgrasp.contacts import object_spec, read_problems
+    from sahgrasp.errors import SahGraspError
+    from sahgrasp.sim.batch import ResultsFileError, read_documents
+
+    specs = []
+    try:
+        if targets is not None:
+            specs = [getattr(p, "object_spec", None) for p in read_problems(targets)[1]]
+        else:
+            specs = [
+                object_spec(document.get("object"), results.parent)
+                for document in read_documents(results)
+                if isinstance(document, dict) and "grasps" in document
+            ]
+    except (SahGraspError, ResultsFileError):
+        return []  # reported with its reason when the grasps are read
+    return sorted({s.mesh for s in specs if s is not None and s.mesh is not None})
+
+
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp check``; 0 if every grasp holds, 1 otherwise."""
     from sahgrasp.errors import InvalidSettingsError
@@ -129,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
     files = [args.targets] if args.results is None else [args.targets, args.results]
     targets, results_path = (None, args.targets) if args.results is None else files
     hand_name = _hand_name(args, targets)
-    check_outputs([args.json], inputs=[*files, hand_name])
+    check_outputs([args.json], inputs=[*files, hand_name, *_named_inputs(targets, results_path)])
     check_json_inputs(hand_name)
 
     from sahgrasp.hand import load_hand

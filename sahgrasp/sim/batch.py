@@ -34,6 +34,7 @@ __all__ = [
     "ResultsFileError",
     "check_grasps",
     "grasp_configuration",
+    "read_documents",
     "read_grasps",
     "summarize",
 ]
@@ -137,6 +138,18 @@ def _plan_grasps(
     return out
 
 
+def read_documents(path: str | Path) -> list[Any]:
+    """The JSON values of a results file: one document, or one per line of a ``.jsonl`` file.
+
+    Raises:
+        ResultsFileError: The file cannot be read or is not JSON.
+    """
+    path = Path(path)
+    if path.suffix.lower() == ".jsonl":
+        return [value for _, value in _lines(path)]
+    return [read_json(path, "results file", ResultsFileError)]
+
+
 def read_grasps(
     hand: Hand, results: str | Path, targets: str | Path | None = None
 ) -> list[GraspToCheck]:
@@ -153,10 +166,7 @@ def read_grasps(
             (count or names differ), or an entry is malformed.
     """
     path = Path(results)
-    if path.suffix.lower() == ".jsonl":
-        values = [value for _, value in _lines(path)]
-    else:
-        values = [read_json(path, "results file", ResultsFileError)]
+    values = read_documents(path)
     if values and all(isinstance(v, dict) and "grasps" in v for v in values):
         return [
             grasp
