@@ -210,3 +210,16 @@ def test_contact_jacobian_matches_finite_differences() -> None:
     mujoco.mj_kinematics(m, d)
     assert np.abs(numeric).max() > 0.01  # the fingers do move their contacts
     np.testing.assert_allclose(J, numeric, atol=1e-7)
+
+
+def test_balanced_forces_of_a_pinch_and_of_one_side() -> None:
+    from sahgrasp.sim.hold import balanced_forces
+
+    points = np.array([[-0.02, 0.0, 0.0], [0.02, 0.0, 0.0]])
+    normals = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    forces = balanced_forces(points, normals, np.zeros(3), 0.05, 4.0, 0.3)
+    np.testing.assert_allclose(forces, [[4.0, 0, 0], [-4.0, 0, 0]], atol=1e-6)
+    # Three fingers pressing from one side cannot balance: the residual says so.
+    side = np.array([[0.02, y, 0.0] for y in (-0.02, 0.0, 0.02)])
+    pushed = balanced_forces(side, np.tile([-1.0, 0, 0], (3, 1)), np.zeros(3), 0.05, 4.0, 0.3)
+    assert np.linalg.norm(pushed.sum(axis=0)) > 1.0

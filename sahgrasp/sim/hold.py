@@ -28,7 +28,15 @@ from sahgrasp.objects import GraspObject
 from sahgrasp.sim.model import SimModel, build_model
 from sahgrasp.sim.settings import DIRECTIONS, HoldSettings
 
-__all__ = ["REASONS", "DirectionResult", "HoldResult", "HoldTester", "Squeeze", "hold_test"]
+__all__ = [
+    "REASONS",
+    "DirectionResult",
+    "HoldResult",
+    "HoldTester",
+    "Squeeze",
+    "balanced_forces",
+    "hold_test",
+]
 
 REASONS = (
     "holds",
@@ -215,7 +223,7 @@ def balanced_forces(
         for d in directions:
             columns.append(d)
             finger_of.append(i)
-            is_edge.append(len(columns) > 1 and d is not n)
+            is_edge.append(d is not n)
     D = np.array(columns)  # (K, 3), each with normal component 1
     arms = points_m[np.array(finger_of)] - centre_m
     W = np.vstack([D.T, np.cross(arms, D).T / size_m])  # (6, K)
