@@ -394,7 +394,7 @@ class HoldTester:
         Stops early once the motion passes ``stop`` (displacement, angle). ``ramp`` (from,
         to, steps): the servo targets go linearly from ``from`` to ``to`` over the first
         ``steps`` steps. Returns the two maxima, the simulated time and whether the simulation
-        stayed finite.
+        stayed trustworthy (finite accelerations, no contact dropped for want of memory).
         """
         m, d = self.sim.model, self.sim.data
         steps = max(1, round(seconds / m.opt.timestep))
@@ -406,13 +406,14 @@ class HoldTester:
         x0, y0, z0 = (float(v) for v in start[0])
         w0, i0, j0, k0 = (float(v) for v in start[1])
         bad_qacc = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+        full = d.warning[mujoco.mjtWarning.mjWARN_CNSTRFULL]  # contacts dropped: not trusted
         while done < steps:
             n = min(self._chunk, steps - done)
             if ramp is not None:
                 d.ctrl[:] = ramp[0] + min(1.0, (done + n) / ramp[2]) * (ramp[1] - ramp[0])
             mujoco.mj_step(m, d, n)
             done += n
-            if bad_qacc.number > 0:
+            if bad_qacc.number > 0 or full.number > 0:
                 return moved, turned, done * m.opt.timestep, False
             x, y, z = centre.tolist()
             w, i, j, k = quat.tolist()
