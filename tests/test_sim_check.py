@@ -169,3 +169,13 @@ def test_without_mujoco_one_line_names_the_extra(tmp_path: Path) -> None:
         cwd=tmp_path,
     )  # fmt: skip
     one_line_error(done, r'needs MuJoCo: pip install "sahgrasp\[sim\]"')
+
+
+def test_cli_defaults_are_the_library_defaults() -> None:
+    from sahgrasp.cli import _parser
+    from sahgrasp.cli.check import _settings
+
+    args = _parser().parse_args(["check", "t.json", "r.json"])
+    assert _settings(args) == HoldSettings()
+    light = _parser().parse_args(["check", "t.json", "r.json", "--light"])
+    assert _settings(light).squeeze_n == 1.0
