@@ -132,7 +132,18 @@ def _grasps_table(doc: Document) -> str:
     return f"bench grasps: {doc['hand']}, seed {doc['seed']}\n{grasps_table(doc)}"
 
 
+def _check_table(doc: Document) -> str:
+    rows = [
+        (r["object"], r["solved"], r["default"]["hold_rate"], r["light"]["hold_rate"],
+         r["check_cpu_median_ms"], r["checks_per_s_one_core"])
+        for r in doc["objects"]
+    ]  # fmt: skip
+    headers = ("object", "solved", "hold rate", "light squeeze", "CPU ms", "checks/s")
+    return format_table(headers, rows)
+
+
 _TABLES: dict[str, Callable[[Document], str]] = {
+    "check": _check_table,
     "ik": _ik_table,
     "atlas": _atlas_table,
     "kinematics": _kinematics_table,

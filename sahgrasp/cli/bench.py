@@ -140,11 +140,28 @@ def _solve(benches: Any) -> None:
     add_json_argument(solve, "the timings")
 
 
+def _check(benches: Any) -> None:
+    check = add_command(
+        benches, "check", "physics hold test: checks/s on one core, hold rates (needs [sim])"
+    )
+    check.add_argument(
+        "--problems-per-object", type=positive_int, default=20, help="contact sets per object"
+    )
+    check.add_argument(
+        "--seed", type=nonnegative_int, default=7305411, help="seed of the contact sets (>= 0)"
+    )
+    check.add_argument(
+        "--objects", nargs="*", default=None, metavar="NAME", help="catalog objects (all)"
+    )
+    _add_quiet(check)
+    add_json_argument(check, "the results")
+
+
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
-    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve):
+    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve, _check):
         add(benches)
     p.set_defaults(run=run)
 

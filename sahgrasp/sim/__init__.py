@@ -1,0 +1,44 @@
+"""Physics hold test of grasps in MuJoCo (the optional extra ``pip install "sahgrasp[sim]"``).
+
+:func:`hold_test` squeezes a grasp and pulls the object in six directions, DexGraspNet's and
+BODex's benchmark way; :class:`HoldTester` tests many grasps of one object with one compiled
+model. docs/physics.md describes the model, its parameters and the criterion.
+"""
+
+try:
+    import mujoco  # noqa: F401
+except ImportError as exc:  # the optional extra is missing
+    raise ImportError('sahgrasp.sim needs MuJoCo: pip install "sahgrasp[sim]"') from exc
+
+from sahgrasp.sim.batch import (
+    GraspToCheck,
+    ResultsFileError,
+    check_grasps,
+    grasp_configuration,
+    read_grasps,
+    summarize,
+)
+from sahgrasp.sim.hold import REASONS, DirectionResult, HoldResult, HoldTester, Squeeze, hold_test
+from sahgrasp.sim.model import SimModel, SimModelError, build_model
+from sahgrasp.sim.settings import DIRECTIONS, LIGHT_SQUEEZE_N, HoldSettings
+
+__all__ = [
+    "DIRECTIONS",
+    "LIGHT_SQUEEZE_N",
+    "REASONS",
+    "DirectionResult",
+    "GraspToCheck",
+    "HoldResult",
+    "HoldSettings",
+    "HoldTester",
+    "ResultsFileError",
+    "SimModel",
+    "SimModelError",
+    "Squeeze",
+    "build_model",
+    "check_grasps",
+    "grasp_configuration",
+    "hold_test",
+    "read_grasps",
+    "summarize",
+]

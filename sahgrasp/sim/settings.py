@@ -1,0 +1,168 @@
+"""Settings of the physics hold test: the model's parameters and the hold criterion."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from sahgrasp.errors import InvalidSettingsError
+
+__all__ = ["DIRECTIONS", "LIGHT_SQUEEZE_N", "HoldSettings"]
+
+DIRECTIONS: tuple[tuple[str, tuple[float, float, float]], ...] = (
+    ("+x", (1.0, 0.0, 0.0)),
+    ("-x", (-1.0, 0.0, 0.0)),
+    ("+y", (0.0, 1.0, 0.0)),
+    ("-y", (0.0, -1.0, 0.0)),
+    ("+z", (0.0, 0.0, 1.0)),
+    ("-z", (0.0, 0.0, -1.0)),
+)
+"""The six pulls of the test, world axes (DexGraspNet's and BODex's six directions)."""
+
+LIGHT_SQUEEZE_N = 1.0
+"""The light squeeze [N] per contact finger on average, which separates strong grasps from weak."""
+
+
+@dataclass(frozen=True)
+class HoldSettings:
+    """Parameters of the hold test (docs/physics.md gives the reason for each default).
+
+    Attributes:
+        friction: Coulomb friction coefficient of every hand-object contact.
+        patch_radius_m: Radius [m] of a fingertip's contact patch (soft-finger contacts: a
+            moment up to ``2/3 * friction * patch_radius_m`` times the normal force resists
+            turning about the normal, the torsional friction of a uniformly pressed disk);
+            0: hard-finger point contacts.
+        density_kg_m3: Object density [kg/m^3], used when ``mass_kg`` is None.
+        mass_kg: Object mass [kg]; None: from ``density_kg_m3`` and the pieces' volume.
+        squeeze_n: Mean normal force [N] each contact finger presses with while settling.
+        settle_s: Simulated time [s] of the squeeze before the pulls.
+        pull_s: Simulated time [s] each pull of mass x 9.81 N lasts.
+        gravity_m_s2: Acceleration [m/s^2] the pull's force equals per kilogram.
+        max_displacement_m: The grasp holds if the object's centre of mass moves less [m]...
+        max_rotation_deg: ...and the object turns less [deg], in every direction.
+        bodex_displacement_m: BODex's displacement threshold [m] (its verdict is reported too).
+        bodex_rotation_deg: BODex's rotation threshold [deg].
+        contact_distance_m: A fingertip nearer the object than this [m] is a contact finger.
+        stiffness_nm_rad: Position-servo gain of every actuated joint [N m/rad].
+        damping_nms_rad: Servo damping [N m s/rad] (velocity feedback).
+        armature_kg_m2: Reflected rotor inertia of every hand joint [kg m^2].
+        timestep_s: Simulation time step [s].
+        contact_timeconst_s: Time constant [s] of MuJoCo's soft contacts (``solref``; at least
+            twice ``timestep_s``).
+        contact_impedance: MuJoCo's contact impedance beyond 1 mm of penetration (``solimp``
+            dmax, in (0, 1): nearer 1, less penetration under a force).
+        solver_iterations: Newton iterations of MuJoCo's constraint solver per step.
+        noslip_iterations: Iterations of MuJoCo's no-slip post-solver (0: off).
+        impratio: Ratio of the friction to the normal constraint impedance (MuJoCo).
+        balance_friction: Share of ``friction`` the squeeze may use to balance its forces.
+        directions: The pulls to run, a subset of :data:`DIRECTIONS`' labels (all six by
+            default; the grasp holds only if it holds in all six).
+        stop_at_first_failure: Stop at the first direction that fails (the others unreported).
+    """
+
+    friction: float = 0.6
+    patch_radius_m: float = 0.0025
+    density_kg_m3: float = 1000.0
+    mass_kg: float | None = None
+    squeeze_n: float = 10.0
+    settle_s: float = 0.3
+    pull_s: float = 1.0
+    gravity_m_s2: float = 9.81
+    max_displacement_m: float = 0.020
+    max_rotation_deg: float = 15.0
+    bodex_displacement_m: float = 0.050
+    bodex_rotation_deg: float = 15.0
+    contact_distance_m: float = 0.003
+    stiffness_nm_rad: float = 10.0
+    damping_nms_rad: float = 0.3
+    armature_kg_m2: float = 0.005
+    timestep_s: float = 0.01
+    contact_timeconst_s: float = 0.02
+    contact_impedance: float = 0.99
+    solver_iterations: int = 20
+    noslip_iterations: int = 5
+    impratio: float = 1.0
+    balance_friction: float = 0.5
+    directions: tuple[str, ...] = tuple(label for label, _ in DIRECTIONS)
+    stop_at_first_failure: bool = False
+
+    def __post_init__(self) -> None:
+        nonnegative = {
+            "friction": self.friction,
+            "patch_radius_m": self.patch_radius_m,
+            "settle_s": self.settle_s,
+        }
+        positive = {
+            "density_kg_m3": self.density_kg_m3,
+            "squeeze_n": self.squeeze_n,
+            "pull_s": self.pull_s,
+            "gravity_m_s2": self.gravity_m_s2,
+            "max_displacement_m": self.max_displacement_m,
+            "max_rotation_deg": self.max_rotation_deg,
+            "bodex_displacement_m": self.bodex_displacement_m,
+            "bodex_rotation_deg": self.bodex_rotation_deg,
+            "contact_distance_m": self.contact_distance_m,
+            "stiffness_nm_rad": self.stiffness_nm_rad,
+            "damping_nms_rad": self.damping_nms_rad,
+            "armature_kg_m2": self.armature_kg_m2,
+            "timestep_s": self.timestep_s,
+            "contact_timeconst_s": self.contact_timeconst_s,
+            "impratio": self.impratio,
+        }
+        if self.mass_kg is not None:
+            positive["mass_kg"] = self.mass_kg
+        for name, value in {**nonnegative, **positive}.items():
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InvalidSettingsError(f"hold setting {name} must be a number, got {value!r}")
+            if not math.isfinite(value) or value < 0 or (name in positive and value == 0):
+                kind = "positive" if name in positive else "non-negative"
+                raise InvalidSettingsError(
+                    f"hold setting {name} must be a finite {kind} number, got {value!r}"
+                )
+        if not 0.0 <= self.balance_friction <= 1.0:
+            raise InvalidSettingsError(
+                f"hold setting balance_friction must be in [0, 1], got {self.balance_friction!r}"
+            )
+        if self.timestep_s > 0.01:
+            raise InvalidSettingsError(
+                f"hold setting timestep_s must be at most 0.01 s (contacts stay stable), got "
+                f"{self.timestep_s!r}"
+            )
+        if not 0.0 < self.contact_impedance < 1.0:
+            raise InvalidSettingsError(
+                f"hold setting contact_impedance must be in (0, 1), got {self.contact_impedance!r}"
+            )
+        if not self.contact_timeconst_s >= 2.0 * self.timestep_s:
+            raise InvalidSettingsError(
+                f"hold setting contact_timeconst_s must be at least twice timestep_s "
+                f"({2.0 * self.timestep_s!r} s), got {self.contact_timeconst_s!r}"
+            )
+        if self.settle_s + self.pull_s > 60.0:
+            raise InvalidSettingsError("hold settings settle_s + pull_s must be at most 60 s")
+        labels = [label for label, _ in DIRECTIONS]
+        if (
+            not isinstance(self.directions, tuple)
+            or not self.directions
+            or any(d not in labels for d in self.directions)
+            or len(set(self.directions)) != len(self.directions)
+        ):
+            raise InvalidSettingsError(
+                f"hold setting directions must be distinct labels among {labels}, "
+                f"got {self.directions!r}"
+            )
+        noslip = self.noslip_iterations
+        if isinstance(noslip, bool) or not isinstance(noslip, int) or not 0 <= noslip <= 1000:
+            raise InvalidSettingsError(
+                f"hold setting noslip_iterations must be an integer in [0, 1000], got {noslip!r}"
+            )
+        iterations = self.solver_iterations
+        if (
+            isinstance(iterations, bool)
+            or not isinstance(iterations, int)
+            or not 1 <= iterations <= 1000
+        ):
+            raise InvalidSettingsError(
+                f"hold setting solver_iterations must be an integer in [1, 1000], "
+                f"got {iterations!r}"
+            )
