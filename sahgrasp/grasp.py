@@ -567,28 +567,33 @@ class _ChartCheck:
         return ChartChecks(configurations, self_collision, object_collision)
 
 
-def coordinate_scales(system: GraspSystem, length_m: float) -> FloatArray:
-    """``x = scales * y`` so that a unit of ``y`` moves something by about ``length_m`` [m].
+def coordinate_scales(
+    system: GraspSystem, length_m: float, unit_m: float | None = None
+) -> FloatArray:
+    """``x = scales * y`` so that a unit of ``y`` moves something by about ``unit_m`` [m].
 
-    Joint angles and the object's rotation vector [rad] keep scale 1: a unit turns a link of
-    ``length_m`` (about a finger's length) through ``length_m``. The object's translation [m]
-    gets ``length_m``. A contact parameter gets ``length_m / |dO/dp|``, ``|dO/dp|`` being how far
-    the contact point moves per unit of it at the regions' nominal parameters.
+    Joint angles and the object's rotation vector [rad] get ``unit_m / length_m``: a unit turns a
+    link of ``length_m`` (about a finger's length) through ``unit_m``. The object's translation
+    [m] gets ``unit_m``. A contact parameter gets ``unit_m / |dO/dp|``, ``|dO/dp|`` being how far
+    the contact point moves per unit of it at the regions' nominal parameters. ``unit_m``
+    defaults to ``length_m`` (angles unscaled).
 
     Raises:
-        GraspSystemError: ``length_m`` is not a positive finite length.
+        GraspSystemError: ``length_m`` or ``unit_m`` is not a positive finite length.
     """
-    if not (np.isfinite(length_m) and length_m > 0):
-        raise GraspSystemError(f"length_m must be a positive finite length [m], got {length_m}")
-    scales = np.ones(system.n)
+    unit = length_m if unit_m is None else unit_m
+    for name, value in (("length_m", length_m), ("unit_m", unit)):
+        if not (np.isfinite(value) and value > 0):
+            raise GraspSystemError(f"{name} must be a positive finite length [m], got {value}")
+    scales = np.full(system.n, unit / length_m)
     for contact in system.contacts:
         rates = np.linalg.norm(
             contact.region.evaluate(contact.region.nominal).point_jacobian, axis=0
         )
-        scales[contact.params] = length_m / np.where(rates > 0, rates, length_m)
+        scales[contact.params] = unit / np.where(rates > 0, rates, length_m)
     if system.free_object:
         start = system.pose_slice.start
-        scales[start : start + 3] = length_m
+        scales[start : start + 3] = unit
     return scales
 
 
@@ -686,6 +691,7 @@ def make_sah_manifold(
     seed: int = 0,
     motion_source: str = "random",
     length_scale_m: float | None = None,
+    unit_m: float | None = None,
 ) -> SahGraspManifold:
     """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
 
@@ -703,6 +709,8 @@ def make_sah_manifold(
             :func:`hand_motions`).
         length_scale_m: Scale the coordinates with :func:`coordinate_scales` at this length [m];
             None: the atlas works in ``x`` itself (radians and metres mixed).
+        unit_m: What a unit of the scaled coordinates moves [m] (:func:`coordinate_scales`;
+            default ``length_scale_m``); only with ``length_scale_m``.
 
     Raises:
         OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds,
@@ -712,7 +720,7 @@ def make_sah_manifold(
     system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
     motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
-    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m)
+    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m, unit_m)
     return SahGraspManifold(system, motions, k, x1, obj, scales)
 
 

@@ -1,8 +1,15 @@
-"""``sahgrasp atlas planar|can|bottle``: global grasp optimization on an atlas (Rosales et al.)."""
+"""``sahgrasp atlas planar|can|bottle``: global grasp optimization on an atlas (Rosales et al.).
+
+``--paper`` runs an experiment at the paper's own settings (k, r, epsilon, in the coordinates that
+reproduce its atlas sizes) and prints the paper's figures beside ours. ``--checkpoint FILE`` saves
+the atlas build as it goes (and on Ctrl-C); ``--resume`` goes on from that file.
+"""
 
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 from typing import Any
 
 from sahgrasp.cli.common import (
@@ -23,6 +30,23 @@ def add_parser(sub: Any) -> None:
     p = add_command(sub, "atlas", "global grasp optimization on an atlas of feasible grasps")
     p.add_argument("experiment", choices=sorted(ATLAS_DEFAULTS), help="the experiment to run")
     add_atlas_arguments(p, list(ATLAS_DEFAULTS))
+    p.add_argument(
+        "--paper",
+        action="store_true",
+        help="the paper's settings (k = 2, or --k 3 for the bottle; r = 1, eps = 0.5 for the "
+        "SAH in the paper's units, planar r = 0.125, eps = 0.4) and its figures beside ours",
+    )
+    p.add_argument(
+        "--checkpoint",
+        default=None,
+        metavar="FILE",
+        help="save the atlas build to FILE (.npz) every minute and on Ctrl-C",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="go on from --checkpoint FILE (the same experiment and options)",
+    )
     add_json_argument(p, "the summary")
     p.add_argument(
         "--plot",
@@ -30,40 +54,124 @@ def add_parser(sub: Any) -> None:
         metavar="PNG",
         help="atlas coloured by the index, PNG (planar: Fig. 9, every index and the grasps)",
     )
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, usage_error=p.error, on_interrupt=_interrupted)
 
 
-def _summary(args: argparse.Namespace, plot: str | None) -> tuple[dict[str, Any], tuple[str, ...]]:
+def _interrupted(args: argparse.Namespace) -> str:
+    if args.checkpoint:
+        return f"interrupted; the atlas so far is in {args.checkpoint}: run again with --resume"
+    return "interrupted"
+
+
+def _paper_settings(args: argparse.Namespace) -> Any:
+    """The paper's settings of the experiment at ``args.k`` (None without ``--paper``)."""
+    from sahgrasp.experiments.setups import PAPER_SETTINGS
+
+    if not args.paper:
+        return None
+    key = (args.experiment, args.k)
+    if key not in PAPER_SETTINGS:
+        known = ", ".join(f"{name} --k {k}" for name, k in sorted(PAPER_SETTINGS))
+        args.usage_error(f"--paper: the paper reports no {args.experiment} atlas with k = "
+                         f"{args.k}; it reports {known}")  # fmt: skip
+    return PAPER_SETTINGS[key]
+
+
+def _summary(
+    args: argparse.Namespace, plot: str | None, geometry: tuple[float, float], paper: Any
+) -> tuple[dict[str, Any], tuple[str, ...]]:
     """Run the experiment and write the plot to ``plot`` if given.
 
     Returns:
         The summary and the report lines on colliding charts.
     """
+    from sahgrasp.atlas import AtlasCheckpoint
     from sahgrasp.experiments.plotting import plot_index_map, plot_planar
     from sahgrasp.experiments.report import collision_notes, summary
     from sahgrasp.experiments.setups import run_experiment
     from sahgrasp.progress import StderrProgress
 
-    radius, epsilon = atlas_geometry(args.experiment, args)
-    with StderrProgress() as progress:
+    radius, epsilon = geometry
+    length, unit = (None, None) if paper is None else (paper.length_scale_m, paper.unit_m)
+    checkpoint = None
+    if args.checkpoint:
+        key = {
+            "experiment": args.experiment, "k": args.k, "radius": radius, "epsilon": epsilon,
+            "length_scale_m": length, "unit_m": unit, "hand": "sah", "motions": "random",
+        }  # fmt: skip
+        checkpoint = AtlasCheckpoint(
+            args.checkpoint, key=json.dumps(key, sort_keys=True), resume=args.resume
+        )
+    with StderrProgress() as bar:
         result = run_experiment(
             args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
-            max_charts=args.max_charts, progress=progress, workers=args.workers,
+            max_charts=args.max_charts, progress=bar if sys.stderr.isatty() else None,
+            workers=args.workers, length_scale_m=length, unit_m=unit, checkpoint=checkpoint,
         )  # fmt: skip
     if plot is not None and args.experiment == "planar":
         plot_planar(result, plot)
     elif plot is not None:
         title = f"{args.experiment}: {args.index} over {result.atlas.n_charts} charts"
         plot_index_map(result, plot, title)
-    return summary(args.experiment, result), collision_notes(result)
+    out = summary(args.experiment, result)
+    if length is not None:
+        out["coordinates"] = {"length_scale_m": length, "unit_m": unit}
+    return out, collision_notes(result)
+
+
+def _paper_lines(args: argparse.Namespace, summary: dict[str, Any], paper: Any) -> list[str]:
+    """The paper's figures beside ours, one line per figure."""
+    from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
+
+    report = PAPER_ATLAS_RUNS[(args.experiment, args.k)]
+    unit = ""
+    if paper.unit_m is not None:
+        turn = paper.unit_m / paper.length_scale_m
+        unit = f" in units of {paper.unit_m * 1e3:g} mm (a joint turn of {turn:g} rad)"
+    summary["paper"] = report._asdict()
+
+    def show(value: Any, digits: str = "") -> str:
+        if value is None:
+            return "not reported"
+        return f"{value:{digits}}" if digits else str(value)
+
+    ours_variance = summary.get("retained_variance")
+    paper_variance = None if report.retained_variance is None else f"> {report.retained_variance}"
+    rows = [
+        ("charts", show(summary["charts"]), show(report.charts)),
+        ("atlas [s]", show(summary["atlas_seconds"], ".1f"), show(report.atlas_seconds)),
+        ("evaluation [s]", show(summary["quality_seconds"], ".1f"), show(report.quality_seconds)),
+        ("whole [s]", show(summary["atlas_seconds"] + summary["quality_seconds"], ".1f"),
+         show(report.total_seconds)),
+        ("t", show(summary["t"]), show(report.t)),
+        ("retained variance", show(ours_variance, ".3f"), show(paper_variance)),
+    ]  # fmt: skip
+    lines = [
+        f"{args.experiment}, the paper's settings: k = {args.k}, r = {summary['radius']:g}, "
+        f"eps = {summary['epsilon']:g}{unit}",
+        f"  {'':<18} {'ours':>12}  paper ({report.figure})",
+    ]
+    lines += [f"  {name:<18} {ours:>12}  {theirs}" for name, ours, theirs in rows]
+    return lines
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp atlas``."""
-    check_outputs([args.json, args.plot])
+    if args.resume and not args.checkpoint:
+        args.usage_error("--resume needs --checkpoint FILE (the file to go on from)")
+    paper = _paper_settings(args)
+    defaults = None if paper is None else (paper.radius, paper.epsilon)
+    try:
+        geometry = atlas_geometry(args.experiment, args, defaults)
+    except argparse.ArgumentTypeError as exc:
+        args.usage_error(str(exc))
+    check_outputs([args.json, args.plot, args.checkpoint])
     with output_file(args.plot) as plot:
-        summary, notes = _summary(args, plot)
+        summary, notes = _summary(args, plot, geometry, paper)
     out = human_stream(args.json)
+    if paper is not None:
+        for line in _paper_lines(args, summary, paper):
+            print(line, file=out)
     print(
         f"{args.experiment}: {summary['charts']} charts, t = {summary['t']}, k = {summary['k']}, "
         f"atlas {summary['atlas_seconds']:.2f} s, quality {summary['quality_seconds']:.2f} s",
@@ -72,6 +180,9 @@ def run(args: argparse.Namespace) -> int:
     if summary["stop_reason"] == "max_charts":
         print(f"  the atlas stopped at --max-charts {summary['max_charts']}: it is incomplete",
               file=out)  # fmt: skip
+    elif summary["stop_reason"] == "stalled":
+        print(f"  no chart could be added to the first one: --r {summary['radius']:g} is too "
+              "large or too small for this experiment", file=out)  # fmt: skip
     for which in ("best", "worst"):
         print(f"  {which}: chart {summary[which]['chart']}, {args.index} = "
               f"{summary[which]['value']:.4g}", file=out)  # fmt: skip
@@ -79,6 +190,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {line}", file=out)
     if args.plot:
         print(f"wrote {args.plot}", file=out)
+    if args.checkpoint:
+        print(f"atlas state in {args.checkpoint}", file=out)
     if args.json:
         emit_json(summary, args.json)
-    return 0
+    return 1 if summary["stop_reason"] == "stalled" else 0
