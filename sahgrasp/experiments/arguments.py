@@ -20,6 +20,7 @@ __all__ = [
     "INDEX_CHOICES",
     "INITS_HELP",
     "MAX_INITS",
+    "MESH_DEFAULTS",
     "METHOD_HELP",
     "PAPER_RADIUS_RANGE",
     "RADIUS_RANGES",
@@ -51,6 +52,11 @@ RADIUS_RANGES = {"planar": (1e-3, 1.0), "can": (1e-3, 1.0), "bottle": (1e-3, 1.0
 """Per experiment: the chart radii ``--r`` accepts, in the units of ``x`` (the planar hand's unit
 vectors and metres; the SAH's radians and metres). Below, an atlas needs millions of charts;
 above, a chart spans the whole set of grasps and every step of the continuation fails."""
+
+MESH_DEFAULTS = {"radius": 1.0, "epsilon": 0.5, "length_scale_m": 0.1, "unit_m": 0.003}
+"""The mesh atlas's chart radius and epsilon (``sahgrasp atlas --mesh``), in scaled coordinates
+whose unit moves a contact or the object by ``unit_m`` [m] and turns a joint by
+``unit_m / length_scale_m`` [rad] (0.03 rad)."""
 
 PAPER_RADIUS_RANGE = (0.1, 50.0)
 """The chart radii ``--r`` accepts with ``--paper`` for the SAH, in the paper's units (the paper:
