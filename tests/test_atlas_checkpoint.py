@@ -104,3 +104,28 @@ def test_a_second_build_on_the_same_checkpoint_is_refused(tmp_path: Path) -> Non
     path = tmp_path / "s3.npz"
     with checkpoint_lock(path), pytest.raises(AtlasError, match="another build is writing"):
         _build(AtlasSettings(radius=0.5, epsilon=0.2), AtlasCheckpoint(path))
+
+
+@pytest.mark.slow
+def test_a_resumed_sah_bottle_atlas_with_k_3_equals_an_uninterrupted_one(tmp_path: Path) -> None:
+    from sahgrasp.experiments.setups import make_experiment
+
+    problem = make_experiment("bottle", k=3, motions="random", length_scale_m=0.1, unit_m=0.004)
+    settings = AtlasSettings(radius=1.0, epsilon=0.5, start_tol=1e-4)
+    lower, upper = problem.bounds()
+
+    def build(checkpoint: AtlasCheckpoint | None = None, stop_at: int | None = None) -> Atlas:
+        def progress(_stage: str, done: int, _total: int | None) -> None:
+            if stop_at is not None and done == stop_at:
+                os.kill(os.getpid(), signal.SIGINT)
+
+        return build_atlas(problem.F, problem.J, problem.start, 3, settings, lower, upper,
+                           progress=progress, checkpoint=checkpoint)  # fmt: skip
+
+    whole = build()
+    assert whole.complete and whole.n_charts > 300
+    path = tmp_path / "bottle.npz"
+    with pytest.raises(KeyboardInterrupt):
+        build(AtlasCheckpoint(path, key="bottle k3"), stop_at=whole.n_charts // 2)
+    resumed = build(AtlasCheckpoint(path, key="bottle k3", resume=True))
+    assert _arrays(resumed) == _arrays(whole)
