@@ -47,15 +47,15 @@ def _analytic_errors(patch, kind: str) -> tuple[float, float]:  # type: ignore[n
     return max(distances), max(angles)
 
 
-# Stated tolerances (docs/atlas.md): a coarse mesh (sphere of 320 faces, edges about 12 mm on a
-# 40 mm radius; cylinder of 24 sections) is itself up to 0.45 mm inside the surface between its
-# vertices, and the model lies between facets and vertices; a fine one (5120 faces, 128 sections)
-# is followed to a few hundredths of a millimetre.
+# Stated tolerances (docs/atlas.md, "The atlas on a mesh"): a coarse mesh (sphere of 320 faces,
+# edges about 12 mm on a 40 mm radius; cylinder of 24 sections) is itself up to 0.45 mm inside the
+# surface between its vertices, and the model lies between facets and vertices; a fine one (5120
+# faces, 128 sections) is followed to within 0.1 mm and 1.5 degrees over a patch of +-20 mm.
 CASES = [
     ("sphere", _sphere(2), 0.8e-3, 3.0),
-    ("sphere", _sphere(4), 0.06e-3, 0.3),
-    ("cylinder", _cylinder(24), 0.3e-3, 0.5),
-    ("cylinder", _cylinder(128), 0.02e-3, 0.2),
+    ("sphere", _sphere(4), 0.1e-3, 1.5),
+    ("cylinder", _cylinder(24), 0.3e-3, 1.0),
+    ("cylinder", _cylinder(128), 0.06e-3, 1.0),
 ]
 
 
@@ -65,7 +65,7 @@ def test_the_model_follows_the_analytic_surface(
 ) -> None:
     point, normal = _contact(mesh, kind)
     patch = fit_mesh_patch("index", mesh, point, normal)
-    assert patch.half_width_m == pytest.approx(0.012)  # smooth: the widest patch is kept
+    assert patch.half_width_m >= 0.011  # smooth: a wide patch is kept (at most 20 mm)
     distance, angle = _analytic_errors(patch, kind)
     assert distance <= point_tol_m and angle <= normal_tol_deg
     assert patch.fit_error_m <= 3e-4  # its own check against the mesh
@@ -105,7 +105,7 @@ def test_a_flat_face_is_modelled_exactly_and_a_corner_is_refused() -> None:
     patch = fit_mesh_patch("thumb", box, [0.0, 0.0, 0.03], [0.0, 0.0, 1.0])
     assert patch.fit_error_m <= 1e-9 and patch.normal_error_rad <= 1e-6
     near_edge = fit_mesh_patch("thumb", box, [0.0, 0.024, 0.03], [0.0, 0.0, 1.0])
-    assert near_edge.half_width_m < 0.012  # shrunk to stay on the face
+    assert near_edge.half_width_m < 0.01  # shrunk to stay on the face
     with pytest.raises(SurfaceModelError, match="sharp edge, a corner"):
         fit_mesh_patch("thumb", box, [0.03, 0.03, 0.03], [0.0, 0.0, 1.0])
 

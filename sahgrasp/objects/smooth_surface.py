@@ -224,7 +224,7 @@ def fit_mesh_patch(
     mesh: Any,
     point: ArrayLike,
     normal: ArrayLike,
-    max_half_width_m: float = 0.012,
+    max_half_width_m: float = 0.02,
     min_half_width_m: float = 0.002,
     tolerance_m: float = 3e-4,
     degree: int = DEGREE,
