@@ -28,7 +28,7 @@ class NeighbourIndex:
 
         The k-d tree answers for all rows in one call; the unindexed tail is scanned directly.
         The tree's pairs come first, then the tail's, each group in row order: a stable sort by
-        row (as :meth:`_Builder.add_charts` makes) lists every row's tree hits, then its tail.
+        row (as ``_Builder.add_charts`` makes) lists every row's tree hits, then its tail.
         """
         pending = points[self._n_tree : count][None] - xs[:, None]
         rows, cols = np.nonzero((pending * pending).sum(axis=2) < radius**2)
