@@ -440,7 +440,7 @@ class _Builder:
             self.F_many, self.J_many, x_tilde, phi_i, s.newton_tol, s.newton_max_iter
         )
         result = np.where(converged, _OK, _NEWTON)
-        dx = x_t - x_tilde
+        dx = np.where(converged[:, None], x_t - x_tilde, 0.0)  # diverged ones: no overflow
         result[(result == _OK) & ((dx * dx).sum(axis=1) > s.epsilon**2)] = _FAR  # Eq. (17)
         if self.bounded:
             outside = ((x_t < self.lower) | (x_t > self.upper)).any(axis=1)

@@ -34,7 +34,7 @@ import numpy as np
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.errors import InvalidSettingsError, SahGraspError
 from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
 from sahgrasp.experiments.setups import PAPER_SETTINGS, run_experiment
 from sahgrasp.fileio import write_json_atomic
@@ -422,6 +422,7 @@ MESH_OBJECTS = ("can", "bottle", "cup", "coffee_cup", "mesh:mug.stl", "mesh:bott
 meshes (``examples/meshes``, ``mesh:`` prefix)."""
 
 _MESH_SAMPLES = 40  # contact sets drawn per object for a 3-finger start the IK solves
+_MESH_TRIES = 3  # starts tried per object when the atlas cannot use one
 
 
 def _mesh_object(name: str) -> Any:
@@ -452,20 +453,24 @@ def _mesh_objects_row() -> dict[str, Any]:
     for name in MESH_OBJECTS:
         obj = _mesh_object(name)
         begin = time.perf_counter()
-        start = None
+        row: dict[str, Any] = {"start": None, "errors": []}
+        search = None
         for target in sample_object_grasps(obj, _MESH_SAMPLES, 0):
             three = GraspTarget(target.name, [c for c in target.contacts if c.finger != "ring"])
             solved = solve_ik(hand, three, free_fingers=("ring",), obstacle=obj)
-            if solved.success:
-                start = MeshStart(three, solved.q, name)
-                break
-        if start is None:
-            objects[name] = {"start": None}
-            continue
-        found = time.perf_counter()
-        search = optimize_mesh_grasps(hand, obj, [start])
-        row: dict[str, Any] = {"start": start.target.to_dict(), "error": search.start_errors[0]}
-        if search.components:
+            if not solved.success or hand.in_collision(solved.q):
+                continue
+            found = time.perf_counter()
+            try:  # the first start the atlas can use
+                search = optimize_mesh_grasps(hand, obj, [MeshStart(three, solved.q, name)])
+            except SahGraspError as exc:
+                row["errors"].append(str(exc))
+                if len(row["errors"]) == _MESH_TRIES:
+                    break
+                continue
+            row["start"] = three.to_dict()
+            break
+        if search is not None and search.components:
             c = search.components[0]
             row.update({
                 "charts": c.result.atlas.n_charts, "complete": c.result.atlas.complete,
