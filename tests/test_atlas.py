@@ -406,3 +406,18 @@ def test_compiled_linear_algebra_refuses_bad_arrays() -> None:
         min_singular_values(np.ones((2, 1, 2)), out)
     with pytest.raises(TypeError, match="float64"):
         det_signs(np.ones((2, 3, 3)), np.ones(2, dtype=np.int64))
+
+
+def test_a_build_leaves_the_garbage_collector_as_it_found_it() -> None:
+    import gc
+
+    assert gc.get_freeze_count() == 0
+    build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+    gc.freeze()  # a caller's own frozen objects stay frozen
+    try:
+        frozen = gc.get_freeze_count()
+        build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+        assert gc.get_freeze_count() > 0.9 * frozen  # not unfrozen by the build
+    finally:
+        gc.unfreeze()
