@@ -43,6 +43,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import GraspSystemError, OptimizationError
 from sahgrasp.hand import Hand, HandDescription
 from sahgrasp.ik import IKSettings, solve_ik
@@ -52,6 +53,7 @@ from sahgrasp.motions import PrincipalMotions, principal_motions
 from sahgrasp.objects import GraspObject
 from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
+from sahgrasp.objects.smooth_surface import fit_mesh_patch
 from sahgrasp.optimization import ChartChecks
 from sahgrasp.quality import Manipulability, ellipsoid_indices, null_space
 
@@ -64,7 +66,9 @@ __all__ = [
     "free_fingers",
     "hand_motions",
     "ik_seeds",
+    "make_mesh_manifold",
     "make_sah_manifold",
+    "mesh_patches",
     "reduced_system",
 ]
 
@@ -567,28 +571,33 @@ class _ChartCheck:
         return ChartChecks(configurations, self_collision, object_collision)
 
 
-def coordinate_scales(system: GraspSystem, length_m: float) -> FloatArray:
-    """``x = scales * y`` so that a unit of ``y`` moves something by about ``length_m`` [m].
+def coordinate_scales(
+    system: GraspSystem, length_m: float, unit_m: float | None = None
+) -> FloatArray:
+    """``x = scales * y`` so that a unit of ``y`` moves something by about ``unit_m`` [m].
 
-    Joint angles and the object's rotation vector [rad] keep scale 1: a unit turns a link of
-    ``length_m`` (about a finger's length) through ``length_m``. The object's translation [m]
-    gets ``length_m``. A contact parameter gets ``length_m / |dO/dp|``, ``|dO/dp|`` being how far
-    the contact point moves per unit of it at the regions' nominal parameters.
+    Joint angles and the object's rotation vector [rad] get ``unit_m / length_m``: a unit turns a
+    link of ``length_m`` (about a finger's length) through ``unit_m``. The object's translation
+    [m] gets ``unit_m``. A contact parameter gets ``unit_m / |dO/dp|``, ``|dO/dp|`` being how far
+    the contact point moves per unit of it at the regions' nominal parameters. ``unit_m``
+    defaults to ``length_m`` (angles unscaled).
 
     Raises:
-        GraspSystemError: ``length_m`` is not a positive finite length.
+        GraspSystemError: ``length_m`` or ``unit_m`` is not a positive finite length.
     """
-    if not (np.isfinite(length_m) and length_m > 0):
-        raise GraspSystemError(f"length_m must be a positive finite length [m], got {length_m}")
-    scales = np.ones(system.n)
+    unit = length_m if unit_m is None else unit_m
+    for name, value in (("length_m", length_m), ("unit_m", unit)):
+        if not (np.isfinite(value) and value > 0):
+            raise GraspSystemError(f"{name} must be a positive finite length [m], got {value}")
+    scales = np.full(system.n, unit / length_m)
     for contact in system.contacts:
         rates = np.linalg.norm(
             contact.region.evaluate(contact.region.nominal).point_jacobian, axis=0
         )
-        scales[contact.params] = length_m / np.where(rates > 0, rates, length_m)
+        scales[contact.params] = unit / np.where(rates > 0, rates, length_m)
     if system.free_object:
         start = system.pose_slice.start
-        scales[start : start + 3] = length_m
+        scales[start : start + 3] = unit
     return scales
 
 
@@ -686,6 +695,7 @@ def make_sah_manifold(
     seed: int = 0,
     motion_source: str = "random",
     length_scale_m: float | None = None,
+    unit_m: float | None = None,
 ) -> SahGraspManifold:
     """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
 
@@ -703,6 +713,8 @@ def make_sah_manifold(
             :func:`hand_motions`).
         length_scale_m: Scale the coordinates with :func:`coordinate_scales` at this length [m];
             None: the atlas works in ``x`` itself (radians and metres mixed).
+        unit_m: What a unit of the scaled coordinates moves [m] (:func:`coordinate_scales`;
+            default ``length_scale_m``); only with ``length_scale_m``.
 
     Raises:
         OptimizationError: The IK finds no first grasp, or it cannot be moved inside the bounds,
@@ -712,7 +724,7 @@ def make_sah_manifold(
     system = first_grasp_system(hand, patches, free_object, symmetry_axis, obj)
     motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
-    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m)
+    scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m, unit_m)
     return SahGraspManifold(system, motions, k, x1, obj, scales)
 
 
@@ -763,3 +775,92 @@ def _start_inside(
         if np.all((inside >= lower + margin) & (inside <= upper - margin)):
             return inside
     raise OptimizationError("the first grasp cannot be moved inside the joint and region bounds")
+
+
+# ----- the grasp manifold on a mesh -------------------------------------------------------------
+def mesh_patches(
+    obj: GraspObject,
+    target: GraspTarget,
+    max_half_width_m: float = 0.02,
+    tolerance_m: float = 3e-4,
+) -> GraspPatches:
+    """Contact regions on a mesh object: the smooth local model around each contact.
+
+    Args:
+        obj: The object (its solids' meshes are the mesh), placed in the world.
+        target: The contacts (world frame, on the placed object), one per touching finger.
+        max_half_width_m: Largest half width of a region [m]
+            (:func:`sahgrasp.objects.smooth_surface.fit_mesh_patch`).
+        tolerance_m: Largest distance from a region's model to the mesh [m].
+
+    Returns:
+        The regions, in the object frame.
+
+    Raises:
+        SurfaceModelError: No smooth model fits around a contact.
+    """
+    import trimesh
+
+    mesh = obj.mesh()
+    tm = trimesh.Trimesh(mesh.vertices_m, mesh.faces, process=False)
+    T_object_world = np.linalg.inv(obj.T_world_object)
+    regions: dict[str, ContactRegion] = {}
+    for c in target.contacts:
+        point = T_object_world[:3, :3] @ c.point + T_object_world[:3, 3]
+        normal = T_object_world[:3, :3] @ c.normal
+        regions[c.finger] = fit_mesh_patch(
+            c.finger, tm, point, normal, max_half_width_m=max_half_width_m,
+            tolerance_m=tolerance_m,
+        )  # fmt: skip
+    return GraspPatches(target.name, regions)
+
+
+def make_mesh_manifold(
+    hand: Hand,
+    obj: GraspObject,
+    target: GraspTarget,
+    q_start: NDArray[np.float64] | None = None,
+    k: int = 2,
+    motion_samples: int = 2000,
+    seed: int = 0,
+    length_scale_m: float = 0.1,
+    unit_m: float = 0.003,
+    patches: GraspPatches | None = None,
+) -> SahGraspManifold:
+    """R (Eq. (11)) of a grasp of a mesh object, around a starting grasp.
+
+    Each contact of ``target`` gets a smooth local model of the mesh (:func:`mesh_patches`); the
+    fingers without a contact are free (placed clear of the object at every chart). The first
+    grasp is ``q_start`` (world frame, the object at its placement), or the IK's solution of
+    ``target`` with the object as an obstacle; it is moved onto F (its contacts onto the models)
+    and inside the joint and region bounds by Newton's method. The atlas works in scaled
+    coordinates (:func:`coordinate_scales`): a unit moves a contact or the object by about
+    ``unit_m`` and turns a joint by ``unit_m / length_scale_m``.
+
+    Raises:
+        OptimizationError: The IK finds no first grasp, or it cannot be brought onto F inside
+            the bounds.
+        SurfaceModelError: No smooth model of the mesh fits around a contact.
+        GraspSystemError: ``k`` is not in ``[1, t]``, or the scales are not positive lengths.
+    """
+    patches = patches or mesh_patches(obj, target)
+    free = free_fingers(hand, patches)
+    at_origin = obj.placed(np.eye(4))  # the IK's and the system's world: the object frame
+    if q_start is None:
+        first = solve_ik(hand, patches.target(), free_fingers=free, obstacle=at_origin)
+        if not first.success:
+            raise OptimizationError(
+                f"{target.name}: the IK found no grasp of the start contacts ({first.reason})"
+            )
+        q = first.q.copy()
+    else:
+        q = hand.check_q(np.array(q_start, dtype=np.float64))
+        T_object_palm = pin.SE3(np.linalg.inv(obj.T_world_object)) * hand.wrist_pose(q)
+        hand.wrist_part(q)[:] = pin.SE3ToXYZQUAT(T_object_palm)
+    if free:
+        q = HandObjectClearance(hand, at_origin).place_free_fingers(q, free).q
+    system = GraspSystem(hand, patches, q, free_object=True)
+    motions = hand_motions(hand, system, motion_samples, seed, "random")
+    x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
+    scales = coordinate_scales(system, length_scale_m, unit_m)
+    return SahGraspManifold(system, motions, k, x1, at_origin, scales)

@@ -36,7 +36,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
+from sahgrasp.atlas import Atlas, AtlasCheckpoint, AtlasSettings, build_atlas
 from sahgrasp.errors import OptimizationError
 from sahgrasp.parallel import check_workers, process_pool
 from sahgrasp.progress import ProgressCallback
@@ -265,7 +265,10 @@ def _ellipsoid_index(quality: Manipulability | None, index: str) -> IndexFunctio
 
 
 def optimize(
-    problem: GraspManifold, settings: OptimizationSettings, start: ArrayLike | None = None
+    problem: GraspManifold,
+    settings: OptimizationSettings,
+    start: ArrayLike | None = None,
+    checkpoint: AtlasCheckpoint | None = None,
 ) -> OptimizationResult:
     """Algorithm 1: atlas of R from ``problem.start``, then the index at every chart centre.
 
@@ -274,6 +277,8 @@ def optimize(
         settings: Chart radius, epsilon, index, cap, progress.
         start: A point of R to start from instead of ``problem.start`` (n,): the atlas covers
             the connected component of R holding it.
+        checkpoint: Save the atlas build's state there and resume from it
+            (:func:`sahgrasp.atlas.build_atlas`); the checks and the index run after the build.
 
     Raises:
         AtlasError: The atlas settings are out of range, or the start is not on R.
@@ -286,7 +291,7 @@ def optimize(
         atlas = build_atlas(
             problem.F, problem.J, x0, problem.dimension, settings.atlas_settings(),
             lower, upper, settings.progress, stacked=bool(getattr(problem, "stacked", False)),
-            new_charts=None if background is None else background.add,
+            new_charts=None if background is None else background.add, checkpoint=checkpoint,
         )  # fmt: skip
         if background is None:
             return _evaluate(problem, atlas, settings, lambda: problem.check_charts(atlas.centres))

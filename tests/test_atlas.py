@@ -167,8 +167,37 @@ def test_progress_hears_of_every_chart() -> None:
     settings = AtlasSettings(radius=0.2, max_charts=30)
     atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings,
                         progress=lambda *report: heard.append(report))  # fmt: skip
-    assert [done for _, done, _ in heard] == list(range(1, atlas.n_charts + 1))
-    assert {(stage, total) for stage, _, total in heard} == {("atlas charts", 30)}
+    assert [done for _, done, _ in heard] == [*range(1, atlas.n_charts + 1), atlas.n_charts]
+    assert {stage for stage, _, _ in heard} == {"atlas charts"}
+    assert all(done <= total <= 30 for _, done, total in heard if total is not None)
+
+
+@pytest.mark.parametrize("batch", [1, 32])
+def test_progress_counts_to_the_end_of_the_atlas_not_to_max_charts(batch: int) -> None:
+    heard: list[tuple[int, int | None]] = []
+    settings = AtlasSettings(radius=0.3, max_charts=100_000, batch=batch)
+    atlas = build_atlas(
+        sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, settings,
+        progress=lambda _stage, done, total: heard.append((done, total)),
+    )  # fmt: skip
+    assert atlas.complete
+    # The total is the charts built plus the open frontier: never the cap, and it ends at 100%.
+    assert all(total is not None and done <= total < 100_000 for done, total in heard)
+    assert heard[-1] == (atlas.n_charts, atlas.n_charts)
+    assert max(total for _, total in heard if total is not None) <= 2 * atlas.n_charts
+
+
+@pytest.mark.parametrize("radius", [1e6, 30.0])
+def test_a_radius_far_larger_than_the_manifold_stalls_and_is_not_complete(radius: float) -> None:
+    bounded = AtlasSettings(radius=radius, epsilon=0.1)
+    atlas = build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, bounded)
+    assert atlas.n_charts == 1
+    assert (atlas.stop_reason, atlas.complete) == ("stalled", False)
+
+
+def test_a_radius_below_the_newton_tolerance_is_refused() -> None:
+    with pytest.raises(AtlasError, match=r"radius must be >= 1000 \* newton_tol"):
+        AtlasSettings(radius=1e-300)
 
 
 def test_progress_setting_draws_a_bar_on_stderr(
@@ -380,3 +409,18 @@ def test_compiled_linear_algebra_refuses_bad_arrays() -> None:
         min_singular_values(np.ones((2, 1, 2)), out)
     with pytest.raises(TypeError, match="float64"):
         det_signs(np.ones((2, 3, 3)), np.ones(2, dtype=np.int64))
+
+
+def test_a_build_leaves_the_garbage_collector_as_it_found_it() -> None:
+    import gc
+
+    assert gc.get_freeze_count() == 0
+    build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+    assert gc.get_freeze_count() == 0 and gc.isenabled()
+    gc.freeze()  # a caller's own frozen objects stay frozen
+    try:
+        frozen = gc.get_freeze_count()
+        build_atlas(sphere_f, sphere_j, [1.0, 0.0, 0.0], 2, AtlasSettings(radius=0.5))
+        assert gc.get_freeze_count() > 0.9 * frozen  # not unfrozen by the build
+    finally:
+        gc.unfreeze()

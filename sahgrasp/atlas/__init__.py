@@ -22,11 +22,20 @@ singular point; neither stops the continuation.
 This package knows nothing of hands: it is tested on spheres, tori and curves. Its modules:
 ``model`` (settings and the frozen :class:`Atlas`), ``polytope`` (chart domains), ``projection``
 (Newton projection and tangent spaces), ``neighbours`` (ball queries over chart centres),
-``checks`` (input checks) and ``builder`` (the continuation, :func:`build_atlas`).
+``checks`` (input checks), ``checkpoint`` (saving and resuming a build) and ``builder`` (the
+continuation, :func:`build_atlas`).
 """
 
 from sahgrasp.atlas.builder import build_atlas
+from sahgrasp.atlas.checkpoint import AtlasCheckpoint
 from sahgrasp.atlas.model import STOP_REASONS, Atlas, AtlasSettings
 from sahgrasp.atlas.projection import project
 
-__all__ = ["STOP_REASONS", "Atlas", "AtlasSettings", "build_atlas", "project"]
+__all__ = [
+    "STOP_REASONS",
+    "Atlas",
+    "AtlasCheckpoint",
+    "AtlasSettings",
+    "build_atlas",
+    "project",
+]

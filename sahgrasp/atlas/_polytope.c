@@ -520,6 +520,75 @@ static PyObject *Polytope_copy(Polytope *self, PyObject *unused) {
     return (PyObject *)p;
 }
 
+/* -- serialisation (atlas checkpoints) ------------------------------------------------------
+ * The bytes are: int32 k, int32 0 (padding), int64 n, double reach2, then n*k vertex coordinates,
+ * n squared norms, n masks (WORDS uint64 each) and n blocked flags, all in native byte order:
+ * a checkpoint is read back on the machine that wrote it. */
+
+#define STATE_HEADER (2 * sizeof(int32_t) + sizeof(int64_t) + sizeof(double))
+
+static size_t state_size(int k, Py_ssize_t n) {
+    return STATE_HEADER + (size_t)n * (sizeof(double) * (size_t)(k + 1) + sizeof(Mask) + 1);
+}
+
+static PyObject *Polytope_to_bytes(Polytope *self, PyObject *unused) {
+    size_t size = state_size(self->k, self->n);
+    PyObject *out = PyBytes_FromStringAndSize(NULL, (Py_ssize_t)size);
+    if (out == NULL) return NULL;
+    char *b = PyBytes_AS_STRING(out);
+    int32_t head[2] = {self->k, 0};
+    int64_t n = self->n;
+    memcpy(b, head, sizeof(head));
+    b += sizeof(head);
+    memcpy(b, &n, sizeof(n));
+    b += sizeof(n);
+    memcpy(b, &self->reach2, sizeof(double));
+    b += sizeof(double);
+    memcpy(b, self->verts, sizeof(double) * (size_t)(self->n * self->k));
+    b += sizeof(double) * (size_t)(self->n * self->k);
+    memcpy(b, self->norm2, sizeof(double) * (size_t)self->n);
+    b += sizeof(double) * (size_t)self->n;
+    memcpy(b, self->masks, sizeof(Mask) * (size_t)self->n);
+    b += sizeof(Mask) * (size_t)self->n;
+    memcpy(b, self->blocked, (size_t)self->n);
+    return out;
+}
+
+static PyObject *Polytope_from_bytes(PyObject *cls, PyObject *arg) {
+    Py_buffer view;
+    if (PyObject_GetBuffer(arg, &view, PyBUF_SIMPLE) < 0) return NULL;
+    const char *b = view.buf;
+    int32_t head[2];
+    int64_t n;
+    PyObject *result = NULL;
+    if ((size_t)view.len < STATE_HEADER) goto bad;
+    memcpy(head, b, sizeof(head));
+    memcpy(&n, b + sizeof(head), sizeof(n));
+    if (head[0] < 1 || head[0] > MAX_FACES / 2 || head[1] != 0 || n < 0 ||
+        n > (int64_t)(PY_SSIZE_T_MAX / 1024) || (size_t)view.len != state_size(head[0], (Py_ssize_t)n))
+        goto bad;
+    Polytope *p = poly_new(head[0], (Py_ssize_t)n);
+    if (p == NULL) goto done;
+    const char *c = b + sizeof(head) + sizeof(n);
+    memcpy(&p->reach2, c, sizeof(double));
+    c += sizeof(double);
+    memcpy(p->verts, c, sizeof(double) * (size_t)(n * head[0]));
+    c += sizeof(double) * (size_t)(n * head[0]);
+    memcpy(p->norm2, c, sizeof(double) * (size_t)n);
+    c += sizeof(double) * (size_t)n;
+    memcpy(p->masks, c, sizeof(Mask) * (size_t)n);
+    c += sizeof(Mask) * (size_t)n;
+    memcpy(p->blocked, c, (size_t)n);
+    p->n = (Py_ssize_t)n;
+    result = (PyObject *)p;
+    goto done;
+bad:
+    PyErr_SetString(PyExc_ValueError, "not the bytes of a polytope (Polytope.to_bytes)");
+done:
+    PyBuffer_Release(&view);
+    return result;
+}
+
 static PyObject *Polytope_expandable(Polytope *self, PyObject *arg) {
     double r2 = PyFloat_AsDouble(arg);
     if (r2 == -1.0 && PyErr_Occurred()) return NULL;
@@ -678,6 +747,10 @@ static PyMethodDef Polytope_methods[] = {
      "planes[h] . w <= offsets[h] (> 0); k = 2 through the dual polygon, otherwise one cut per\n"
      "plane in order."},
     {"copy", (PyCFunction)Polytope_copy, METH_NOARGS, "An independent copy."},
+    {"to_bytes", (PyCFunction)Polytope_to_bytes, METH_NOARGS,
+     "to_bytes(): the whole state (vertices, norms, masks, blocked flags) as bytes."},
+    {"from_bytes", (PyCFunction)Polytope_from_bytes, METH_O | METH_CLASS,
+     "from_bytes(data): the polytope whose to_bytes() gave data; ValueError if data is not."},
     {"expandable", (PyCFunction)Polytope_expandable, METH_O,
      "expandable(r2): index of the nearest unblocked vertex with squared norm >= r2, or -1."},
     {"cut", (PyCFunction)(void (*)(void))Polytope_cut, METH_FASTCALL,

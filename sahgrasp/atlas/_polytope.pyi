@@ -56,6 +56,13 @@ class Polytope:
     def copy(self) -> Polytope:
         """An independent copy (cuts of one leave the other as it is)."""
 
+    def to_bytes(self) -> bytes:
+        """The whole state (vertices, norms, face masks, blocked flags), native byte order."""
+
+    @classmethod
+    def from_bytes(cls, data: bytes) -> Polytope:
+        """The polytope whose :meth:`to_bytes` gave ``data``; ValueError if it did not."""
+
     def expandable(self, r2: float) -> int:
         """Index of the nearest unblocked vertex not inside the ball of squared radius ``r2``."""
 

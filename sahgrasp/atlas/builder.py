@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import operator
 import time
 from collections import deque
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.atlas import checkpoint as _checkpoint
+from sahgrasp.atlas.checkpoint import AtlasCheckpoint
 from sahgrasp.atlas.checks import check_bounds, start_point
 from sahgrasp.atlas.model import Atlas, AtlasSettings, FloatArray, Function, IndexArray
 from sahgrasp.atlas.neighbours import NeighbourIndex
@@ -34,6 +39,14 @@ __all__ = ["build_atlas"]
 _SHRINK = 0.9  # Algorithm 1, line 11: alpha <- 0.9 alpha
 _BISECTIONS = 40  # steps to locate a branch crossing along a chart's parameter ray
 _PROGRESS_STAGE = "atlas charts"
+
+
+def _shaping(settings: AtlasSettings) -> dict[str, Any]:
+    """The settings that shape the atlas (a checkpoint resumes only under the same ones)."""
+    shaping = asdict(settings)
+    for name in ("max_charts", "progress"):  # how far and how loudly, not which atlas
+        del shaping[name]
+    return {name: float(v).hex() if isinstance(v, float) else v for name, v in shaping.items()}
 
 
 class _Rowwise:
@@ -178,6 +191,7 @@ class _Builder:
         self.index = NeighbourIndex()
         self.queue: deque[int] = deque()
         self.counters = _Counters()
+        self.blocked = 0  # vertices blocked (every step failed), for the "stalled" verdict
 
     # -- adding a chart ------------------------------------------------------------------------
 
@@ -312,30 +326,45 @@ class _Builder:
 
     # -- expanding -----------------------------------------------------------------------------
 
-    def run(self, progress: ProgressCallback | None) -> None:
+    def run(
+        self, progress: ProgressCallback | None, between: Callable[[], None] | None = None
+    ) -> None:
         """Expand charts until every one is bounded or ``max_charts`` is reached.
 
-        ``progress`` hears of every new chart (``done`` charts of at most ``max_charts``).
+        ``between`` is called after every wave (or every chart expansion, batch 1): a state the
+        build passes through, which a checkpoint can save.
+
+        ``progress`` hears of every new chart: ``done`` charts of ``total``, the charts built
+        plus those still open (queued), at most ``max_charts``. The total grows while the
+        frontier does and meets ``done`` when the atlas is complete.
         """
         r2, cap = self.r**2, self.settings.max_charts
         if progress is not None:
-            progress(_PROGRESS_STAGE, self.count, cap)
+            progress(_PROGRESS_STAGE, self.count, self._progress_total())
         while self.queue and self.count < cap:
             if self.settings.batch > 1:
                 before = self.count
                 self._run_wave()
                 if progress is not None:  # every new chart, as one-chart expansion reports
+                    total = self._progress_total()
                     for done in range(before + 1, self.count + 1):
-                        progress(_PROGRESS_STAGE, done, cap)
-                continue
-            i = self.queue[0]
-            v = self._polytope(i).expandable(r2)
-            if v < 0:
-                self.queue.popleft()
-                self._dequeue(i)
-                continue
-            if self.expand(i, v) and progress is not None:
-                progress(_PROGRESS_STAGE, self.count, cap)
+                        progress(_PROGRESS_STAGE, done, total)
+            else:
+                i = self.queue[0]
+                v = self._polytope(i).expandable(r2)
+                if v < 0:
+                    self.queue.popleft()
+                    self._dequeue(i)
+                elif self.expand(i, v) and progress is not None:
+                    progress(_PROGRESS_STAGE, self.count, self._progress_total())
+            if between is not None:
+                between()
+        if progress is not None:  # the last total: the charts built
+            progress(_PROGRESS_STAGE, self.count, self.count)
+
+    def _progress_total(self) -> int:
+        """The charts built plus the open frontier (queued charts), capped at ``max_charts``."""
+        return min(self.count + len(self.queue), self.settings.max_charts)
 
     def expand(self, i: int, v: int, alpha: float | None = None) -> bool:
         """Try to create a chart from vertex ``v`` of chart ``i`` (Algorithm 1, lines 7-13).
@@ -364,6 +393,7 @@ class _Builder:
                     return True
             alpha *= _SHRINK  # Algorithm 1, line 11
         poly.block(v)
+        self.blocked += 1
         self.charts[i].boundary = True
         return False
 
@@ -412,7 +442,7 @@ class _Builder:
             self.F_many, self.J_many, x_tilde, phi_i, s.newton_tol, s.newton_max_iter
         )
         result = np.where(converged, _OK, _NEWTON)
-        dx = x_t - x_tilde
+        dx = np.where(converged[:, None], x_t - x_tilde, 0.0)  # diverged ones: no overflow
         result[(result == _OK) & ((dx * dx).sum(axis=1) > s.epsilon**2)] = _FAR  # Eq. (17)
         if self.bounded:
             outside = ((x_t < self.lower) | (x_t > self.upper)).any(axis=1)
@@ -592,6 +622,97 @@ class _Builder:
         if all(np.linalg.norm(p - x) >= self.r for p in self.singular):
             self.singular.append(x.copy())
 
+    # -- checkpoints ---------------------------------------------------------------------------
+
+    def state(self, seconds: float) -> tuple[dict[str, Any], dict[str, NDArray[Any]]]:
+        """The whole state as JSON-able meta data and flat arrays (see ``atlas.checkpoint``).
+
+        A closed chart's polytope is left out: nothing reads it again (no plane is given to it,
+        it never re-enters the queue).
+        """
+        N, k, charts = self.count, self.k, self.charts
+        pending = [len(c.offsets) for c in charts]
+        planes = [p for c in charts for p in c.planes]
+        closed = self.closed[:N]
+        polys = [b"" if c.poly is None or closed[i] else c.poly.to_bytes()
+                 for i, c in enumerate(charts)]  # fmt: skip
+        s, c = self.settings, self.counters
+        meta = {
+            "k": k,
+            "n": int(self.X.shape[1]),
+            "charts": N,
+            "seconds": seconds,
+            "settings": _shaping(s),
+            "scale": float(self.scale).hex(),
+            "n_tree": self.index.indexed,
+            "counters": [c.newton_failures, c.rejections, c.bound_rejections, self.blocked],
+        }
+        arrays = {
+            "centres": self.X[:N],
+            "tangents": self.PHI[:N],
+            "closed": closed,
+            "lower": self.lower,
+            "upper": self.upper,
+            "sign": np.array([c.sign for c in charts]),
+            "parent": np.array([c.parent for c in charts], dtype=np.int64),
+            "boundary": np.array([c.boundary for c in charts], dtype=bool),
+            "queued": np.array([c.queued for c in charts], dtype=bool),
+            "nbr_sizes": np.array([len(c.nbrs) for c in charts], dtype=np.int64),
+            "nbrs": np.concatenate([c.nbrs for c in charts]).astype(np.int64),
+            "plane_sizes": np.array(pending, dtype=np.int64),
+            "planes": np.array(planes, dtype=np.float64).reshape(-1, k),
+            "offsets": np.array([b for c in charts for b in c.offsets], dtype=np.float64),
+            "poly_sizes": np.array([len(b) for b in polys], dtype=np.int64),
+            "polys": np.frombuffer(b"".join(polys), dtype=np.uint8),
+            "queue": np.array(list(self.queue), dtype=np.int64),
+            "singular": np.array(self.singular).reshape(-1, self.X.shape[1]),
+        }
+        return meta, arrays
+
+    def restore(self, meta: dict[str, Any], arrays: dict[str, NDArray[Any]]) -> None:
+        """Take the state :meth:`state` gave (checked against this build by the caller)."""
+        N = int(meta["charts"])
+        while self.X.shape[0] < N:
+            self._grow()
+        self.X[:N], self.PHI[:N], self.closed[:N] = (
+            arrays["centres"],
+            arrays["tangents"],
+            arrays["closed"],
+        )
+        cuts = [np.cumsum(np.concatenate(([0], arrays[name]))).tolist()
+                for name in ("nbr_sizes", "plane_sizes", "poly_sizes")]  # fmt: skip
+        nbrs, planes, offsets = arrays["nbrs"], arrays["planes"].tolist(), arrays["offsets"]
+        polys = arrays["polys"].tobytes()
+        self.charts = []
+        for i, (sign, parent, boundary, queued) in enumerate(zip(
+            arrays["sign"].tolist(), arrays["parent"].tolist(), arrays["boundary"].tolist(),
+            arrays["queued"].tolist(), strict=True,
+        )):  # fmt: skip
+            p0, p1 = cuts[2][i], cuts[2][i + 1]
+            self.charts.append(_Chart(
+                sign, parent, nbrs[cuts[0][i] : cuts[0][i + 1]].copy(),
+                planes[cuts[1][i] : cuts[1][i + 1]], offsets[cuts[1][i] : cuts[1][i + 1]].tolist(),
+                Polytope.from_bytes(polys[p0:p1]) if p1 > p0 else None, boundary, queued,
+            ))  # fmt: skip
+        self.count = N
+        self.queue = deque(arrays["queue"].tolist())
+        self.singular = [row.copy() for row in arrays["singular"]]
+        c = self.counters
+        c.newton_failures, c.rejections, c.bound_rejections, self.blocked = meta["counters"]
+        self.index.restore(self.X, int(meta["n_tree"]))
+        if self.new_charts is not None:
+            self.new_charts(self.X[:N].copy())
+
+    def _stop_reason(self, still_open: NDArray[np.bool_]) -> str:
+        """Why the build ended (one of ``STOP_REASONS``).
+
+        ``"max_charts"`` with charts still open; ``"stalled"`` when the start chart alone remains
+        with blocked vertices (no step of any size was accepted); else ``"complete"``.
+        """
+        if still_open.any():
+            return "max_charts"
+        return "stalled" if self.count == 1 and self.blocked else "complete"
+
     def result(self, seconds: float) -> Atlas:
         """Freeze the state into an :class:`Atlas`."""
         n, N = self.X.shape[1], self.count
@@ -614,7 +735,7 @@ class _Builder:
             rejections=self.counters.rejections,
             bound_rejections=self.counters.bound_rejections,
             build_seconds=seconds,
-            stop_reason="max_charts" if still_open.any() else "complete",
+            stop_reason=self._stop_reason(still_open),
         )
 
 
@@ -629,6 +750,7 @@ def build_atlas(
     progress: ProgressCallback | None = None,
     stacked: bool = False,
     new_charts: Callable[[FloatArray], None] | None = None,
+    checkpoint: AtlasCheckpoint | None = None,
 ) -> Atlas:
     """Cover the connected component of ``F(x) = 0`` through ``x0`` with charts (Section IV).
 
@@ -640,22 +762,53 @@ def build_atlas(
         settings: Continuation parameters (radius ``r``, ``epsilon``, caps); defaults if None.
         lower: Lower box bound on ``x`` (``-inf`` for none), shape (n,).
         upper: Upper box bound on ``x`` (``+inf`` for none), shape (n,).
-        progress: Called after every new chart as ``progress("atlas charts", charts,
-            max_charts)``; with None, ``settings.progress`` draws a bar on stderr.
+        progress: Called after every new chart as ``progress("atlas charts", charts, total)``,
+            ``total`` the charts built plus the open frontier (at most ``max_charts``), and once
+            more at the end with ``total = charts``; with None, ``settings.progress`` draws a
+            bar on stderr.
         stacked: ``F`` and ``J`` also take a stack of points, ``(B, n) -> (B, n - k)`` and
             ``(B, n - k, n)``; a wave (``settings.batch > 1``) then evaluates them once per
             Newton iteration for all its charts instead of point by point.
         new_charts: Called with the centres of every chart added, (B, n) at a time, in the
-            order of ``atlas.centres`` (a chart's centre never changes once added).
+            order of ``atlas.centres`` (a chart's centre never changes once added); on a resumed
+            build, first with every centre of the checkpoint.
+        checkpoint: Save the build's state to ``checkpoint.path`` every
+            ``checkpoint.every_seconds``, on Ctrl-C, SIGTERM or SIGHUP (then KeyboardInterrupt
+            is raised) and at the end; with ``checkpoint.resume``, start from the state saved
+            there. The resumed atlas equals an uninterrupted one, array for array
+            (``build_seconds`` adds up the runs).
 
     Returns:
         The atlas; when ``max_charts`` stopped the build, ``atlas.stop_reason`` is
-        ``"max_charts"`` and ``atlas.complete`` is False.
+        ``"max_charts"`` and ``atlas.complete`` is False; when not a single chart could be
+        added to the start (the radius is far too large or small for the manifold), it is
+        ``"stalled"``.
 
     Raises:
         AtlasError: Shapes of ``F``/``J`` disagree with ``n`` and ``k``, ``x0`` is off the manifold,
-            singular or outside the bounds, or the settings are invalid.
+            singular or outside the bounds, or the settings are invalid; the checkpoint is
+            another problem's, damaged, or written by another build at the same time.
+        KeyboardInterrupt: Interrupted while saving checkpoints (the state is saved first).
     """
+    with _collections_of_new_objects():
+        return _build(F, J, x0, k, settings, lower, upper, progress, stacked, new_charts,
+                      checkpoint)  # fmt: skip
+
+
+def _build(
+    F: Function,
+    J: Function,
+    x0: ArrayLike,
+    k: int,
+    settings: AtlasSettings | None,
+    lower: ArrayLike | None,
+    upper: ArrayLike | None,
+    progress: ProgressCallback | None,
+    stacked: bool,
+    new_charts: Callable[[FloatArray], None] | None,
+    checkpoint: AtlasCheckpoint | None,
+) -> Atlas:
+    """:func:`build_atlas`'s work (its arguments)."""
     start_time = time.perf_counter()
     settings = settings or AtlasSettings()
     point = start_point(F, J, x0, k, settings)
@@ -666,10 +819,120 @@ def build_atlas(
     scale = float(np.sqrt(np.einsum("ij,ij->i", J(point.x), J(point.x))).max())
     builder = _Builder(F, J, k, (lo, hi), scale, settings, stacked)
     builder.new_charts = new_charts
-    builder.add_chart(point, -1)
+    if checkpoint is None:
+        builder.add_chart(point, -1)
+        _run(builder, settings, progress, None)
+        return builder.result(time.perf_counter() - start_time)
+    with _checkpoint.checkpoint_lock(checkpoint.path):
+        earlier = _resumed(builder, checkpoint, point) if checkpoint.resume else None
+        if earlier is None:
+            earlier = 0.0
+            builder.add_chart(point, -1)
+        saver = _Saver(builder, checkpoint, start_time - earlier)
+        with _checkpoint.deferred_interrupts() as flag:
+            saver.flag = flag
+            _run(builder, settings, progress, saver)
+        saver.save()
+    return builder.result(time.perf_counter() - start_time + earlier)
+
+
+@contextlib.contextmanager
+def _collections_of_new_objects() -> Iterator[None]:
+    """While the build runs, the garbage collector scans only the objects created meanwhile.
+
+    A build allocates hundreds of thousands of small containers (plane lists, chart records);
+    the first build in a process otherwise triggers full collections that traverse every object
+    the process holds (numpy's, scipy's, Pinocchio's: some 10^5), which made the first build of
+    S^2 about twice as long as the next ones. ``gc.freeze`` sets the existing objects aside and
+    ``gc.unfreeze`` puts them back afterwards; a caller who froze objects keeps them frozen (then
+    nothing is done here).
+    """
+    if gc.get_freeze_count():
+        yield
+        return
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
+
+
+def _run(
+    builder: _Builder,
+    settings: AtlasSettings,
+    progress: ProgressCallback | None,
+    between: Callable[[], None] | None,
+) -> None:
     if progress is None and settings.progress:
         with StderrProgress() as bar:
-            builder.run(bar)
+            builder.run(bar, between)
     else:
-        builder.run(progress)
-    return builder.result(time.perf_counter() - start_time)
+        builder.run(progress, between)
+
+
+class _Saver:
+    """Writes the builder's state when due, and on an interrupt before raising it."""
+
+    def __init__(self, builder: _Builder, checkpoint: AtlasCheckpoint, origin: float) -> None:
+        self.builder, self.checkpoint, self.origin = builder, checkpoint, origin
+        self.last = time.perf_counter()
+        self.flag: Any = None
+
+    def save(self) -> None:
+        now = time.perf_counter()
+        meta, arrays = self.builder.state(now - self.origin)
+        meta["key"] = self.checkpoint.key
+        _checkpoint.write(self.checkpoint.path, meta, arrays)
+        self.last = time.perf_counter()
+
+    def __call__(self) -> None:
+        if self.flag is not None and self.flag.raised:
+            self.save()
+            raise KeyboardInterrupt
+        if time.perf_counter() - self.last >= self.checkpoint.every_seconds:
+            self.save()
+
+
+def _resumed(builder: _Builder, checkpoint: AtlasCheckpoint, point: Point) -> float | None:
+    """Restore the checkpoint's state into ``builder``; its build seconds (None: no file).
+
+    Raises:
+        AtlasError: The file belongs to another problem or other settings.
+    """
+    try:
+        meta, arrays = _checkpoint.read(checkpoint.path)
+    except FileNotFoundError:
+        return None
+    path = checkpoint.path
+    mismatch = [
+        what
+        for what, ours, theirs in (
+            ("key", checkpoint.key, meta.get("key")),
+            ("k", builder.k, meta.get("k")),
+            ("n", builder.X.shape[1], meta.get("n")),
+            ("settings", _shaping(builder.settings), meta.get("settings")),
+            ("scale", float(builder.scale).hex(), meta.get("scale")),
+        )
+        if ours != theirs
+    ]
+    centres = arrays.get("centres")
+    if (
+        centres is None
+        or centres.ndim != 2
+        or not len(centres)
+        or (centres[0].tobytes() != point.x.tobytes())
+    ):
+        mismatch.append("start point")
+    for name, ours in (("lower", builder.lower), ("upper", builder.upper)):
+        if arrays.get(name) is None or arrays[name].tobytes() != ours.tobytes():
+            mismatch.append(f"{name} bounds")
+    if mismatch:
+        raise AtlasError(
+            f"the checkpoint {path} was written for another problem (its {', '.join(mismatch)} "
+            "differ); resume with the same problem and settings, or start afresh without resume"
+        )
+    try:
+        builder.restore(meta, arrays)
+    except (KeyError, ValueError, TypeError, IndexError) as exc:
+        raise AtlasError(f"the checkpoint {path} is damaged ({exc}); start afresh") from None
+    return float(meta["seconds"])

@@ -10,14 +10,28 @@ from numpy.typing import NDArray
 
 from sahgrasp.errors import AtlasError
 
-__all__ = ["STOP_REASONS", "Atlas", "AtlasSettings", "FloatArray", "Function", "IndexArray"]
+__all__ = [
+    "MIN_RADIUS_OVER_NEWTON_TOL",
+    "STOP_REASONS",
+    "Atlas",
+    "AtlasSettings",
+    "FloatArray",
+    "Function",
+    "IndexArray",
+]
 
 FloatArray = NDArray[np.float64]
 IndexArray = NDArray[np.int64]
 Function = Callable[[FloatArray], FloatArray]
 
-STOP_REASONS = ("complete", "max_charts")
-"""Why a build ended: every chart bounded (or at a box bound), or ``max_charts`` charts exist."""
+STOP_REASONS = ("complete", "max_charts", "stalled")
+"""Why a build ended: every chart bounded (or at a box bound), ``max_charts`` charts exist, or
+the start chart could not be expanded at all (every step from ``alpha = r`` down to
+``min_step * r`` failed: ``r`` is too large or too small for the manifold)."""
+
+MIN_RADIUS_OVER_NEWTON_TOL = 1e3
+"""The chart radius must be at least this many times ``newton_tol``: a step shorter than that is
+lost in the Newton projection's own error."""
 
 
 @dataclass(frozen=True)
@@ -54,6 +68,12 @@ class AtlasSettings:
     def __post_init__(self) -> None:
         checks = (
             (self.radius > 0 and np.isfinite(self.radius), "radius must be finite and > 0"),
+            (
+                self.radius >= MIN_RADIUS_OVER_NEWTON_TOL * self.newton_tol,
+                f"radius must be >= {MIN_RADIUS_OVER_NEWTON_TOL:g} * newton_tol = "
+                f"{MIN_RADIUS_OVER_NEWTON_TOL * self.newton_tol:g} (smaller steps are lost in "
+                "the Newton tolerance)",
+            ),
             (0 < self.epsilon < 1, "epsilon must lie in (0, 1)"),
             (self.max_charts >= 1, "max_charts must be >= 1"),
             (self.newton_tol > 0, "newton_tol must be > 0"),
@@ -87,7 +107,8 @@ class Atlas:
         bound_rejections: Projections that left the box bounds.
         build_seconds: Wall time of the build [s].
         stop_reason: Why the build ended, one of :data:`STOP_REASONS`: ``"max_charts"`` when the
-            cap stopped it with charts still to expand.
+            cap stopped it with charts still to expand, ``"stalled"`` when no chart could be
+            added to the start chart (one chart, its vertices blocked).
     """
 
     centres: FloatArray
@@ -123,7 +144,7 @@ class Atlas:
     @property
     def complete(self) -> bool:
         """True when every chart is bounded or stopped at a box bound (no open frontier)."""
-        return not bool(self.open.any())
+        return self.stop_reason == "complete"
 
     def neighbours(self, i: int) -> IndexArray:
         """Indices of the charts neighbouring chart ``i``, sorted."""

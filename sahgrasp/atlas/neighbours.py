@@ -42,6 +42,16 @@ class NeighbourIndex:
         owners = np.repeat(np.arange(len(xs)), sizes)
         return np.concatenate((owners, rows)), np.concatenate((hits, cols))
 
+    @property
+    def indexed(self) -> int:
+        """How many of the first points the k-d tree holds."""
+        return self._n_tree
+
+    def restore(self, points: FloatArray, indexed: int) -> None:
+        """Index the first ``indexed`` points, as an index that had them indexed did."""
+        self._tree = cKDTree(points[:indexed]) if indexed else None
+        self._n_tree = indexed
+
     def added(self, points: FloatArray, count: int) -> None:
         """Note that ``count`` points exist; rebuild the tree when the unindexed tail is long."""
         if count - self._n_tree > max(32, count // 16):

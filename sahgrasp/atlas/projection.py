@@ -174,6 +174,16 @@ def project_many(
     A = np.empty((idx.size, n, n))
     A[:, m:] = phi[idx].transpose(0, 2, 1)
     tol2 = tol * tol
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverging point is dropped below
+        _iterate(F, J, x, done, idx, xa, A, m, n, tol2, max_iter)
+    return x, done
+
+
+def _iterate(
+    F: Function, J: Function, x: FloatArray, done: NDArray[np.bool_], idx: NDArray[np.intp],
+    xa: FloatArray, A: FloatArray, m: int, n: int, tol2: float, max_iter: int,
+) -> None:  # fmt: skip
+    """The Newton iterations of :func:`project_many`, writing into ``x`` and ``done``."""
     for _ in range(max_iter):
         if idx.size == 0:
             break
@@ -196,7 +206,6 @@ def project_many(
             x[idx[~moving]] = xa[~moving]
             idx, xa, A = idx[moving], xa[moving], A[moving]
     x[idx] = xa  # the last iterates of points that did not converge
-    return x, done
 
 
 def tangent_many(

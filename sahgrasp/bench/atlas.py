@@ -1,16 +1,19 @@
 """Atlas benchmark: spheres S^2 and S^3, the planar hand (Fig. 8) and the SAH (Fig. 10).
 
-The sphere references are CuikSuite's (the authors' C code, with a k-d tree neighbour index) chart
-counts and times, measured on an idle 2-core machine in the same run as this engine: the targets
-are chart counts within 10% of ``Vol / r^k`` and the times in :data:`BASELINES` (S^2 <= 0.06 s, S^3
-<= 5 s). For the planar hand the targets are an atlas in <= 0.1 s, the three indices over all
-charts in <= 0.1 s and both together (``whole_seconds``) in <= 0.1 s. The SAH cases (can and oil
-bottle, Section V) compare the chart rate with the paper's (C, Core 2 Duo at 3 GHz); the target,
-for the can with k = 2, is 10x that rate; two of them (:data:`SAH_CASES` with a length scale) are
-the paper's sizes in scaled coordinates. Each case reports its best wall time over ``repeats``
-builds and the CPU time of that build (steadier on a shared machine). The paper's largest atlas,
-the bottle with k = 3 (:data:`PAPER_SCALE_CASES`), is timed once as a whole optimization with the
-collision checks on a worker process beside the build, against the target of 300 s on 2 cores. The
+The spheres (r = 0.1, epsilon = 0.1, from (1, 0, 0[, 0])) time the whole ``build_atlas`` call,
+set-up included: the first call of the process (``first_call_seconds``) and the best of ``repeats``
+(``seconds``). Their reference columns (``cuikatlas_*``) are figures measured earlier with
+CuikSuite's ``cuikatlas`` (the authors' C code) on this 2-core machine, as a whole process, not by
+this run (:data:`BASELINES`); the targets are chart counts within 10% of ``Vol / r^k`` and times no
+longer than cuikatlas's slowest. For the planar hand the targets are an atlas in <= 0.1 s, the
+three indices over all charts in <= 0.1 s and both together (``whole_seconds``) in <= 0.1 s. The
+SAH cases (can and oil bottle, Section V) compare the chart rate with the paper's (C, Core 2 Duo
+at 3 GHz); the target, for the can with k = 2, is 10x that rate. The paper's own experiments
+(:data:`PAPER_CASES`, as ``sahgrasp atlas NAME --paper`` runs them) are timed once end to end, the
+collision checks on a worker process beside the build: the can with k = 2 (about 4,800 charts,
+target 15 s for the atlas and the evaluation), the bottle with k = 2 (about 1,400) and with k = 3
+(about 95,000 charts, target 260 s, 5x faster than the paper's 1,300 s). Each repeated case
+reports its best wall time and the CPU time of that build (steadier on a shared machine). The
 S2, S3 and planar cases time the wave-front engine (:data:`WAVE_BATCH` charts per wave) and, beside
 it in the same run, the one-chart engine (``one_chart``, ``cpu_speedup``). :func:`stage_profile`
 tells where one build's time goes.
@@ -31,14 +34,17 @@ import numpy as np
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.experiments.setups import run_experiment
+from sahgrasp.errors import InvalidSettingsError, SahGraspError
+from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
+from sahgrasp.experiments.setups import PAPER_SETTINGS, run_experiment
 from sahgrasp.fileio import write_json_atomic
 from sahgrasp.planar import make_planar_problem
 from sahgrasp.progress import ProgressCallback
 
 __all__ = [
     "BASELINES",
+    "MESH_OBJECTS",
+    "PAPER_CASES",
     "PAPER_SCALE_CASES",
     "SAH_CASES",
     "SAH_PAPER",
@@ -50,13 +56,14 @@ __all__ = [
 ]
 
 BASELINES: dict[str, dict[str, float]] = {
-    "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.06},
-    "S3": {"charts": 18802, "fastest": 4.2, "slowest": 5.5, "seconds": 5.0},
+    "S2": {"charts": 1169, "fastest": 0.03, "slowest": 0.05, "seconds": 0.05},
+    "S3": {"charts": 18802, "fastest": 4.2, "slowest": 5.5, "seconds": 5.5},
     "planar": {"charts": 750, "seconds": 0.1, "quality_seconds": 0.1, "whole_seconds": 0.1},
 }
-"""References and target times [s], r = 0.1 (spheres): CuikSuite's charts and its fastest and
-slowest time over repeated runs, and ``seconds`` the target; the planar hand's are the paper's,
-and ``whole_seconds`` the target of the atlas and the three indices together."""
+"""References and target times [s]. Spheres (r = 0.1): cuikatlas's charts and its fastest and
+slowest whole-process time over repeated runs, measured earlier on this machine (not by the
+benchmark), and ``seconds`` the target (no slower than cuikatlas). The planar hand: the paper's
+charts and times, ``whole_seconds`` the target of the atlas and the three indices together."""
 
 SAH_PAPER: dict[tuple[str, int], dict[str, float]] = {
     ("can", 2): {"t": 8, "charts": 4800, "seconds": 140.0},
@@ -71,23 +78,29 @@ SAH_CASES: tuple[tuple[str, int, float, bool, float | None], ...] = (
     ("bottle", 2, 0.1, True, None),
     ("bottle", 2, 0.03, True, None),
     ("bottle", 3, 0.05, False, None),
-    ("can", 2, 0.015, False, 0.1),
-    ("bottle", 2, 0.0088, False, 0.1),
 )
-"""SAH cases: experiment, k, chart radius r, whether to repeat the build (else once) and the
-length scale [m] of scaled coordinates (None: unscaled). The scaled ones give atlases of the
-paper's sizes (about 4800 can and 1400 bottle charts, docs/atlas.md "Scaled coordinates")."""
+"""SAH cases in unscaled coordinates: experiment, k, chart radius r, whether to repeat the build
+(else once) and the length scale [m] of scaled coordinates (None: unscaled)."""
 
-PAPER_SCALE_CASES: tuple[tuple[str, int, float, float, int, float], ...] = (
-    ("bottle", 3, 0.0101, 0.1, 1, 300.0),
+PAPER_SCALE_CASES: tuple[tuple[str, int, float, float, int, float], ...] = ()
+"""Further whole optimizations timed once end to end (IK, principal motions, atlas, collision
+checks on ``workers`` processes beside the build, indices): experiment, k, radius, length scale
+[m], workers and the target [s]; none by default (:data:`PAPER_CASES` runs the paper's)."""
+
+PAPER_CASES: tuple[tuple[str, int, int, float], ...] = (
+    ("can", 2, 1, 15.0),
+    ("bottle", 2, 1, 15.0),
+    ("bottle", 3, 1, 260.0),
 )
-"""Whole optimizations at the paper's largest size, timed once end to end (IK, principal motions,
-atlas, collision checks on ``workers`` processes beside the build, indices): experiment, k,
-radius, length scale [m], workers and the target [s] (the bottle with k = 3: about 95000 charts,
-the paper's 1300 s; target 300 s on 2 cores, so one checking process beside the builder)."""
+"""The paper's experiments at its settings (``sahgrasp atlas NAME --paper``,
+:data:`sahgrasp.experiments.setups.PAPER_SETTINGS`), timed once end to end: experiment, k,
+workers checking the chart centres beside the build, and the target [s] for the atlas and the
+evaluation together (can: 15 s, 10x the paper's 150 s; bottle with k = 3: 260 s, 5x its 1300 s;
+the bottle with k = 2 is held to the can's)."""
 
 _SAH_SPEEDUP = 10.0  # target chart rate over the paper's (SAH can, k = 2)
 _SAH_MAX_CHARTS = 20_000
+_PAPER_MAX_CHARTS = 250_000
 _COUNT_TOLERANCE = 0.10  # allowed relative deviation of the chart count from Vol / r^k
 
 
@@ -222,6 +235,8 @@ def stage_profile(case: str, batch: int = 1) -> dict[str, float]:
 
 
 def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any]:
+    # The first call of the wave engine before any other: what a user's first build costs.
+    _, first_seconds, first_cpu = _timed(_sphere_build(n, radius, WAVE_BATCH))
     (atlas, seconds, cpu), engines = _engines(functools.partial(_sphere_build, n, radius), repeats)
     volume = 2.0 * pi ** (n / 2) / gamma(n / 2)  # of the unit sphere S^(n-1)
     expected = volume / radius ** (n - 1)
@@ -235,11 +250,18 @@ def _sphere_row(name: str, n: int, radius: float, repeats: int) -> dict[str, Any
         "seconds": seconds,
         "cpu_seconds": cpu,
         "charts_per_second": atlas.n_charts / seconds,
+        "first_call_seconds": first_seconds,
+        "first_call_cpu_seconds": first_cpu,
+        "cuikatlas_charts": baseline["charts"],
+        "cuikatlas_seconds": [baseline["fastest"], baseline["slowest"]],
+        "cuikatlas_note": "measured earlier with CuikSuite's cuikatlas on this machine (the "
+        "whole process), not by this run",
         "baseline_charts": baseline["charts"],
         "baseline_seconds": [baseline["fastest"], baseline["slowest"]],
         "target_seconds": baseline["seconds"],
         "count_ok": abs(atlas.n_charts / expected - 1.0) <= _COUNT_TOLERANCE,
         "time_ok": seconds <= baseline["seconds"],
+        "first_call_time_ok": first_seconds <= baseline["seconds"],
         **engines,
     }
 
@@ -348,6 +370,130 @@ def _paper_scale_row(
     }
 
 
+def _paper_row(name: str, k: int, workers: int, target_s: float) -> dict[str, Any]:
+    """The paper's experiment once, end to end, with the chart checks on ``workers`` processes.
+
+    ``seconds`` is the whole run (IK, principal motions, atlas, evaluation),
+    ``optimization_seconds`` the atlas and the evaluation (what the paper times); both are held
+    to the target (``whole_time_ok``, ``optimization_time_ok``).
+    """
+    paper = PAPER_SETTINGS[name, k]
+    start, cpu = time.perf_counter(), time.process_time()
+    result = run_experiment(
+        name, k=k, radius=paper.radius, epsilon=paper.epsilon, max_charts=_PAPER_MAX_CHARTS,
+        length_scale_m=paper.length_scale_m, unit_m=paper.unit_m, workers=workers,
+    )  # fmt: skip
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
+    report = PAPER_ATLAS_RUNS[name, k]
+    optimization = result.atlas_seconds + result.quality_seconds
+    return {
+        "k": k,
+        "t": result.problem.t,
+        "n": result.atlas.ambient_dim,
+        "radius": paper.radius,
+        "epsilon": paper.epsilon,
+        "length_scale_m": paper.length_scale_m,
+        "unit_m": paper.unit_m,
+        "workers": workers,
+        "charts": result.atlas.n_charts,
+        "valid": int(result.valid.sum()),
+        "complete": result.atlas.complete,
+        "atlas_seconds": result.atlas_seconds,
+        "evaluation_seconds": result.quality_seconds,
+        "optimization_seconds": optimization,
+        "seconds": seconds,
+        "cpu_seconds_main": cpu,
+        "charts_per_second": result.atlas.n_charts / result.atlas_seconds,
+        "best_volume": float(result.values[result.best]),
+        "worst_volume": float(result.values[result.worst]),
+        "paper_t": report.t,
+        "paper_charts": report.charts,
+        "paper_atlas_seconds": report.atlas_seconds,
+        "paper_evaluation_seconds": report.quality_seconds,
+        "paper_seconds": report.total_seconds,
+        "whole_target_seconds": target_s,
+        "optimization_time_ok": optimization <= target_s,
+        "whole_time_ok": seconds <= target_s,
+    }
+
+
+MESH_OBJECTS = ("can", "bottle", "cup", "coffee_cup", "mesh:mug.stl", "mesh:bottle.obj")
+"""Objects of the ``mesh_objects`` case: catalog objects (their display meshes) and the shipped
+meshes (``examples/meshes``, ``mesh:`` prefix)."""
+
+_MESH_SAMPLES = 40  # contact sets drawn per object for a 3-finger start the IK solves
+_MESH_TRIES = 3  # starts tried per object when the atlas cannot use one
+
+
+def _mesh_object(name: str) -> Any:
+    from pathlib import Path
+
+    from sahgrasp.objects import load_mesh, load_object
+
+    if not name.startswith("mesh:"):
+        return load_object(name)
+    path = Path(__file__).resolve().parents[2] / "examples" / "meshes" / name[5:]
+    return load_mesh(path)
+
+
+def _mesh_objects_row() -> dict[str, Any]:
+    """The mesh atlas per object, from a 3-finger start, against that start.
+
+    The start: the first of the sampled contact sets the IK solves with the object as obstacle.
+    Reported: whether the best verified grasp beats the start on the volume.
+    """
+    from sahgrasp.contacts import GraspTarget
+    from sahgrasp.experiments.mesh_atlas import MeshStart, optimize_mesh_grasps
+    from sahgrasp.hand import load_hand
+    from sahgrasp.ik import solve_ik
+    from sahgrasp.objects.grasp_sampler import sample_object_grasps
+
+    hand = load_hand("sah")
+    objects: dict[str, Any] = {}
+    for name in MESH_OBJECTS:
+        obj = _mesh_object(name)
+        begin = time.perf_counter()
+        row: dict[str, Any] = {"start": None, "errors": []}
+        search = None
+        for target in sample_object_grasps(obj, _MESH_SAMPLES, 0):
+            three = GraspTarget(target.name, [c for c in target.contacts if c.finger != "ring"])
+            solved = solve_ik(hand, three, free_fingers=("ring",), obstacle=obj)
+            if not solved.success or hand.in_collision(solved.q):
+                continue
+            found = time.perf_counter()
+            try:  # the first start the atlas can use
+                search = optimize_mesh_grasps(hand, obj, [MeshStart(three, solved.q, name)])
+            except SahGraspError as exc:
+                row["errors"].append(str(exc))
+                if len(row["errors"]) == _MESH_TRIES:
+                    break
+                continue
+            row["start"] = three.to_dict()
+            break
+        if search is not None and search.components:
+            c = search.components[0]
+            row.update({
+                "charts": c.result.atlas.n_charts, "complete": c.result.atlas.complete,
+                "valid": int(c.result.valid.sum()), "start_volume": c.start_value,
+                "best_volume": c.best_value, "improved": bool(c.best_value > c.start_value),
+                "verified": c.verification is not None and c.verification.ok,
+                "start_seconds": found - begin, "atlas_seconds": time.perf_counter() - found,
+            })  # fmt: skip
+        objects[name] = row
+    rows = [r for r in objects.values() if "improved" in r]
+    improved = sum(r["improved"] and r["verified"] for r in rows)
+    return {
+        "objects": objects,
+        "charts": sum(r["charts"] for r in rows),
+        "complete": all(r["complete"] for r in rows),
+        "seconds": sum(r["atlas_seconds"] for r in rows),
+        "charts_per_second": sum(r["charts"] for r in rows)
+        / max(sum(r["atlas_seconds"] for r in rows), 1e-9),
+        "improved_share": improved / len(MESH_OBJECTS),
+        "improved_target": 0.9,
+    }
+
+
 def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
     """Case name -> the function measuring it, in the order they run."""
     cases: dict[str, Callable[[], dict[str, Any]]] = {
@@ -361,6 +507,9 @@ def _cases(repeats: int) -> dict[str, Callable[[], dict[str, Any]]]:
     for name, k, radius, scale, workers, target in PAPER_SCALE_CASES:
         label = f"sah_{name}_k{k}_r{radius:g}_L{scale:g}_whole"
         cases[label] = functools.partial(_paper_scale_row, name, k, radius, scale, workers, target)
+    for name, k, workers, target in PAPER_CASES:
+        cases[f"paper_{name}_k{k}"] = functools.partial(_paper_row, name, k, workers, target)
+    cases["mesh_objects"] = _mesh_objects_row
     return cases
 
 

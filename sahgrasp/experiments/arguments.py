@@ -22,7 +22,10 @@ __all__ = [
     "INDEX_CHOICES",
     "INITS_HELP",
     "MAX_INITS",
+    "MESH_DEFAULTS",
     "METHOD_HELP",
+    "PAPER_RADIUS_RANGE",
+    "RADIUS_RANGES",
     "add_atlas_arguments",
     "add_html_argument",
     "add_ik_arguments",
@@ -33,6 +36,7 @@ __all__ = [
     "nonnegative_int",
     "positive_float",
     "positive_int",
+    "unit_interval_float",
 ]
 
 MAX_INITS = 1000
@@ -45,6 +49,20 @@ INITS_HELP = f"i_max, initial configurations per problem (1..{MAX_INITS})"
 ATLAS_DEFAULTS = {"planar": (0.125, 0.4), "can": (0.1, 0.5), "bottle": (0.1, 0.5)}
 """Per experiment: the chart radius ``r`` and ``epsilon`` used unless told otherwise (the one place
 they are set). Planar: the atlas paper's values; SAH: ours, as ``x`` mixes radians and metres."""
+
+RADIUS_RANGES = {"planar": (1e-3, 1.0), "can": (1e-3, 1.0), "bottle": (1e-3, 1.0)}
+"""Per experiment: the chart radii ``--r`` accepts, in the units of ``x`` (the planar hand's unit
+vectors and metres; the SAH's radians and metres). Below, an atlas needs millions of charts;
+above, a chart spans the whole set of grasps and every step of the continuation fails."""
+
+MESH_DEFAULTS = {"radius": 1.0, "epsilon": 0.5, "length_scale_m": 0.1, "unit_m": 0.003}
+"""The mesh atlas's chart radius and epsilon (``sahgrasp atlas --mesh``), in scaled coordinates
+whose unit moves a contact or the object by ``unit_m`` [m] and turns a joint by
+``unit_m / length_scale_m`` [rad] (0.03 rad)."""
+
+PAPER_RADIUS_RANGE = (0.1, 50.0)
+"""The chart radii ``--r`` accepts with ``--paper`` for the SAH, in the paper's units (the paper:
+r = 1; see :data:`sahgrasp.experiments.setups.PAPER_SETTINGS`)."""
 
 INDEX_CHOICES = QUALITY_INDICES.names()
 """Names of the registered quality indices (a live view: numpy-free, as the registry is)."""
@@ -79,6 +97,7 @@ def int_in_range(low: int, high: int) -> Any:
 positive_int = int_at_least(1)
 nonnegative_int = int_at_least(0)
 positive_float = _checked(float, lambda v: math.isfinite(v) and v > 0.0, "a finite number > 0")
+unit_interval_float = _checked(float, lambda v: 0.0 < v < 1.0, "a finite number > 0 and < 1")
 
 
 def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
@@ -144,9 +163,9 @@ def add_atlas_arguments(
     )
     parser.add_argument(
         "--eps",
-        type=positive_float,
+        type=unit_interval_float,
         default=epsilon,
-        help="epsilon > 0 of Eqs. (17)-(18)"
+        help="epsilon in (0, 1) of Eqs. (17)-(18)"
         + ("" if one else f" (default: {_per_experiment(experiments, 1)})"),
     )
     parser.add_argument("--index", choices=INDEX_CHOICES, default="volume", help="quality index")
@@ -163,10 +182,24 @@ def add_atlas_arguments(
         )
 
 
-def atlas_geometry(experiment: str, args: argparse.Namespace) -> tuple[float, float]:
-    """Chart radius and epsilon of ``args``, the experiment's defaults where not given."""
-    radius, epsilon = ATLAS_DEFAULTS[experiment]
-    return (
-        radius if args.r is None else args.r,
-        epsilon if args.eps is None else args.eps,
-    )
+def atlas_geometry(
+    experiment: str, args: argparse.Namespace, defaults: tuple[float, float] | None = None
+) -> tuple[float, float]:
+    """Chart radius and epsilon of ``args``, ``defaults`` (the experiment's) where not given.
+
+    Raises:
+        argparse.ArgumentTypeError: ``--r`` is outside the experiment's range
+            (:data:`RADIUS_RANGES`, or :data:`PAPER_RADIUS_RANGE` with a ``paper`` option set).
+    """
+    radius, epsilon = defaults or ATLAS_DEFAULTS[experiment]
+    if args.r is not None:
+        paper = bool(getattr(args, "paper", False)) and experiment != "planar"
+        low, high = PAPER_RADIUS_RANGE if paper else RADIUS_RANGES[experiment]
+        if not low <= args.r <= high:
+            units = "the paper's units" if paper else "the units of x"
+            raise argparse.ArgumentTypeError(
+                f"--r {args.r:g} is out of range for {experiment}: valid {low:g}..{high:g} "
+                f"({units}; smaller needs millions of charts, larger spans every grasp at once)"
+            )
+        radius = args.r
+    return radius, epsilon if args.eps is None else args.eps

@@ -39,7 +39,7 @@ __all__ = ["DOCUMENTS", "TABLES", "DocTablesError", "main", "refresh", "stale_ta
 ROOT = Path(__file__).resolve().parents[2]
 """The repository (the docs are not part of an installed package)."""
 
-DOCUMENTS = ("README.md", "examples/README.md", "docs/objects.md")
+DOCUMENTS = ("README.md", "examples/README.md", "docs/objects.md", "docs/atlas.md")
 """Files holding generated tables, relative to the repository."""
 
 _BLOCK = re.compile(
@@ -142,10 +142,57 @@ def optimize_examples_table() -> str:
     )
 
 
+def _analytic_errors(kind: str, radius: float, subdivisions: int) -> tuple[object, ...]:
+    """One row of :func:`mesh_model_table`: the mesh, the model's errors to it and to the shape."""
+    import numpy as np
+    import trimesh
+
+    from sahgrasp.objects.smooth_surface import fit_mesh_patch
+
+    if kind == "sphere":
+        mesh = trimesh.creation.icosphere(subdivisions, radius)
+        direction = np.array([1.0, 0.3, 0.2]) / np.linalg.norm([1.0, 0.3, 0.2])
+        point = direction * radius
+    else:
+        mesh = trimesh.creation.cylinder(radius, 0.12, sections=subdivisions)
+        direction = np.array([1.0, 0.3, 0.0]) / np.linalg.norm([1.0, 0.3, 0.0])
+        point = direction * radius + [0.0, 0.0, 0.01]
+    closest, _, _ = trimesh.proximity.closest_point(mesh, [point])
+    patch = fit_mesh_patch("contact", mesh, closest[0], direction, max_half_width_m=0.02)
+    grid = np.linspace(-patch.half_width_m, patch.half_width_m, 11)
+    distances, angles = [], []
+    for u in grid:
+        for v in grid:
+            jet = patch.evaluate((u, v))
+            axis = jet.point if kind == "sphere" else jet.point * [1.0, 1.0, 0.0]
+            distances.append(abs(np.linalg.norm(axis) - radius))
+            exact = axis / np.linalg.norm(axis)
+            angles.append(np.degrees(np.arccos(np.clip(exact @ jet.normal, -1.0, 1.0))))
+    return (
+        f"{kind}, r = {radius * 1e3:g} mm", len(mesh.faces), f"{patch.half_width_m * 1e3:.1f}",
+        f"{patch.fit_error_m * 1e3:.3f}", f"{np.degrees(patch.normal_error_rad):.1f}",
+        f"{max(distances) * 1e3:.3f}", f"{max(angles):.2f}",
+    )  # fmt: skip
+
+
+def mesh_model_table() -> str:
+    """docs/atlas.md: the smooth local model of a mesh against the mesh and the analytic shape."""
+    rows = [
+        _analytic_errors("sphere", 0.04, 2),
+        _analytic_errors("sphere", 0.04, 4),
+        _analytic_errors("cylinder", 0.033, 24),
+        _analytic_errors("cylinder", 0.033, 128),
+    ]
+    headers = ("shape", "faces", "a [mm]", "to mesh [mm]", "to facets [deg]",
+               "to shape [mm]", "to shape [deg]")  # fmt: skip
+    return format_table(headers, rows, markdown=True)
+
+
 TABLES: dict[str, Callable[[], str]] = {
     "demo": demo_table,
     "ik-examples": ik_examples_table,
     "ik-methods": ik_methods_table,
+    "mesh-model": mesh_model_table,
     "optimize-examples": optimize_examples_table,
 }
 """Table name (as in the markers) -> the function generating it."""

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from sahgrasp.atlas import AtlasCheckpoint
 from sahgrasp.errors import OptimizationError
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
 from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
@@ -30,7 +31,9 @@ from sahgrasp.progress import ProgressCallback
 
 __all__ = [
     "EXPERIMENTS",
+    "PAPER_SETTINGS",
     "SAH_EXPERIMENTS",
+    "PaperSettings",
     "SahExperiment",
     "experiment_settings",
     "make_experiment",
@@ -68,6 +71,40 @@ SAH_EXPERIMENTS = {
 EXPERIMENTS = ("planar", *SAH_EXPERIMENTS)
 """Every experiment's name."""
 
+
+@dataclass(frozen=True)
+class PaperSettings:
+    """The atlas paper's settings of one experiment, in the coordinates that reproduce it.
+
+    Attributes:
+        radius: The paper's chart radius r.
+        epsilon: The paper's epsilon.
+        length_scale_m: The length [m] a joint angle is compared with (about a finger's), or
+            None: the experiment's own coordinates (the planar hand is the paper's formulation).
+        unit_m: What a unit of the scaled coordinates moves [m]: a joint turns by
+            ``unit_m / length_scale_m`` rad, the object and the contacts move by ``unit_m``.
+    """
+
+    radius: float
+    epsilon: float
+    length_scale_m: float | None = None
+    unit_m: float | None = None
+
+
+PAPER_SETTINGS: dict[tuple[str, int], PaperSettings] = {
+    ("planar", 2): PaperSettings(0.125, 0.4),
+    ("can", 2): PaperSettings(1.0, 0.5, 0.1, 0.0015),
+    ("bottle", 2): PaperSettings(1.0, 0.5, 0.1, 0.00088),
+    ("bottle", 3): PaperSettings(1.0, 0.5, 0.1, 0.00101),
+}
+"""Per (experiment, k), the paper's r and epsilon (Section V) and the unit in which they apply.
+
+The paper states no unit for the SAH's r = 1. Our F differs from the paper's (t = 11 against 8 for
+the can: rolling fingertips, the coupled distal joints, a free object), so no unit makes the two
+atlases the same set; the unit here is the one at which our atlas has the paper's number of
+charts, about 1 mm of contact or object motion (1.5 mm can, 0.88 mm bottle, 1.01 mm bottle with
+k = 3), i.e. r = 1 in millimetres. docs/atlas.md, "The paper's sizes", explains."""
+
 _MOTION_SAMPLES = {"random": 2000, "grasps": 200}
 """Configurations sampled for the principal motions per source (an IK solve each for grasps)."""
 
@@ -78,6 +115,7 @@ def make_experiment(
     hand: str = "sah",
     motions: str = "random",
     length_scale_m: float | None = None,
+    unit_m: float | None = None,
 ) -> GraspManifold:
     """The grasp manifold of experiment ``name`` with ``k`` kept dimensions.
 
@@ -91,6 +129,7 @@ def make_experiment(
             :data:`~sahgrasp.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
         length_scale_m: Scale the SAH's coordinates at this length
             (:func:`sahgrasp.grasp.coordinate_scales`); None: unscaled.
+        unit_m: What a unit of the scaled coordinates moves [m] (default ``length_scale_m``).
 
     Raises:
         OptimizationError: ``name`` is unknown, or the IK finds no first grasp.
@@ -105,6 +144,7 @@ def make_experiment(
     return make_sah_manifold(
         load_hand(hand), setup.patches(), k, setup.free_object, setup.symmetry_axis,
         setup.object(), samples, motion_source=motions, length_scale_m=length_scale_m,
+        unit_m=unit_m,
     )  # fmt: skip
 
 
@@ -148,13 +188,17 @@ def run_experiment(
     motions: str = "random",
     length_scale_m: float | None = None,
     workers: int = 0,
+    unit_m: float | None = None,
+    checkpoint: AtlasCheckpoint | None = None,
 ) -> OptimizationResult:
     """Algorithm 1 on experiment ``name``.
 
-    The arguments are those of :func:`make_experiment` and :func:`experiment_settings`.
+    The arguments are those of :func:`make_experiment` and :func:`experiment_settings`;
+    ``checkpoint`` saves (and resumes) the atlas build (:func:`sahgrasp.atlas.build_atlas`).
     """
     settings = experiment_settings(name, radius, epsilon, index, max_charts, progress, workers)
-    return optimize(make_experiment(name, k, hand, motions, length_scale_m), settings)
+    problem = make_experiment(name, k, hand, motions, length_scale_m, unit_m)
+    return optimize(problem, settings, checkpoint=checkpoint)
 
 
 def run_components(
