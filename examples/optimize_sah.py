@@ -34,7 +34,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_atlas_arguments(parser, EXPERIMENTS)  # --k, --r, --eps, --index, --max-charts, --workers
     add_html_argument(parser)  # --html OUT
     args = parser.parse_args(argv)
-    radius, epsilon = atlas_geometry(args.experiment, args)  # each object's own defaults
+    try:
+        radius, epsilon = atlas_geometry(args.experiment, args)  # each object's own defaults
+    except argparse.ArgumentTypeError as exc:  # --r out of the experiment's range
+        parser.error(str(exc))
 
     with StderrProgress() as progress:
         result = run_experiment(
