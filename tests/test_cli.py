@@ -7,6 +7,7 @@ import json
 import os
 import re
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -30,7 +31,7 @@ def sahgrasp(*args: object, cwd: Path, **kwargs: Any) -> subprocess.CompletedPro
     return subprocess.run(
         [sys.executable, "-m", "sahgrasp", *map(str, args)],
         capture_output=True, encoding="utf-8", errors="strict", cwd=cwd,
-        env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300, **kwargs,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, **{"timeout": 300, **kwargs},
     )  # fmt: skip
 
 
@@ -178,6 +179,22 @@ def test_cli_defaults_are_the_library_defaults() -> None:
         (["bench", "ik", "--problems", "0"], r"--problems: 0 .* >= 1"),
         (["demo", "--inits", "5000"], r"--inits: 5000 .* in 1\.\.1000"),
         (["info", "--bogus"], r"unrecognized arguments: --bogus"),
+        (["solve", "one.json", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask sch"),
+        (["solve", "one.json", "--scheduler", ""], r"--scheduler: '' is not a Dask scheduler"),
+        (["solve", "one.json", "--scheduler", "tcp://"], r"--scheduler: 'tcp://' is not a Dask"),
+        (
+            ["solve", "one.json", "--scheduler", "http://h:80"],
+            r"--scheduler: .*give tcp://HOST:PORT or HOST",
+        ),
+        (
+            ["solve", "one.json", "--scheduler", "inproc://x"],
+            r"--scheduler: .*'inproc://x' is not supp",
+        ),
+        (
+            ["sequence", "--out", "d", "--scheduler", "tls://h:1"],
+            r"--scheduler: .*'tls://h:1' is not supp",
+        ),
+        (["sequence", "--out", "d", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask"),
     ],
 )
 def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
@@ -227,6 +244,16 @@ def test_unreadable_targets_files(tmp_path: Path, content: bytes | None, pattern
     one_line_error(
         sahgrasp("solve", "missing.json", cwd=tmp_path), r"^sahgrasp: error: .*" + pattern
     )
+
+
+def test_a_refused_scheduler_connection_is_one_line_at_once(files: Path) -> None:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]  # nothing listens there once closed
+    for args in (["solve", "one.json"], ["sequence", "--out", "d"]):
+        done = sahgrasp(*args, "--scheduler", f"127.0.0.1:{port}", cwd=files, timeout=20)
+        one_line_error(done, rf"cannot reach the Dask scheduler at tcp://127\.0\.0\.1:{port}")
+    assert not (files / "d").exists()
 
 
 def test_a_folder_as_targets(tmp_path: Path) -> None:

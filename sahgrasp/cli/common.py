@@ -61,6 +61,7 @@ __all__ = [
     "positive_float",
     "positive_int",
     "printable",
+    "scheduler_address",
 ]
 
 HAND_OVERRIDE_HELP = f"use this hand instead of the targets file's: {HAND_HELP}"
@@ -103,6 +104,19 @@ def add_json_argument(parser: argparse.ArgumentParser, what: str) -> None:
         metavar="OUT",
         help=f"write {what} as JSON to OUT ('-': JSON alone on stdout, other lines on stderr)",
     )
+
+
+def scheduler_address(text: str) -> str:
+    """Option type of ``--scheduler``: a Dask scheduler address, checked before any work.
+
+    The check is :func:`sahgrasp.parallel.check_scheduler_address` (no connection is made here).
+    """
+    from sahgrasp.parallel import SchedulerError, check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except SchedulerError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def human_stream(json_out: str | None) -> TextIO:

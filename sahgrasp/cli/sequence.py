@@ -13,6 +13,7 @@ from sahgrasp.cli.common import (
     int_at_least,
     nonnegative_int,
     positive_int,
+    scheduler_address,
 )
 from sahgrasp.fileio import check_output_path
 
@@ -53,9 +54,10 @@ def add_parser(sub: Any) -> None:
     )
     where.add_argument(
         "--scheduler",
+        type=scheduler_address,
         default=None,
         metavar="ADDR",
-        help="Dask scheduler address, e.g. tcp://host:8786",
+        help="Dask scheduler address: tcp://HOST:PORT or HOST:PORT",
     )
     p.add_argument("--resume", action="store_true", help="continue the search checkpointed in DIR")
     p.set_defaults(run=run, on_interrupt=resume_command)
