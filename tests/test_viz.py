@@ -521,3 +521,36 @@ def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None
     with pytest.raises(ScreenshotError, match="attempts >= 1"):
         screenshot(page, tmp_path / "out.png", attempts=0)
     assert main(["screenshot", str(page), str(tmp_path / "out.png"), "--size", "12x"]) == 2
+
+
+ARGS_SEEN = 'printf "%s\\n" "$@" > "$(dirname "$0")/args.txt"\n' + WRITE_SHOT
+
+
+@pytest.mark.parametrize("root", [False, True], ids=["user", "root"])
+def test_the_sandbox_is_off_only_for_root(
+    tmp_path: Path, page: Path, monkeypatch: pytest.MonkeyPatch, root: bool
+) -> None:
+    monkeypatch.setattr(os, "geteuid", lambda: 0 if root else 1000)
+    chromium = fake_chromium(tmp_path, ARGS_SEEN)
+    screenshot(page, tmp_path / "out.png", timeout_s=30, chromium=chromium)
+    args = (tmp_path / "args.txt").read_text().splitlines()
+    assert ("--no-sandbox" in args) == root
+    assert "--headless" in args and "--window-size=1200,800" in args
+
+
+@pytest.mark.parametrize("size", [(0, 800), (15, 800), (1200, 8193), (10**6, 10**6), (1200,)])
+def test_window_sizes_are_bounded(tmp_path: Path, page: Path, size: tuple[int, ...]) -> None:
+    with pytest.raises(ScreenshotError, match=r"size must be \(width, height\) in 16\.\.8192 px"):
+        screenshot(page, tmp_path / "out.png", size)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("text", ["8193x800", "1200x100000", "15x15", "0x0", "5x800"])
+def test_the_size_option_is_bounded_and_shows_its_default(
+    tmp_path: Path, page: Path, text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["screenshot", str(page), str(tmp_path / "out.png"), "--size", text]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "--size: width and height must be in 16..8192 px" in line
+    assert main(["screenshot", "--help"]) == 0
+    shown = " ".join(capsys.readouterr().out.split())
+    assert "(default: 1200x800)" in shown and "16..8192" in shown
