@@ -211,7 +211,13 @@ def test_bench_solve_runs_the_chosen_worker_counts() -> None:
     pytest.importorskip("psutil")
     from sahgrasp.bench import solve as bench_solve
 
-    doc = bench_solve.run(problems=6, lines=0, dask=False, workers=[1])
+    reports: list[tuple[str, int, int | None]] = []
+    doc = bench_solve.run(
+        problems=6, lines=0, dask=False, workers=[1],
+        progress=lambda stage, done, total: reports.append((stage, done, total)),
+    )  # fmt: skip
+    assert reports[-1] == ("bench solve: --workers 1", 6, 6)
+    assert all(0 <= done <= total for _, done, total in reports)  # type: ignore[operator]
     assert [case["where"] for case in doc["cases"]] == ["--workers 1"]
     assert doc["cases"][0]["lines"] == 6 and doc["cases"][0]["peak_rss_mb"] > 0
     assert doc["speedup_1_to_2_workers"] is None

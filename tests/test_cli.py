@@ -195,6 +195,12 @@ def test_cli_defaults_are_the_library_defaults() -> None:
             r"--scheduler: .*'tls://h:1' is not supp",
         ),
         (["sequence", "--out", "d", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask"),
+        (
+            ["bench", "ik", "--plot", "fig"],
+            r"--plot: 'fig' is not an image file name \(no suffix\)",
+        ),
+        (["bench", "ik", "--plot", "fig.txt"], r"--plot: 'fig.txt' .*unknown suffix '\.txt'"),
+        (["atlas", "planar", "--plot", "out"], r"--plot: 'out' is not an image file name"),
     ],
 )
 def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
@@ -464,6 +470,15 @@ def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "| can | without object |" in done.stdout and "with object |" not in done.stdout
     assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
+
+
+def test_bench_ik_reports_its_plot_under_the_users_name(tmp_path: Path) -> None:
+    args = ("bench", "ik", "--problems", "2", "--peers", "--quiet", "--plot", "fig.png")
+    done = sahgrasp(*args, "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout, parse_constant=pytest.fail)["plot"] == "fig.png"
+    assert done.stderr.strip().splitlines() == ["wrote fig.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png"]
 
 
 def test_atlas_writes_its_plot_atomically(tmp_path: Path) -> None:

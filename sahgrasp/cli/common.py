@@ -41,6 +41,7 @@ from sahgrasp.fileio import (
 __all__ = [
     "HAND_HELP",
     "HAND_OVERRIDE_HELP",
+    "IMAGE_SUFFIXES",
     "INITS_HELP",
     "MAX_INITS",
     "METHOD_HELP",
@@ -53,6 +54,7 @@ __all__ = [
     "check_outputs",
     "emit_json",
     "human_stream",
+    "image_path",
     "int_at_least",
     "int_in_range",
     "json_text",
@@ -65,6 +67,9 @@ __all__ = [
 ]
 
 HAND_OVERRIDE_HELP = f"use this hand instead of the targets file's: {HAND_HELP}"
+
+IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps")
+"""Figure formats ``--plot`` accepts: matplotlib picks the format from the suffix."""
 
 
 class Parser(argparse.ArgumentParser):
@@ -117,6 +122,22 @@ def scheduler_address(text: str) -> str:
         return check_scheduler_address(text)
     except SchedulerError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def image_path(text: str) -> str:
+    """Option type of ``--plot``: a file name whose suffix names an image format.
+
+    Checked when the command line is parsed, so that a name matplotlib cannot write (no suffix,
+    or an unknown one) fails before the work, not after it.
+    """
+    suffix = Path(text).suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        found = f"unknown suffix {suffix!r}" if suffix else "no suffix"
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not an image file name ({found}): end it in "
+            f"{', '.join(IMAGE_SUFFIXES)}, e.g. fig9.png"
+        )
+    return text
 
 
 def human_stream(json_out: str | None) -> TextIO:
