@@ -30,6 +30,12 @@ SIGINT ends a worker at once and silently (the default action, not Python's
 without printing a traceback each and without finishing their tasks, and the parent, which gets
 the ``KeyboardInterrupt``, closes a pool that has nothing left to wait for.
 
+SIGHUP (a closed terminal, ``kill -HUP`` of the process group) must not reach ``multiprocessing``'s
+resource tracker: it ignores SIGINT and SIGTERM but dies of SIGHUP, and the tracker started again
+for the pool's shutdown then prints a ``KeyError`` traceback for each semaphore it never saw.
+:func:`process_pool` therefore starts the tracker with SIGHUP ignored (an ignored signal stays
+ignored across ``exec``); the tracker still ends with this process, when its pipe closes.
+
 A Dask cluster is the other place work runs. :func:`check_scheduler_address` is the one check of a
 scheduler address (``--scheduler`` of every command, :func:`sahgrasp.sequence.open_executor`):
 it refuses what Dask would fail on later with a traceback, and what sahgrasp does not support.
@@ -179,6 +185,7 @@ def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
         InvalidSettingsError: ``workers`` is not an integer >= 1.
     """
     count = check_workers(workers)
+    _start_resource_tracker()
     saved = {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS}
     os.environ.update({k: v for k, v in SINGLE_THREADED_BLAS.items() if saved[k] is None})
     pool = ProcessPoolExecutor(
@@ -199,6 +206,20 @@ def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
 
 
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker, if not running, immune to SIGHUP (module doc)."""
+    hup = getattr(signal, "SIGHUP", None)
+    if hup is None or threading.current_thread() is not threading.main_thread():
+        return  # no SIGHUP (Windows), or signal dispositions cannot be changed from this thread
+    from multiprocessing import resource_tracker
+
+    previous = signal.signal(hup, signal.SIG_IGN)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.signal(hup, previous)
 
 
 @contextmanager

@@ -397,6 +397,24 @@ def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int
     assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
 
 
+def test_sighup_to_the_process_group_prints_no_traceback(files: Path) -> None:
+    # As when the terminal closes: every process of the group gets SIGHUP, the workers and
+    # multiprocessing's resource tracker too.
+    process = subprocess.Popen(
+        [sys.executable, "-m", "sahgrasp", "solve", "many.json", "--workers", "2", "--inits",
+         "1000"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, encoding="utf-8", cwd=files,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+    )  # fmt: skip
+    workers = _wait_for_workers(process, 2)
+    os.killpg(process.pid, signal.SIGHUP)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyError" not in err, err
+    assert err.strip().splitlines()[-1] == "sahgrasp: interrupted"
+    psutil.wait_procs(workers, timeout=30)
+
+
 def test_interrupted_sequence_prints_the_resume_command(tmp_path: Path) -> None:
     process = start("sequence", "--grid", "3", "--problems", "30", "--rounds", "2",
                     "--workers", "1", "--out", "out dir", cwd=tmp_path)  # fmt: skip
@@ -424,6 +442,26 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
     err = process.stderr.read()
     assert process.wait(timeout=120) == 141
     assert err == ""
+
+
+@pytest.mark.parametrize("unbuffered", ["", "1"], ids=["buffered", "PYTHONUNBUFFERED"])
+def test_json_to_a_reader_that_closes_early_exits_141(tmp_path: Path, unbuffered: str) -> None:
+    # A document far larger than a pipe's buffer: the reader closes while it is being written.
+    problems = [{"name": f"p{i}", "contacts": []} for i in range(5000)]
+    (tmp_path / "t.json").write_text(json.dumps({"hand": "sah", "problems": problems}))
+    with (tmp_path / "err.txt").open("wb") as errors:  # a file: its 5000 lines block no pipe
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sahgrasp", "solve", "t.json", "--quiet", "--json", "-"],
+            stdout=subprocess.PIPE, stderr=errors, cwd=tmp_path,
+            env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": unbuffered},
+        )  # fmt: skip
+        assert process.stdout is not None
+        assert process.stdout.read(1) == b"{"
+        process.stdout.close()
+        code = process.wait(timeout=120)
+    err = (tmp_path / "err.txt").read_text()
+    assert code == 141, err[-2000:]
+    assert "Traceback" not in err and "error:" not in err, err[-2000:]
 
 
 @pytest.mark.parametrize(

@@ -64,6 +64,7 @@ __all__ = [
     "positive_int",
     "printable",
     "scheduler_address",
+    "write_stdout",
 ]
 
 HAND_OVERRIDE_HELP = f"use this hand instead of the targets file's: {HAND_HELP}"
@@ -226,6 +227,25 @@ def json_text(data: Any) -> str:
         return _layout(json_safe(data)) + "\n"
 
 
+def write_stdout(text: str) -> None:
+    """Write ``text`` to stdout whole, or raise ``BrokenPipeError`` when its reader went away.
+
+    With ``PYTHONUNBUFFERED`` set (as in many containers), ``sys.stdout.write`` makes one
+    ``write`` call and ignores how much of it went through: a reader that closes mid-document
+    left a truncated document and exit status 0. Here every byte is written or the error
+    raised, so that the command exits with 141 (see :mod:`sahgrasp.cli`).
+    """
+    sys.stdout.flush()
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # a stream without a file (a test harness)
+        sys.stdout.write(text)
+        return
+    data = memoryview(text.encode("utf-8", errors="backslashreplace"))
+    while data:
+        data = data[os.write(fd, data) :]
+
+
 def emit_json(data: Any, out: str | None) -> None:
     """Write ``data`` as strict JSON (undefined numbers as ``null``) to ``out``.
 
@@ -233,7 +253,7 @@ def emit_json(data: Any, out: str | None) -> None:
     """
     text = json_text(data)
     if out is None or out == "-":
-        sys.stdout.write(text)
+        write_stdout(text)
         return
     write_bytes_atomic(out, text.encode("utf-8"))
     print(f"wrote {out}")
