@@ -113,6 +113,8 @@ def test_every_option_has_help_and_shows_its_default() -> None:
                 assert "%(default)" not in shown, f"{parser.prog} {action.dest}: a flag's default"
             else:
                 assert "%(default)s" in shown, f"{parser.prog} {action.dest} hides its default"
+    demo = next(p for p in parsers if p.prog.endswith(" demo"))
+    assert "(default: sah; with --targets, the file's hand)" in " ".join(demo.format_help().split())
     sequence = next(p for p in parsers if p.prog.endswith(" sequence"))
     assert "about 10 minutes on 2 cores (SAH)" in " ".join(sequence.format_help().split())
 
@@ -474,6 +476,8 @@ def test_json_to_a_reader_that_closes_early_exits_141(tmp_path: Path, unbuffered
             r"sequence file deep\.json is nested too deeply",
         ),
         (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
+        (["info", "--hand", "h.urdf"], r"h\.urdf is a URDF, but a hand .* docs/hand\.md"),
+        (["solve", "one.json", "--hand", "h.xml"], r"h\.xml is a URDF, .*hand-description JSON"),
     ],
 )
 def test_malformed_hand_and_sequence_files(
@@ -482,6 +486,9 @@ def test_malformed_hand_and_sequence_files(
     (tmp_path / "one.json").write_bytes((files / "one.json").read_bytes())
     (tmp_path / "deep.json").write_bytes(b"[" * 100_000 + b"]" * 100_000)
     (tmp_path / "u16.json").write_bytes('{"name": "x"}'.encode("utf-16"))
+    urdf = (ROOT / "urdf" / "sah_right.urdf").read_bytes()
+    (tmp_path / "h.urdf").write_bytes(urdf)
+    (tmp_path / "h.xml").write_bytes(urdf)
     one_line_error(sahgrasp(*args, cwd=tmp_path), r"^sahgrasp: error: " + pattern)
 
 

@@ -161,10 +161,11 @@ def check_json_inputs(hand: str | None = None, sequence: str | Path | None = Non
     the loader's own error type. A hand name (``sah``) or a missing file is left to the loader.
 
     Raises:
-        HandModelError: The hand description is not UTF-8 JSON.
+        HandModelError: The hand description is a URDF, or not UTF-8 JSON.
         SequenceFileError: The sequence file is not UTF-8 JSON.
     """
     if hand is not None and Path(hand).suffix and Path(hand).is_file():
+        _refuse_urdf(hand)
         read_json(hand, "hand description", HandModelError)
     if sequence is not None and Path(sequence).is_file():
         read_json(sequence, "sequence file", SequenceFileError)
@@ -186,6 +187,22 @@ def check_outputs(outputs: Iterable[str | None], inputs: Iterable[str | Path | N
         if real in seen:
             raise OutputPathError(f"output {out} is given twice; give each output its own file")
         seen.add(real)
+
+
+def _refuse_urdf(hand: str) -> None:
+    """A URDF given where a hand description goes: say what is expected and how to make one."""
+    try:
+        with open(hand, "rb") as f:
+            start = f.read(512).lstrip(b"\xef\xbb\xbf \t\r\n")
+    except OSError:
+        return  # left to the loader, which names the file and the reason
+    if Path(hand).suffix.lower() == ".urdf" or start.startswith(b"<"):
+        raise HandModelError(
+            f'{hand} is a URDF, but a hand (--hand, a targets file\'s "hand") is sah, allegro or a '
+            "hand-description JSON, which "
+            "names the URDF and says which links are the fingertips and palm; write one as "
+            "docs/hand.md ('Adding another hand') shows"
+        )
 
 
 @contextlib.contextmanager
