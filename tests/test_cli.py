@@ -545,3 +545,23 @@ def test_package_exports_load_lazily() -> None:
     subprocess.run(
         [sys.executable, "-c", code], check=True, env={**os.environ, "PYTHONPATH": str(ROOT)}
     )
+
+
+def test_the_sequence_summary_says_what_its_columns_are(capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from sahgrasp.cli import sequence as command
+
+    round_ = argparse.Namespace(
+        index=1, lambdas=(0.444, 0.556), success_rates=np.array([0.5, 0.763]),
+        prior_success_rate=0.0, scanned=300,
+    )  # fmt: skip
+    result = argparse.Namespace(
+        rounds=[round_], cells_computed=9, ik_runs_computed=2700, wall_seconds=1.0
+    )
+    command._print_summary(result, "out")  # type: ignore[arg-type]
+    header, row = capsys.readouterr().out.splitlines()[:2]
+    for column in ("round", "chosen pose solves [%]", "earlier poses solved [%]", "scanned"):
+        assert column in header
+    assert "E_i" not in header and "SEQ" not in header
+    assert row.split() == ["1", "0.444", "0.556", "76.3", "0.0", "300"]
