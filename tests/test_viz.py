@@ -281,6 +281,23 @@ def test_a_row_of_examples_fits_a_1280x800_window(sah: Hand) -> None:
     assert in_view(np.concatenate(placed), eye, centre, aspect=1280 / 800)
 
 
+def test_a_targets_files_grasps_show_their_palm_side_and_stay_upright(sah: Hand) -> None:
+    # facing=False is how demo --targets draws: each grasp as the world has it, turned about z.
+    examples = [solve_example(sah, name) for name in EXAMPLE_NAMES]
+    with Viewer() as viewer:
+        show_examples(viewer, sah, examples, facing=False)
+        html = viewer.html()
+    eye = camera_eye(html)
+    for ex in examples:
+        T = transform(by_path(html, "set_transform")[f"/meshcat/grasps/{ex.name}"])
+        np.testing.assert_allclose(T[2, :3], [0.0, 0.0, 1.0], atol=1e-12)  # upright
+        contacts = transform_points(T, ex.contact_centre_m[None])[0]
+        wrist = transform_points(T, ex.result.q[None, :3])[0]
+        outward = contacts - wrist
+        if np.hypot(*outward[:2]) > 1e-3:
+            assert (eye - contacts)[:2] @ outward[:2] > 0, ex.name  # beyond the contacts
+
+
 # ----- colours --------------------------------------------------------------------------------
 def test_hex_color() -> None:
     assert hex_color((1.0, 0.0, 0.0, 1.0)) == 0xFF0000
