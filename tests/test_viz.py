@@ -434,6 +434,15 @@ def test_atlas_with_the_best_and_worst_hand_grasps(sah: Hand) -> None:
     assert "/meshcat/best/object" in objects and "/meshcat/worst/object" not in objects
     assert {"/meshcat/links/best", "/meshcat/links/worst"} <= set(objects)
     assert any(p.startswith("/meshcat/worst/hand/") for p in objects)
+    # Both hands and the can whole in a 1200x800 window: every drawn box corner and vertex.
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    drawn = [
+        transform_points(transform(by_path(html, "set_transform")[f"/meshcat/{name}"]),
+                         grasp_points(sah, grasp.q, grasp.obj))
+        for name, grasp in (("best", best), ("worst", worst))
+    ]  # fmt: skip
+    assert in_view(np.concatenate(drawn), eye, centre, aspect=1200 / 800)
 
 
 # ----- paper examples -------------------------------------------------------------------------
