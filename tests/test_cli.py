@@ -503,6 +503,7 @@ def test_bench_prints_its_table_and_writes_json_only_when_asked(tmp_path: Path) 
     done = sahgrasp("bench", "kinematics", "--calls", "3", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("bench kinematics: 3 calls") and "{" not in done.stdout
+    assert done.stderr == ""  # progress bars only on a terminal, not in a pipe or a log
     assert list(tmp_path.iterdir()) == []
     done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "k.json", cwd=tmp_path)
     assert done.returncode == 0 and "bench kinematics" in done.stdout

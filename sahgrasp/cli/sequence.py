@@ -93,7 +93,10 @@ class _Bar:
         if self.bar is None:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05)
+            self.bar = tqdm(
+                total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05,
+                disable=None,  # on a terminal only: no carriage returns in a log
+            )  # fmt: skip
         self.bar.set_description(f"round {p.round}/{p.rounds} {p.stage}", refresh=False)
         screening = p.stage == "screening"
         if screening:
