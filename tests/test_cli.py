@@ -218,7 +218,7 @@ def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
         (["info", "--json", "."], r"output \. is a folder"),
         (["atlas", "planar", "--plot", "one.json/p.png"], r"one\.json is not a folder"),
         (["atlas", "planar", "--plot", "o.png", "--json", "o.png"], r"o\.png is given twice"),
-        (["bench", "ik", "--targets", "one.json", "--plot", "one.json"], r"is the input file"),
+        (["bench", "ik", "--targets", "one.json", "--json", "one.json"], r"is the input file"),
         (["bench", "kinematics", "--json", "."], r"is a folder"),
         (["demo", "--html", "."], r"is a folder"),
         (["sequence", "--out", "one.json"], r"one\.json exists and is not a folder"),
