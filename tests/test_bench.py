@@ -173,9 +173,14 @@ def test_stage_profile_gives_nested_shares_of_one_build() -> None:
         bench_atlas.stage_profile("S4")
 
 
-def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
-    capsys: pytest.CaptureFixture[str],
+def test_bench_atlas_draws_progress_on_a_terminal_unless_quiet(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    from sahgrasp.bench import report
+
+    bench_atlas.run(repeats=1, cases=["S2"])
+    assert capsys.readouterr().err == ""  # stderr is no terminal here: no bars in a log
+    monkeypatch.setattr(report, "_is_terminal", lambda stream: True)
     bench_atlas.run(repeats=1, cases=["S2"])
     assert "bench atlas: cases" in capsys.readouterr().err
     bench_atlas.run(repeats=1, cases=["S2"], quiet=True)
