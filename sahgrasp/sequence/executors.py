@@ -95,9 +95,11 @@ def _dask_client(address: str) -> Iterator[Any]:
         with client:
             try:
                 yield client
-            except CancelledError:
+            except (CancelledError, OSError, RuntimeError):
+                # A lost scheduler cancels the chunks in flight (CancelledError); a submit after
+                # it fails on the closed connection. Either way the client is no longer running.
                 if client.status == "running":
-                    raise  # cancelled on purpose, not by a lost scheduler
+                    raise  # cancelled on purpose, or another failure: not a lost scheduler
                 raise SchedulerLostError(f"lost the Dask scheduler at {address} mid-run") from None
     finally:
         log.setLevel(level)
