@@ -37,7 +37,13 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.collision import Penetration, SelfCollision
-from sahgrasp.errors import HandModelError, InvalidConfigurationError, SahGraspError
+from sahgrasp.errors import (
+    HandModelError,
+    InvalidConfigurationError,
+    InvalidSettingsError,
+    InvalidTargetError,
+    SahGraspError,
+)
 from sahgrasp.hand_checks import (
     check_name,
     check_urdf,
@@ -676,8 +682,12 @@ class Hand:
         return self.lower + 1e-12, self.upper - 1e-12
 
     def check_q(self, q: ArrayLike) -> NDArray[np.float64]:
-        """Return ``q`` as a float array, or raise if its size is wrong or it holds NaN/inf."""
-        arr = np.asarray(q, dtype=np.float64)
+        """Return ``q`` as a float array, or raise if its size is wrong or it holds NaN/inf.
+
+        Raises:
+            InvalidConfigurationError: ``q`` is not numbers, has the wrong size or holds NaN/inf.
+        """
+        arr = _float_array("configuration", q)
         if arr.shape != (self.nq,):
             raise InvalidConfigurationError(
                 f"configuration of hand {self.description.name} must have {self.nq} values "
@@ -689,8 +699,12 @@ class Hand:
         return arr
 
     def within_limits(self, q: NDArray[np.float64], tol: float = 1e-9) -> bool:
-        """True if every joint coordinate is within its limits (mimic joints follow)."""
-        joints = self.finger_part(q)
+        """True if every joint coordinate is within its limits (mimic joints follow).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        joints = self.finger_part(self._finite(q))
         return bool(np.all(joints >= self.lower - tol) and np.all(joints <= self.upper + tol))
 
     def configuration(
@@ -704,16 +718,28 @@ class Hand:
             T_world_palm: Palm pose in ``world`` (identity if None).
             coordinates: ``q[7:]`` as an array, or a mapping from coordinate names (missing ones
                 take the middle of their range). Mimic joints cannot be set: they follow.
+
+        Raises:
+            InvalidConfigurationError: ``T_world_palm`` is not a ``pinocchio.SE3``, or the
+                coordinates have the wrong size or hold NaN/inf.
+            HandModelError: A coordinate name is not the hand's.
         """
         q = np.empty(self.nq)
-        pose = pin.SE3.Identity() if T_world_palm is None else T_world_palm
+        pose = _pose("T_world_palm", T_world_palm)
         self.wrist_part(q)[:] = pin.SE3ToXYZQUAT(pose)
         if coordinates is None or isinstance(coordinates, Mapping):
             self.finger_part(q)[:] = 0.5 * (self.lower + self.upper)
             for name, value in (coordinates or {}).items():
                 q[7 + self.coordinate_index(name)] = float(value)
         else:
-            self.finger_part(q)[:] = np.asarray(coordinates, dtype=np.float64)
+            joints = _float_array("coordinates", coordinates)
+            if joints.shape != (self.nq - _WRIST_NQ,):
+                raise InvalidConfigurationError(
+                    f"coordinates of hand {self.description.name} must be {self.nq - _WRIST_NQ} "
+                    f"values {list(self.coordinate_names)} or a mapping of them, got shape "
+                    f"{joints.shape}"
+                )
+            self.finger_part(q)[:] = joints
         return self.check_q(q)
 
     @staticmethod
@@ -732,7 +758,12 @@ class Hand:
         return pin.XYZQUATToSE3(q[:_WRIST_NQ])
 
     def joint_values(self, q: NDArray[np.float64]) -> dict[str, float]:
-        """Every URDF joint angle [rad] by name, mimic joints included (virtual ones excluded)."""
+        """Every URDF joint angle [rad] by name, mimic joints included (virtual ones excluded).
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        q = self._finite(q)
         coords = dict(zip(self.coordinate_names, self.finger_part(q).tolist(), strict=True))
         out = {n: coords[n] for n in self.joint_names}
         for mimic, (leader, scale, offset) in self.mimic_joints.items():
@@ -740,7 +771,12 @@ class Hand:
         return out
 
     def contact_parameters(self, q: NDArray[np.float64]) -> dict[str, tuple[float, float]]:
-        """Finger -> (pitch, yaw) [rad] of the virtual contact joints."""
+        """Finger -> (pitch, yaw) [rad] of the virtual contact joints.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        q = self._finite(q)
         return {
             f: (
                 float(q[7 + self.coordinate_index(f"{f}_contact_pitch")]),
@@ -763,11 +799,26 @@ class Hand:
         """Draw joint coordinates uniformly within limits (virtual joints in the contact region).
 
         Args:
-            rng: The random generator (the caller owns the seed).
+            rng: The random generator (the caller owns the seed), e.g.
+                ``np.random.default_rng(seed)``.
             T_world_palm: Wrist pose; a uniformly random rotation at the origin if None.
             collision_free: Redraw until the hand has no self-collision.
-            max_tries: Draws allowed before giving up with :class:`HandModelError`.
+            max_tries: Draws allowed (>= 1) before giving up with :class:`HandModelError`.
+
+        Raises:
+            InvalidSettingsError: ``rng`` is not a ``numpy.random.Generator``, or ``max_tries``
+                is not an integer >= 1.
+            InvalidConfigurationError: ``T_world_palm`` is not a ``pinocchio.SE3``.
+            HandModelError: No collision-free configuration in ``max_tries`` draws.
         """
+        if not isinstance(rng, np.random.Generator):
+            raise InvalidSettingsError(
+                "rng must be a numpy.random.Generator (np.random.default_rng(seed)), got "
+                f"{type(rng).__name__}"
+            )
+        if isinstance(max_tries, bool) or not isinstance(max_tries, int) or max_tries < 1:
+            raise InvalidSettingsError(f"max_tries must be an integer >= 1, got {max_tries!r}")
+        _pose("T_world_palm", T_world_palm)
         for _ in range(max_tries):
             pose = _random_rotation(rng) if T_world_palm is None else T_world_palm
             q = self.configuration(pose, rng.uniform(self.lower, self.upper))
@@ -844,13 +895,36 @@ class Hand:
         return np.asarray(J.dot(self._reduce))
 
     def _stack_layout(self, fingers: list[int]) -> _Layout:
-        """The layout of :meth:`contact_stack`, ``(p_i, r_i)`` per finger of ``fingers``."""
-        key = tuple(fingers)
-        layout = self._stack_layouts.get(key)
+        """The layout of :meth:`contact_stack`, ``(p_i, r_i)`` per finger of ``fingers``.
+
+        Raises:
+            InvalidTargetError: ``fingers`` is not a non-empty list of distinct finger indices.
+        """
+        try:
+            key = tuple(fingers)
+            layout = self._stack_layouts.get(key)
+        except TypeError:  # not iterable, or unhashable items
+            key, layout = (), None
         if layout is None:
+            self._check_finger_indices(fingers, key)
             rows = [(kind, i) for i in key for kind in ("point", "centre")]
             layout = self._stack_layouts[key] = self._layout(rows)
         return layout
+
+    def _check_finger_indices(self, fingers: object, key: tuple[object, ...]) -> None:
+        """Refuse what :meth:`_stack_layout` cannot serve (checked once per new selection)."""
+        count = len(self.fingers)
+        valid = (
+            len(key) > 0
+            and all(isinstance(i, int | np.integer) and not isinstance(i, bool) for i in key)
+            and all(0 <= int(i) < count for i in key)  # type: ignore[call-overload]
+            and len(set(key)) == len(key)
+        )
+        if not valid:
+            raise InvalidTargetError(
+                f"fingers must be distinct indices 0..{count - 1} into {list(self.fingers)} "
+                f"(None: all), got {fingers!r}"
+            )
 
     def _layout(self, blocks: list[tuple[str, int]]) -> _Layout:
         """Constant matrices of a list of (``point``/``centre``/``normal``, finger) 3-row blocks.
@@ -919,8 +993,12 @@ class Hand:
         return ContactJacobians(_contact_state(values), J[0], J[1], J[2])
 
     def frame_placements(self, q: NDArray[np.float64]) -> dict[str, pin.SE3]:
-        """World placement of every body frame (link) at ``q``, by link name."""
-        pin.framesForwardKinematics(self.model, self.data, q)
+        """World placement of every body frame (link) at ``q``, by link name.
+
+        Raises:
+            InvalidConfigurationError: ``q`` has the wrong size or holds NaN/inf.
+        """
+        pin.framesForwardKinematics(self.model, self.data, self._finite(q))
         return {
             f.name: self.data.oMf[i].copy()
             for i, f in enumerate(self.model.frames)
@@ -929,7 +1007,7 @@ class Hand:
 
     def contact_placement(self, q: NDArray[np.float64], finger: str) -> pin.SE3:
         """World placement of ``finger``'s contact frame (origin = point, x = outward normal)."""
-        pin.forwardKinematics(self.model, self.data, q)
+        pin.forwardKinematics(self.model, self.data, self._finite(q))
         frame = self._contact_frames[self._finger_index(finger)]
         return pin.updateFramePlacement(self.model, self.data, frame).copy()
 
@@ -1102,6 +1180,28 @@ def _skew_batch(v: NDArray[np.float64]) -> NDArray[np.float64]:
     S[:, 0, 1], S[:, 0, 2], S[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
     S[:, 1, 0], S[:, 2, 0], S[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
     return S
+
+
+def _pose(name: str, pose: object) -> pin.SE3:
+    """``pose`` if it is a ``pinocchio.SE3`` with finite values, the identity if None."""
+    if pose is None:
+        return pin.SE3.Identity()
+    if not isinstance(pose, pin.SE3):
+        raise InvalidConfigurationError(
+            f"{name} must be a pinocchio.SE3 (or None), got {type(pose).__name__}"
+        )
+    if not np.all(np.isfinite(pose.homogeneous)):
+        raise InvalidConfigurationError(f"{name} holds NaN or inf; all must be finite")
+    return pose
+
+
+def _float_array(name: str, values: object) -> NDArray[np.float64]:
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidConfigurationError(
+            f"{name} must be numbers, got {type(values).__name__}"
+        ) from None
 
 
 def _random_rotation(rng: np.random.Generator) -> pin.SE3:

@@ -29,6 +29,16 @@ SIGINT ends a worker at once and silently (the default action, not Python's
 ``KeyboardInterrupt``): Ctrl-C in a terminal reaches the whole process group, so the workers stop
 without printing a traceback each and without finishing their tasks, and the parent, which gets
 the ``KeyboardInterrupt``, closes a pool that has nothing left to wait for.
+
+SIGHUP (a closed terminal, ``kill -HUP`` of the process group) must not reach ``multiprocessing``'s
+resource tracker: it ignores SIGINT and SIGTERM but dies of SIGHUP, and the tracker started again
+for the pool's shutdown then prints a ``KeyError`` traceback for each semaphore it never saw.
+:func:`process_pool` therefore starts the tracker with SIGHUP ignored (an ignored signal stays
+ignored across ``exec``); the tracker still ends with this process, when its pipe closes.
+
+A Dask cluster is the other place work runs. :func:`check_scheduler_address` is the one check of a
+scheduler address (``--scheduler`` of every command, :func:`sahgrasp.sequence.open_executor`):
+it refuses what Dask would fail on later with a traceback, and what sahgrasp does not support.
 """
 
 from __future__ import annotations
@@ -36,6 +46,7 @@ from __future__ import annotations
 import ctypes
 import multiprocessing
 import os
+import re
 import signal
 import sys
 import threading
@@ -44,11 +55,16 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, wait
 from contextlib import contextmanager
 
-from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.errors import InvalidSettingsError, SahGraspError
 
 __all__ = [
+    "SCHEDULER_ADDRESS_FORMS",
+    "SCHEDULER_TIMEOUT_S",
     "SINGLE_THREADED_BLAS",
     "WORKERS_PER_CORE_LIMIT",
+    "SchedulerError",
+    "SchedulerLostError",
+    "check_scheduler_address",
     "check_workers",
     "die_with_parent",
     "process_pool",
@@ -89,6 +105,71 @@ def check_workers(workers: int | None) -> int:
     return workers
 
 
+SCHEDULER_ADDRESS_FORMS = "tcp://HOST:PORT or HOST:PORT (e.g. tcp://127.0.0.1:8786)"
+"""The scheduler addresses sahgrasp accepts, as said in its messages."""
+
+SCHEDULER_TIMEOUT_S = 10.0
+"""How long connecting (or reconnecting) to a Dask scheduler may take [s] before the run gives up.
+
+Dask's own default, 30 s, made a mistyped local address wait half a minute; a scheduler answers
+within a second on a local network, and a port where nothing listens is refused at once."""
+
+_HOST_PORT = re.compile(r"(?P<host>\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9.-]*[A-Za-z0-9])?)"
+                        r":(?P<port>[0-9]{1,5})")  # fmt: skip
+_UNSUPPORTED_SCHEMES = {
+    "tls": "TLS needs certificates, which sahgrasp does not pass on (reach a remote scheduler "
+    "over an SSH tunnel with tcp://)",
+    "inproc": "an in-process scheduler lives in another process's memory; pass the "
+    "dask.distributed.Client to the Python API instead",
+    "ws": "sahgrasp connects over TCP only",
+    "wss": "sahgrasp connects over TCP only",
+    "ucx": "sahgrasp connects over TCP only",
+}
+
+
+class SchedulerError(SahGraspError):
+    """A Dask scheduler address is malformed or unsupported, unreachable, or lost mid-run."""
+
+
+class SchedulerLostError(SchedulerError):
+    """The Dask scheduler went away mid-run: its chunks were cancelled; what was done is kept."""
+
+
+def check_scheduler_address(address: object) -> str:
+    """The Dask scheduler address ``address`` in its full form ``tcp://HOST:PORT``.
+
+    Only the address is checked here (no connection is made): its form, and a port in 1 .. 65535.
+
+    Args:
+        address: ``tcp://HOST:PORT`` or ``HOST:PORT``; HOST a name, an IPv4 address or a
+            bracketed IPv6 address.
+
+    Raises:
+        SchedulerError: Not a string, an empty or malformed address, a port out of range, or a
+            scheme sahgrasp does not support (``tls://``, ``ws://``, ``inproc://``...); the
+            message names the valid forms.
+    """
+    if not isinstance(address, str):
+        raise SchedulerError(
+            f"a Dask scheduler address must be a string, {SCHEDULER_ADDRESS_FORMS}; got {address!r}"
+        )
+    scheme, sep, rest = address.partition("://")
+    if not sep:
+        scheme, rest = "tcp", address
+    if scheme in _UNSUPPORTED_SCHEMES:
+        raise SchedulerError(
+            f"scheduler address {address!r} is not supported: {_UNSUPPORTED_SCHEMES[scheme]}; "
+            f"give {SCHEDULER_ADDRESS_FORMS}"
+        )
+    match = _HOST_PORT.fullmatch(rest) if scheme == "tcp" else None
+    if match is None or not 1 <= int(match["port"]) <= 65535:
+        raise SchedulerError(
+            f"{address!r} is not a Dask scheduler address: give {SCHEDULER_ADDRESS_FORMS}, "
+            "the port in 1..65535"
+        )
+    return f"tcp://{match['host']}:{int(match['port'])}"
+
+
 @contextmanager
 def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
     """Yield a ``ProcessPoolExecutor`` whose workers end when this process ends.
@@ -104,6 +185,7 @@ def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
         InvalidSettingsError: ``workers`` is not an integer >= 1.
     """
     count = check_workers(workers)
+    _start_resource_tracker()
     saved = {k: os.environ.get(k) for k in SINGLE_THREADED_BLAS}
     os.environ.update({k: v for k, v in SINGLE_THREADED_BLAS.items() if saved[k] is None})
     pool = ProcessPoolExecutor(
@@ -124,6 +206,20 @@ def process_pool(workers: int | None = None) -> Iterator[ProcessPoolExecutor]:
 
 
 _STOP_SIGNALS = ("SIGINT", "SIGTERM", "SIGHUP")
+
+
+def _start_resource_tracker() -> None:
+    """Start multiprocessing's resource tracker, if not running, immune to SIGHUP (module doc)."""
+    hup = getattr(signal, "SIGHUP", None)
+    if hup is None or threading.current_thread() is not threading.main_thread():
+        return  # no SIGHUP (Windows), or signal dispositions cannot be changed from this thread
+    from multiprocessing import resource_tracker
+
+    previous = signal.signal(hup, signal.SIG_IGN)
+    try:
+        resource_tracker.ensure_running()
+    finally:
+        signal.signal(hup, previous)
 
 
 @contextmanager

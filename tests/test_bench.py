@@ -178,10 +178,14 @@ def test_stage_profile_gives_nested_shares_of_one_build() -> None:
         bench_atlas.stage_profile("S4")
 
 
-def test_bench_atlas_draws_progress_on_stderr_unless_quiet(
+def test_bench_atlas_draws_progress_on_a_terminal_unless_quiet(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # bars are drawn on a terminal only
+    from sahgrasp.bench import report
+
+    bench_atlas.run(repeats=1, cases=["S2"])
+    assert capsys.readouterr().err == ""  # stderr is no terminal here: no bars in a log
+    monkeypatch.setattr(report, "_is_terminal", lambda stream: True)
     bench_atlas.run(repeats=1, cases=["S2"])
     assert "bench atlas: cases" in capsys.readouterr().err
     bench_atlas.run(repeats=1, cases=["S2"], quiet=True)
@@ -219,7 +223,13 @@ def test_bench_solve_runs_the_chosen_worker_counts() -> None:
     pytest.importorskip("psutil")
     from sahgrasp.bench import solve as bench_solve
 
-    doc = bench_solve.run(problems=6, lines=0, dask=False, workers=[1])
+    reports: list[tuple[str, int, int | None]] = []
+    doc = bench_solve.run(
+        problems=6, lines=0, dask=False, workers=[1],
+        progress=lambda stage, done, total: reports.append((stage, done, total)),
+    )  # fmt: skip
+    assert reports[-1] == ("bench solve: --workers 1", 6, 6)
+    assert all(0 <= done <= total for _, done, total in reports)  # type: ignore[operator]
     assert [case["where"] for case in doc["cases"]] == ["--workers 1"]
     assert doc["cases"][0]["lines"] == 6 and doc["cases"][0]["peak_rss_mb"] > 0
     assert doc["speedup_1_to_2_workers"] is None

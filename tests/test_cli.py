@@ -7,6 +7,7 @@ import json
 import os
 import re
 import signal
+import socket
 import stat
 import subprocess
 import sys
@@ -31,7 +32,7 @@ def sahgrasp(*args: object, cwd: Path, **kwargs: Any) -> subprocess.CompletedPro
     return subprocess.run(
         [sys.executable, "-m", "sahgrasp", *map(str, args)],
         capture_output=True, encoding="utf-8", errors="strict", cwd=cwd,
-        env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=300, **kwargs,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, **{"timeout": 300, **kwargs},
     )  # fmt: skip
 
 
@@ -113,6 +114,8 @@ def test_every_option_has_help_and_shows_its_default() -> None:
                 assert "%(default)" not in shown, f"{parser.prog} {action.dest}: a flag's default"
             else:
                 assert "%(default)s" in shown, f"{parser.prog} {action.dest} hides its default"
+    demo = next(p for p in parsers if p.prog.endswith(" demo"))
+    assert "(default: sah; with --targets, the file's hand)" in " ".join(demo.format_help().split())
     sequence = next(p for p in parsers if p.prog.endswith(" sequence"))
     assert "about 10 minutes on 2 cores (SAH)" in " ".join(sequence.format_help().split())
 
@@ -179,6 +182,28 @@ def test_cli_defaults_are_the_library_defaults() -> None:
         (["bench", "ik", "--problems", "0"], r"--problems: 0 .* >= 1"),
         (["demo", "--inits", "5000"], r"--inits: 5000 .* in 1\.\.1000"),
         (["info", "--bogus"], r"unrecognized arguments: --bogus"),
+        (["solve", "one.json", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask sch"),
+        (["solve", "one.json", "--scheduler", ""], r"--scheduler: '' is not a Dask scheduler"),
+        (["solve", "one.json", "--scheduler", "tcp://"], r"--scheduler: 'tcp://' is not a Dask"),
+        (
+            ["solve", "one.json", "--scheduler", "http://h:80"],
+            r"--scheduler: .*give tcp://HOST:PORT or HOST",
+        ),
+        (
+            ["solve", "one.json", "--scheduler", "inproc://x"],
+            r"--scheduler: .*'inproc://x' is not supp",
+        ),
+        (
+            ["sequence", "--out", "d", "--scheduler", "tls://h:1"],
+            r"--scheduler: .*'tls://h:1' is not supp",
+        ),
+        (["sequence", "--out", "d", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask"),
+        (
+            ["bench", "ik", "--plot", "fig"],
+            r"--plot: 'fig' is not an image file name \(no suffix\)",
+        ),
+        (["bench", "ik", "--plot", "fig.txt"], r"--plot: 'fig.txt' .*unknown suffix '\.txt'"),
+        (["atlas", "planar", "--plot", "out"], r"--plot: 'out' is not an image file name"),
     ],
 )
 def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
@@ -194,7 +219,7 @@ def test_usage_errors(files: Path, args: list[str], pattern: str) -> None:
         (["info", "--json", "."], r"output \. is a folder"),
         (["atlas", "planar", "--plot", "one.json/p.png"], r"one\.json is not a folder"),
         (["atlas", "planar", "--plot", "o.png", "--json", "o.png"], r"o\.png is given twice"),
-        (["bench", "ik", "--targets", "one.json", "--plot", "one.json"], r"is the input file"),
+        (["bench", "ik", "--targets", "one.json", "--json", "one.json"], r"is the input file"),
         (["bench", "kinematics", "--json", "."], r"is a folder"),
         (["demo", "--html", "."], r"is a folder"),
         (["sequence", "--out", "one.json"], r"one\.json exists and is not a folder"),
@@ -228,6 +253,16 @@ def test_unreadable_targets_files(tmp_path: Path, content: bytes | None, pattern
     one_line_error(
         sahgrasp("solve", "missing.json", cwd=tmp_path), r"^sahgrasp: error: .*" + pattern
     )
+
+
+def test_a_refused_scheduler_connection_is_one_line_at_once(files: Path) -> None:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]  # nothing listens there once closed
+    for args in (["solve", "one.json"], ["sequence", "--out", "d"]):
+        done = sahgrasp(*args, "--scheduler", f"127.0.0.1:{port}", cwd=files, timeout=20)
+        one_line_error(done, rf"cannot reach the Dask scheduler at tcp://127\.0\.0\.1:{port}")
+    assert not (files / "d").exists()
 
 
 def test_a_folder_as_targets(tmp_path: Path) -> None:
@@ -367,6 +402,24 @@ def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int
     assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
 
 
+def test_sighup_to_the_process_group_prints_no_traceback(files: Path) -> None:
+    # As when the terminal closes: every process of the group gets SIGHUP, the workers and
+    # multiprocessing's resource tracker too.
+    process = subprocess.Popen(
+        [sys.executable, "-m", "sahgrasp", "solve", "many.json", "--workers", "2", "--inits",
+         "1000"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, encoding="utf-8", cwd=files,
+        env={**os.environ, "PYTHONPATH": str(ROOT)}, start_new_session=True,
+    )  # fmt: skip
+    workers = _wait_for_workers(process, 2)
+    os.killpg(process.pid, signal.SIGHUP)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyError" not in err, err
+    assert err.strip().splitlines()[-1] == "sahgrasp: interrupted"
+    psutil.wait_procs(workers, timeout=30)
+
+
 @pytest.mark.slow
 def test_interrupted_sequence_prints_the_resume_command(tmp_path: Path) -> None:
     process = start("sequence", "--grid", "3", "--problems", "30", "--rounds", "2",
@@ -397,6 +450,26 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
     assert err == ""
 
 
+@pytest.mark.parametrize("unbuffered", ["", "1"], ids=["buffered", "PYTHONUNBUFFERED"])
+def test_json_to_a_reader_that_closes_early_exits_141(tmp_path: Path, unbuffered: str) -> None:
+    # A document far larger than a pipe's buffer: the reader closes while it is being written.
+    problems = [{"name": f"p{i}", "contacts": []} for i in range(5000)]
+    (tmp_path / "t.json").write_text(json.dumps({"hand": "sah", "problems": problems}))
+    with (tmp_path / "err.txt").open("wb") as errors:  # a file: its 5000 lines block no pipe
+        process = subprocess.Popen(
+            [sys.executable, "-m", "sahgrasp", "solve", "t.json", "--quiet", "--json", "-"],
+            stdout=subprocess.PIPE, stderr=errors, cwd=tmp_path,
+            env={**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": unbuffered},
+        )  # fmt: skip
+        assert process.stdout is not None
+        assert process.stdout.read(1) == b"{"
+        process.stdout.close()
+        code = process.wait(timeout=120)
+    err = (tmp_path / "err.txt").read_text()
+    assert code == 141, err[-2000:]
+    assert "Traceback" not in err and "error:" not in err, err[-2000:]
+
+
 @pytest.mark.parametrize(
     ("args", "pattern"),
     [
@@ -407,6 +480,8 @@ def test_a_closed_pipe_ends_quietly(tmp_path: Path) -> None:
             r"sequence file deep\.json is nested too deeply",
         ),
         (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
+        (["info", "--hand", "h.urdf"], r"h\.urdf is a URDF, but a hand .* docs/hand\.md"),
+        (["solve", "one.json", "--hand", "h.xml"], r"h\.xml is a URDF, .*hand-description JSON"),
     ],
 )
 def test_malformed_hand_and_sequence_files(
@@ -415,6 +490,9 @@ def test_malformed_hand_and_sequence_files(
     (tmp_path / "one.json").write_bytes((files / "one.json").read_bytes())
     (tmp_path / "deep.json").write_bytes(b"[" * 100_000 + b"]" * 100_000)
     (tmp_path / "u16.json").write_bytes('{"name": "x"}'.encode("utf-16"))
+    urdf = (ROOT / "urdf" / "sah_right.urdf").read_bytes()
+    (tmp_path / "h.urdf").write_bytes(urdf)
+    (tmp_path / "h.xml").write_bytes(urdf)
     one_line_error(sahgrasp(*args, cwd=tmp_path), r"^sahgrasp: error: " + pattern)
 
 
@@ -429,6 +507,7 @@ def test_bench_prints_its_table_and_writes_json_only_when_asked(tmp_path: Path) 
     done = sahgrasp("bench", "kinematics", "--calls", "3", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith("bench kinematics: 3 calls") and "{" not in done.stdout
+    assert done.stderr == ""  # progress bars only on a terminal, not in a pipe or a log
     assert list(tmp_path.iterdir()) == []
     done = sahgrasp("bench", "kinematics", "--calls", "3", "--json", "k.json", cwd=tmp_path)
     assert done.returncode == 0 and "bench kinematics" in done.stdout
@@ -441,6 +520,15 @@ def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr
     assert "| can | without object |" in done.stdout and "with object |" not in done.stdout
     assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
+
+
+def test_bench_ik_reports_its_plot_under_the_users_name(tmp_path: Path) -> None:
+    args = ("bench", "ik", "--problems", "2", "--peers", "--quiet", "--plot", "fig.png")
+    done = sahgrasp(*args, "--json", "-", cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout, parse_constant=pytest.fail)["plot"] == "fig.png"
+    assert done.stderr.strip().splitlines() == ["wrote fig.png"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig.png"]
 
 
 @pytest.mark.slow
@@ -794,3 +882,23 @@ def test_solve_lines_and_its_bar_do_not_interleave_on_a_terminal(files: Path) ->
         assert line.rstrip("\r").rsplit("\r", 1)[-1].split(":")[0] in names, repr(line)
     piped = sahgrasp("solve", "many.json", "--inits", "1", "--json", os.devnull, cwd=files)
     assert "\r" not in piped.stderr and "\r" not in piped.stdout
+
+
+def test_the_sequence_summary_says_what_its_columns_are(capsys: pytest.CaptureFixture[str]) -> None:
+    import numpy as np
+
+    from sahgrasp.cli import sequence as command
+
+    round_ = argparse.Namespace(
+        index=1, lambdas=(0.444, 0.556), success_rates=np.array([0.5, 0.763]),
+        prior_success_rate=0.0, scanned=300,
+    )  # fmt: skip
+    result = argparse.Namespace(
+        rounds=[round_], cells_computed=9, ik_runs_computed=2700, wall_seconds=1.0
+    )
+    command._print_summary(result, "out")  # type: ignore[arg-type]
+    header, row = capsys.readouterr().out.splitlines()[:2]
+    for column in ("round", "chosen pose solves [%]", "earlier poses solved [%]", "scanned"):
+        assert column in header
+    assert "E_i" not in header and "SEQ" not in header
+    assert row.split() == ["1", "0.444", "0.556", "76.3", "0.0", "300"]

@@ -2,12 +2,26 @@
 
 from __future__ import annotations
 
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import pytest
 
+from sahgrasp.contacts import save_targets
 from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.hand import load_hand
+from sahgrasp.ik import random_problems
+from sahgrasp.parallel import SchedulerError
 from sahgrasp.sequence.executors import open_executor
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
 def test_an_executor_is_used_as_is_and_left_open() -> None:
@@ -20,3 +34,90 @@ def test_an_executor_is_used_as_is_and_left_open() -> None:
 def test_anything_else_is_refused_naming_what_is_valid() -> None:
     with pytest.raises(InvalidSettingsError, match="Dask scheduler address"), open_executor(42):
         pass
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def test_a_malformed_scheduler_address_is_refused_before_connecting() -> None:
+    with pytest.raises(SchedulerError, match="give tcp://HOST:PORT"), open_executor("bogus"):
+        pass
+
+
+def test_a_refused_connection_fails_at_once_with_one_line() -> None:
+    port = _free_port()  # nothing listens there now
+    with (
+        pytest.raises(SchedulerError, match=rf"tcp://127\.0\.0\.1:{port}: Connection refused"),
+        open_executor(f"127.0.0.1:{port}"),
+    ):
+        pass
+
+
+def _sahgrasp(*args: object, cwd: Path) -> subprocess.Popen[str]:
+    return subprocess.Popen(
+        [sys.executable, "-m", "sahgrasp", *map(str, args)], cwd=cwd, env=ENV,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, encoding="utf-8",
+    )  # fmt: skip
+
+
+def _lines(path: Path) -> int:
+    try:
+        return path.read_bytes().count(b"\n")
+    except FileNotFoundError:
+        return 0
+
+
+def _results(path: Path) -> list[dict[str, object]]:
+    """The results of a JSON Lines output without their times (which differ run to run)."""
+    lines = path.read_text(encoding="utf-8").splitlines()[1:]
+    return [
+        {k: v for k, v in json.loads(line).items() if not k.startswith("time")} for line in lines
+    ]
+
+
+@pytest.mark.slow
+def test_a_scheduler_lost_mid_run_ends_in_one_line_and_the_part_resumes(tmp_path: Path) -> None:
+    hand = load_hand("sah")
+    save_targets(tmp_path / "t.json", "sah", random_problems(hand, 300, 3) * 10)
+    port = _free_port()
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", str(port),
+         "--no-dashboard"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV,
+    )  # fmt: skip
+    worker = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
+         "--nthreads", "1", "--no-dashboard"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=ENV,
+    )  # fmt: skip
+    try:
+        args = ("solve", "t.json", "--init", "random", "--inits", "50", "--quiet")
+        run = _sahgrasp(*args, "--scheduler", f"127.0.0.1:{port}", "--json", "r.jsonl",
+                        cwd=tmp_path)  # fmt: skip
+        part = tmp_path / "r.jsonl.part"
+        deadline = time.monotonic() + 240
+        while _lines(part) < 2 and run.poll() is None:  # the header and one chunk's results
+            assert time.monotonic() < deadline, "no result reached the .part"
+            time.sleep(0.1)
+        scheduler.kill()
+        _, err = run.communicate(timeout=120)
+    finally:
+        for process in (scheduler, worker):
+            process.kill()
+            process.wait()
+    assert run.returncode == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith(
+        f"sahgrasp: error: lost the Dask scheduler at tcp://127.0.0.1:{port}"
+    )
+    assert "results so far in r.jsonl.part; continue with: sahgrasp solve" in lines[0]
+    assert part.exists() and not (tmp_path / "r.jsonl").exists()
+    resumed = _sahgrasp(*args, "--json", "r.jsonl", "--resume", cwd=tmp_path)
+    assert resumed.wait(timeout=300) in (0, 1), resumed.communicate()
+    whole = _sahgrasp(*args, "--json", "whole.jsonl", cwd=tmp_path)
+    assert whole.wait(timeout=300) in (0, 1), whole.communicate()
+    assert _results(tmp_path / "r.jsonl") == _results(tmp_path / "whole.jsonl")

@@ -14,7 +14,13 @@ from pathlib import Path
 import pytest
 
 from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.parallel import SINGLE_THREADED_BLAS, check_workers, process_pool
+from sahgrasp.parallel import (
+    SINGLE_THREADED_BLAS,
+    SchedulerError,
+    check_scheduler_address,
+    check_workers,
+    process_pool,
+)
 
 psutil = pytest.importorskip("psutil")
 
@@ -149,3 +155,42 @@ def test_bad_worker_counts_are_refused(workers: object) -> None:
 def test_default_is_one_worker_per_core() -> None:
     assert check_workers(None) == (os.cpu_count() or 1)
     assert check_workers(3) == 3
+
+
+@pytest.mark.parametrize(
+    ("address", "pattern"),
+    [
+        ("bogus", r"'bogus' is not a Dask scheduler address: give tcp://HOST:PORT or HOST:PORT"),
+        ("", r"'' is not a Dask scheduler address"),
+        ("tcp://", r"'tcp://' is not a Dask scheduler address"),
+        ("tcp://host:0", r"the port in 1\.\.65535"),
+        ("tcp://host:65536", r"the port in 1\.\.65535"),
+        ("tcp://host:8786/path", r"is not a Dask scheduler address"),
+        (" host:8786", r"is not a Dask scheduler address"),
+        ("http://host:80", r"'http://host:80' is not a Dask scheduler address"),
+        ("inproc://x", r"'inproc://x' is not supported: .*give tcp://HOST:PORT"),
+        ("tls://host:8786", r"'tls://host:8786' is not supported: TLS needs certificates"),
+        ("ws://host:8786", r"is not supported: sahgrasp connects over TCP only"),
+        (None, r"must be a string"),
+        (8786, r"must be a string"),
+    ],
+)
+def test_bad_scheduler_addresses_are_refused_naming_the_valid_forms(
+    address: object, pattern: str
+) -> None:
+    with pytest.raises(SchedulerError, match=pattern):
+        check_scheduler_address(address)
+
+
+@pytest.mark.parametrize(
+    ("address", "full"),
+    [
+        ("tcp://127.0.0.1:8786", "tcp://127.0.0.1:8786"),
+        ("127.0.0.1:8786", "tcp://127.0.0.1:8786"),
+        ("cluster-head.example.org:1", "tcp://cluster-head.example.org:1"),
+        ("[::1]:8786", "tcp://[::1]:8786"),
+        ("tcp://host:08786", "tcp://host:8786"),
+    ],
+)
+def test_scheduler_addresses_in_their_full_form(address: str, full: str) -> None:
+    assert check_scheduler_address(address) == full

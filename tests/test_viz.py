@@ -282,6 +282,23 @@ def test_a_row_of_examples_fits_a_1280x800_window(sah: Hand) -> None:
     assert in_view(np.concatenate(placed), eye, centre, aspect=1280 / 800)
 
 
+def test_a_targets_files_grasps_show_their_palm_side_and_stay_upright(sah: Hand) -> None:
+    # facing=False is how demo --targets draws: each grasp as the world has it, turned about z.
+    examples = [solve_example(sah, name) for name in EXAMPLE_NAMES]
+    with Viewer() as viewer:
+        show_examples(viewer, sah, examples, facing=False)
+        html = viewer.html()
+    eye = camera_eye(html)
+    for ex in examples:
+        T = transform(by_path(html, "set_transform")[f"/meshcat/grasps/{ex.name}"])
+        np.testing.assert_allclose(T[2, :3], [0.0, 0.0, 1.0], atol=1e-12)  # upright
+        contacts = transform_points(T, ex.contact_centre_m[None])[0]
+        wrist = transform_points(T, ex.result.q[None, :3])[0]
+        outward = contacts - wrist
+        if np.hypot(*outward[:2]) > 1e-3:
+            assert (eye - contacts)[:2] @ outward[:2] > 0, ex.name  # beyond the contacts
+
+
 # ----- colours --------------------------------------------------------------------------------
 def test_hex_color() -> None:
     assert hex_color((1.0, 0.0, 0.0, 1.0)) == 0xFF0000
@@ -418,6 +435,15 @@ def test_atlas_with_the_best_and_worst_hand_grasps(sah: Hand) -> None:
     assert "/meshcat/best/object" in objects and "/meshcat/worst/object" not in objects
     assert {"/meshcat/links/best", "/meshcat/links/worst"} <= set(objects)
     assert any(p.startswith("/meshcat/worst/hand/") for p in objects)
+    # Both hands and the can whole in a 1200x800 window: every drawn box corner and vertex.
+    eye = camera_eye(html)
+    centre = -transform(by_path(html, "set_transform")["/meshcat"])[:3, 3]
+    drawn = [
+        transform_points(transform(by_path(html, "set_transform")[f"/meshcat/{name}"]),
+                         grasp_points(sah, grasp.q, grasp.obj))
+        for name, grasp in (("best", best), ("worst", worst))
+    ]  # fmt: skip
+    assert in_view(np.concatenate(drawn), eye, centre, aspect=1200 / 800)
 
 
 # ----- paper examples -------------------------------------------------------------------------
@@ -524,3 +550,36 @@ def test_bad_screenshot_requests_are_refused(tmp_path: Path, page: Path) -> None
     with pytest.raises(ScreenshotError, match="attempts >= 1"):
         screenshot(page, tmp_path / "out.png", attempts=0)
     assert main(["screenshot", str(page), str(tmp_path / "out.png"), "--size", "12x"]) == 2
+
+
+ARGS_SEEN = 'printf "%s\\n" "$@" > "$(dirname "$0")/args.txt"\n' + WRITE_SHOT
+
+
+@pytest.mark.parametrize("root", [False, True], ids=["user", "root"])
+def test_the_sandbox_is_off_only_for_root(
+    tmp_path: Path, page: Path, monkeypatch: pytest.MonkeyPatch, root: bool
+) -> None:
+    monkeypatch.setattr(os, "geteuid", lambda: 0 if root else 1000)
+    chromium = fake_chromium(tmp_path, ARGS_SEEN)
+    screenshot(page, tmp_path / "out.png", timeout_s=30, chromium=chromium)
+    args = (tmp_path / "args.txt").read_text().splitlines()
+    assert ("--no-sandbox" in args) == root
+    assert "--headless" in args and "--window-size=1200,800" in args
+
+
+@pytest.mark.parametrize("size", [(0, 800), (15, 800), (1200, 8193), (10**6, 10**6), (1200,)])
+def test_window_sizes_are_bounded(tmp_path: Path, page: Path, size: tuple[int, ...]) -> None:
+    with pytest.raises(ScreenshotError, match=r"size must be \(width, height\) in 16\.\.8192 px"):
+        screenshot(page, tmp_path / "out.png", size)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("text", ["8193x800", "1200x100000", "15x15", "0x0", "5x800"])
+def test_the_size_option_is_bounded_and_shows_its_default(
+    tmp_path: Path, page: Path, text: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["screenshot", str(page), str(tmp_path / "out.png"), "--size", text]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "--size: width and height must be in 16..8192 px" in line
+    assert main(["screenshot", "--help"]) == 0
+    shown = " ".join(capsys.readouterr().out.split())
+    assert "(default: 1200x800)" in shown and "16..8192" in shown

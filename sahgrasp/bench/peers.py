@@ -20,6 +20,7 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
+from sahgrasp.bench.extras import install_command
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import Hand
 from sahgrasp.ik.initial import hang_from_thumb
@@ -28,8 +29,9 @@ from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings, InnerSolver
 __all__ = ["BENCH_EXTRA", "PEERS", "PEER_MODULES", "available_peers", "pink_attempt",
            "scipy_attempt"]  # fmt: skip
 
-BENCH_EXTRA = 'pip install -e ".[bench]"'
-"""How to install the optional peers (the ``bench`` extra of the package)."""
+BENCH_EXTRA = 'pip install "sahgrasp[bench]"'
+"""How to install the optional peers (the ``bench`` extra of the package) from the package index;
+messages say :func:`sahgrasp.bench.extras.install_command`, which fits an editable install too."""
 
 
 def _finish(
@@ -137,5 +139,6 @@ def available_peers(names: Sequence[str]) -> tuple[list[str], dict[str, str]]:
         if missing is None:
             ready.append(name)
         else:
-            skipped[name] = f"module {missing!r} is not installed; install it with {BENCH_EXTRA}"
+            hint = install_command("bench")
+            skipped[name] = f"module {missing!r} is not installed; install it with {hint}"
     return ready, skipped

@@ -8,6 +8,7 @@ its JSON document; :func:`summary_table` turns any benchmark's document into a s
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -25,12 +26,23 @@ Document = dict[str, Any]
 def progress_reporter(
     progress: ProgressCallback | None, quiet: bool
 ) -> Iterator[ProgressCallback | None]:
-    """The callback a benchmark reports to: ``progress`` if given, else stderr bars unless quiet."""
-    if progress is not None or quiet:
+    """The callback a benchmark reports to: ``progress`` if given, else stderr bars unless quiet.
+
+    Bars are drawn only on a terminal: in a log file or a pipe their carriage returns and
+    redraws are noise, not progress.
+    """
+    if progress is not None or quiet or not _is_terminal(sys.stderr):
         yield progress
         return
     with StderrProgress() as bar:
         yield bar
+
+
+def _is_terminal(stream: object) -> bool:
+    try:
+        return bool(stream.isatty())  # type: ignore[attr-defined]
+    except (AttributeError, ValueError):  # no stream, or a closed one
+        return False
 
 
 def _ik_table(doc: Document) -> str:

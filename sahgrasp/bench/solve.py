@@ -26,9 +26,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from sahgrasp.bench.extras import install_command
+from sahgrasp.bench.report import progress_reporter
 from sahgrasp.errors import InvalidSettingsError
 from sahgrasp.hand import load_hand
 from sahgrasp.ik import random_problems
+from sahgrasp.progress import ProgressCallback
 
 __all__ = ["run"]
 
@@ -74,8 +77,40 @@ def _sample(roots: list[Any], cpu: dict[int, float]) -> int:
     return total
 
 
-def _case(targets: Path, where: list[str], extra: list[Any]) -> dict[str, Any]:
-    """Run one ``sahgrasp solve`` and sample its memory (and that of ``extra`` processes)."""
+class _Lines:
+    """Counts the result lines a running ``solve`` has written to its ``.part`` so far."""
+
+    def __init__(self, part: Path) -> None:
+        self.part = part
+        self.count = -1  # the header line is no result
+        self.handle: Any = None
+
+    def __call__(self) -> int:
+        if self.handle is None:
+            try:
+                self.handle = self.part.open("rb")
+            except FileNotFoundError:
+                return 0
+        self.count += self.handle.read().count(b"\n")
+        return max(self.count, 0)
+
+    def close(self) -> None:
+        if self.handle is not None:
+            self.handle.close()
+
+
+def _case(
+    targets: Path,
+    where: list[str],
+    extra: list[Any],
+    total: int,
+    progress: ProgressCallback | None,
+    label: str = "",
+) -> dict[str, Any]:
+    """Run one ``sahgrasp solve`` and sample its memory (and that of ``extra`` processes).
+
+    ``progress`` hears of the results written so far, out of ``total`` lines.
+    """
     import psutil
 
     out = targets.with_name(f"results-{time.monotonic_ns()}.jsonl")
@@ -87,10 +122,19 @@ def _case(targets: Path, where: list[str], extra: list[Any]) -> dict[str, Any]:
     root = psutil.Process(process.pid)
     peak = 0
     cpu: dict[int, float] = {}
-    while process.poll() is None:
-        peak = max(peak, _sample([root, *extra], cpu))
-        time.sleep(SAMPLE_S)
+    written = _Lines(out.with_name(out.name + ".part"))
+    stage = f"bench solve: {label or ' '.join(where)}"
+    try:
+        while process.poll() is None:
+            peak = max(peak, _sample([root, *extra], cpu))
+            if progress is not None:
+                progress(stage, min(written(), total), total)
+            time.sleep(SAMPLE_S)
+    finally:
+        written.close()
     wall = time.perf_counter() - started
+    if progress is not None:
+        progress(stage, total, total)
     stdout, stderr = process.communicate()
     if process.returncode not in (0, 1):
         raise InvalidSettingsError(f"{' '.join(command)} failed: {stderr.decode()[-500:]}")
@@ -108,14 +152,15 @@ def _case(targets: Path, where: list[str], extra: list[Any]) -> dict[str, Any]:
     }
 
 
-def _dask_case(targets: Path) -> dict[str, Any]:
+def _dask_case(targets: Path, total: int, progress: ProgressCallback | None) -> dict[str, Any]:
     import psutil
     from dask.distributed import LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:
         pids = [w.pid for w in cluster.workers.values() if getattr(w, "pid", None)]
         extra = [psutil.Process(pid) for pid in pids]
-        result = _case(targets, ["--scheduler", cluster.scheduler_address], extra)
+        where = ["--scheduler", cluster.scheduler_address]
+        result = _case(targets, where, extra, total, progress, "dask LocalCluster")
     return {**result, "where": "dask LocalCluster, 2 workers"}
 
 
@@ -125,6 +170,8 @@ def run(
     seed: int = 9090,
     dask: bool = True,
     workers: Sequence[int] = (1, 2),
+    quiet: bool = False,
+    progress: ProgressCallback | None = None,
 ) -> dict[str, Any]:
     """Time ``sahgrasp solve`` on ``problems`` random SAH problems and on ``lines`` mostly invalid.
 
@@ -136,6 +183,8 @@ def run(
         dask: Also run on a Dask LocalCluster of 2 workers.
         workers: The local worker counts to run; the speed-up is reported when 1 and 2 are
             among them.
+        quiet: No progress bars on stderr.
+        progress: Reports the results written, per case (instead of the bars).
 
     Returns:
         The cases (wall time, lines per second, peak memory), the speed-up from 1 to 2 workers
@@ -147,23 +196,23 @@ def run(
     if importlib.util.find_spec("psutil") is None:
         raise InvalidSettingsError(
             "bench solve measures memory with psutil, which is not installed: "
-            'pip install -e ".[bench]"'
+            + install_command("bench")
         )
-    with tempfile.TemporaryDirectory(prefix="sahgrasp-bench-solve-") as folder:
+    with (
+        tempfile.TemporaryDirectory(prefix="sahgrasp-bench-solve-") as folder,
+        progress_reporter(progress, quiet) as report,
+    ):
         targets = Path(folder) / "random.jsonl"
         _write_problems(targets, problems, seed)
-        cases = [_case(targets, ["--workers", str(n)], []) for n in workers]
+        cases = [_case(targets, ["--workers", str(n)], [], problems, report) for n in workers]
         if dask:
-            cases.append(_dask_case(targets))
+            cases.append(_dask_case(targets, problems, report))
         if lines:
             mostly_invalid = Path(folder) / "mostly-invalid.jsonl"
             _write_problems(mostly_invalid, lines, seed + 1, VALID_EVERY)
-            cases.append(
-                {
-                    **_case(mostly_invalid, ["--workers", "2"], []),
-                    "where": "mostly invalid, 2 workers",
-                }
-            )
+            label = "mostly invalid, 2 workers"
+            case = _case(mostly_invalid, ["--workers", "2"], [], lines, report, label)
+            cases.append({**case, "where": label})
     rate = {case["where"]: case["problems_per_s"] for case in cases}
     return {
         "benchmark": "solve",

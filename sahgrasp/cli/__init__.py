@@ -114,12 +114,20 @@ def _os_error(exc: OSError) -> str:
 
 def _run(argv: Sequence[str] | None) -> int:
     args = _parser().parse_args(argv)
+    hint = getattr(args, "on_interrupt", None)
     try:
         code = int(args.run(args))
     except KeyboardInterrupt:
-        hint = getattr(args, "on_interrupt", None)
         print(f"sahgrasp: {hint(args) if hint else 'interrupted'}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except SahGraspError as exc:
+        from sahgrasp.parallel import SchedulerLostError
+
+        if not isinstance(exc, SchedulerLostError) or hint is None:
+            raise
+        # A lost scheduler stops the run as an interruption does: say how to continue it.
+        resume = hint(args).removeprefix("interrupted")
+        raise SchedulerLostError(f"{exc}{resume}") from None
     sys.stdout.flush()  # a closed pipe shows here, while BrokenPipeError can still be handled
     return code
 

@@ -18,6 +18,7 @@ from sahgrasp.cli.common import (
     check_outputs,
     emit_json,
     human_stream,
+    image_path,
     output_file,
 )
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS, add_atlas_arguments, atlas_geometry
@@ -69,6 +70,7 @@ def add_parser(sub: Any) -> None:
     add_json_argument(p, "the summary")
     p.add_argument(
         "--plot",
+        type=image_path,
         default=None,
         metavar="PNG",
         help="atlas coloured by the index, PNG (planar: Fig. 9, every index and the grasps)",

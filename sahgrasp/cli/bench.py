@@ -16,6 +16,8 @@ from sahgrasp.cli.common import (
     check_json_inputs,
     check_outputs,
     emit_json,
+    human_stream,
+    image_path,
     nonnegative_int,
     output_file,
     positive_int,
@@ -54,7 +56,13 @@ def _ik(benches: Any) -> None:
     ik.add_argument(
         "--peer-problems", type=positive_int, default=200, help="problems the peers solve"
     )
-    ik.add_argument("--plot", default=None, metavar="PNG", help="write the Fig. 9 figure, PNG")
+    ik.add_argument(
+        "--plot",
+        type=image_path,
+        default=None,
+        metavar="IMAGE",
+        help="write the Fig. 9 figure to IMAGE (.png, .pdf, .svg...)",
+    )
     _add_quiet(ik)
     add_json_argument(ik, "the results")
 
@@ -137,6 +145,7 @@ def _solve(benches: Any) -> None:
         default=True,
         help="also run on a Dask LocalCluster of 2 workers",
     )
+    _add_quiet(solve)
     add_json_argument(solve, "the timings")
 
 
@@ -181,10 +190,14 @@ def run(args: argparse.Namespace) -> int:
         if plot is not None:
             options["plot"] = plot
         data = module.run(**options)
+    if plot is not None:
+        data["plot"] = options["plot"] = args.plot  # the user's name, not the temporary one
     if args.json != "-":
         from sahgrasp.bench.report import summary_table
 
         print(summary_table(data))
     if args.json is not None:
         emit_json(data, args.json)
+    if plot is not None:
+        print(f"wrote {args.plot}", file=human_stream(args.json))
     return 0

@@ -41,6 +41,7 @@ from sahgrasp.fileio import (
 __all__ = [
     "HAND_HELP",
     "HAND_OVERRIDE_HELP",
+    "IMAGE_SUFFIXES",
     "INITS_HELP",
     "MAX_INITS",
     "METHOD_HELP",
@@ -54,6 +55,7 @@ __all__ = [
     "check_outputs",
     "emit_json",
     "human_stream",
+    "image_path",
     "int_at_least",
     "int_in_range",
     "json_text",
@@ -62,9 +64,14 @@ __all__ = [
     "positive_float",
     "positive_int",
     "printable",
+    "scheduler_address",
+    "write_stdout",
 ]
 
 HAND_OVERRIDE_HELP = f"use this hand instead of the targets file's: {HAND_HELP}"
+
+IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps")
+"""Figure formats ``--plot`` accepts: matplotlib picks the format from the suffix."""
 
 
 class Parser(argparse.ArgumentParser):
@@ -116,6 +123,35 @@ def add_mesh_path_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def scheduler_address(text: str) -> str:
+    """Option type of ``--scheduler``: a Dask scheduler address, checked before any work.
+
+    The check is :func:`sahgrasp.parallel.check_scheduler_address` (no connection is made here).
+    """
+    from sahgrasp.parallel import SchedulerError, check_scheduler_address
+
+    try:
+        return check_scheduler_address(text)
+    except SchedulerError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def image_path(text: str) -> str:
+    """Option type of ``--plot``: a file name whose suffix names an image format.
+
+    Checked when the command line is parsed, so that a name matplotlib cannot write (no suffix,
+    or an unknown one) fails before the work, not after it.
+    """
+    suffix = Path(text).suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        found = f"unknown suffix {suffix!r}" if suffix else "no suffix"
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not an image file name ({found}): end it in "
+            f"{', '.join(IMAGE_SUFFIXES)}, e.g. fig9.png"
+        )
+    return text
+
+
 def human_stream(json_out: str | None) -> TextIO:
     """Where the lines for a human go: stderr when stdout carries the JSON (``--json -``)."""
     return sys.stderr if json_out == "-" else sys.stdout
@@ -136,10 +172,11 @@ def check_json_inputs(hand: str | None = None, sequence: str | Path | None = Non
     the loader's own error type. A hand name (``sah``) or a missing file is left to the loader.
 
     Raises:
-        HandModelError: The hand description is not UTF-8 JSON.
+        HandModelError: The hand description is a URDF, or not UTF-8 JSON.
         SequenceFileError: The sequence file is not UTF-8 JSON.
     """
     if hand is not None and Path(hand).suffix and _is_file(hand):
+        _refuse_urdf(hand)
         read_json(hand, "hand description", HandModelError)
     if sequence is not None and _is_file(sequence):
         read_json(sequence, "sequence file", SequenceFileError)
@@ -169,6 +206,22 @@ def check_outputs(outputs: Iterable[str | None], inputs: Iterable[str | Path | N
         if real in seen:
             raise OutputPathError(f"output {out} is given twice; give each output its own file")
         seen.add(real)
+
+
+def _refuse_urdf(hand: str) -> None:
+    """A URDF given where a hand description goes: say what is expected and how to make one."""
+    try:
+        with open(hand, "rb") as f:
+            start = f.read(512).lstrip(b"\xef\xbb\xbf \t\r\n")
+    except OSError:
+        return  # left to the loader, which names the file and the reason
+    if Path(hand).suffix.lower() == ".urdf" or start.startswith(b"<"):
+        raise HandModelError(
+            f'{hand} is a URDF, but a hand (--hand, a targets file\'s "hand") is sah, allegro or a '
+            "hand-description JSON, which "
+            "names the URDF and says which links are the fingertips and palm; write one as "
+            "docs/hand.md ('Adding another hand') shows"
+        )
 
 
 @contextlib.contextmanager
@@ -210,6 +263,25 @@ def json_text(data: Any) -> str:
         return _layout(json_safe(data)) + "\n"
 
 
+def write_stdout(text: str) -> None:
+    """Write ``text`` to stdout whole, or raise ``BrokenPipeError`` when its reader went away.
+
+    With ``PYTHONUNBUFFERED`` set (as in many containers), ``sys.stdout.write`` makes one
+    ``write`` call and ignores how much of it went through: a reader that closes mid-document
+    left a truncated document and exit status 0. Here every byte is written or the error
+    raised, so that the command exits with 141 (see :mod:`sahgrasp.cli`).
+    """
+    sys.stdout.flush()
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):  # a stream without a file (a test harness)
+        sys.stdout.write(text)
+        return
+    data = memoryview(text.encode("utf-8", errors="backslashreplace"))
+    while data:
+        data = data[os.write(fd, data) :]
+
+
 def emit_json(data: Any, out: str | None) -> None:
     """Write ``data`` as strict JSON (undefined numbers as ``null``) to ``out``.
 
@@ -217,7 +289,7 @@ def emit_json(data: Any, out: str | None) -> None:
     """
     text = json_text(data)
     if out is None or out == "-":
-        sys.stdout.write(text)
+        write_stdout(text)
         return
     write_bytes_atomic(out, text.encode("utf-8"))
     print(f"wrote {out}")

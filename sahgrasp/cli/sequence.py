@@ -13,13 +13,21 @@ from sahgrasp.cli.common import (
     int_at_least,
     nonnegative_int,
     positive_int,
+    scheduler_address,
 )
 from sahgrasp.fileio import check_output_path
 
 if TYPE_CHECKING:
     from sahgrasp.sequence import Progress, SearchResult
 
-__all__ = ["SEARCH_DEFAULTS", "add_parser", "resume_command", "run"]
+__all__ = [
+    "SEARCH_DEFAULTS",
+    "SUMMARY_HEADERS",
+    "add_parser",
+    "resume_command",
+    "run",
+    "summary_rows",
+]
 
 SEARCH_DEFAULTS = {"grid": 10, "problems": 300, "rounds": 12, "seed": 0, "method": "auto"}
 """``SearchSettings()``'s values, spelled out so that ``--help`` need not import the search."""
@@ -53,9 +61,10 @@ def add_parser(sub: Any) -> None:
     )
     where.add_argument(
         "--scheduler",
+        type=scheduler_address,
         default=None,
         metavar="ADDR",
-        help="Dask scheduler address, e.g. tcp://host:8786",
+        help="Dask scheduler address: tcp://HOST:PORT or HOST:PORT",
     )
     p.add_argument("--resume", action="store_true", help="continue the search checkpointed in DIR")
     p.set_defaults(run=run, on_interrupt=resume_command)
@@ -84,7 +93,10 @@ class _Bar:
         if self.bar is None:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05)
+            self.bar = tqdm(
+                total=p.runs_total, initial=p.runs_done, unit="IK", smoothing=0.05,
+                disable=None,  # on a terminal only: no carriage returns in a log
+            )  # fmt: skip
         self.bar.set_description(f"round {p.round}/{p.rounds} {p.stage}", refresh=False)
         screening = p.stage == "screening"
         if screening:
@@ -99,12 +111,28 @@ class _Bar:
             self.bar.close()
 
 
+SUMMARY_HEADERS = (
+    "round", "lambda1", "lambda2", "chosen pose solves [%]", "earlier poses solved [%]",
+    "problems scanned",
+)  # fmt: skip
+"""Columns of the summary: per round the chosen pose (lambda1, lambda2), the share of the round's
+problems it solves (E_i), the share of the screened problems the poses chosen before had solved
+(the round's problems are among those they did not), and the problems screened to find them."""
+
+
+def summary_rows(result: SearchResult) -> list[tuple[object, ...]]:
+    """One row of :data:`SUMMARY_HEADERS` per round of ``result``."""
+    return [
+        (r.index, f"{r.lambdas[0]:.3f}", f"{r.lambdas[1]:.3f}",
+         f"{100 * r.success_rates.max():.1f}", f"{100 * r.prior_success_rate:.1f}", r.scanned)
+        for r in result.rounds
+    ]  # fmt: skip
+
+
 def _print_summary(result: SearchResult, out: str) -> None:
-    print(f"{'i':>3} {'lambda1':>8} {'lambda2':>8} {'E_i':>7} {'SEQ before':>10} {'scanned':>8}")
-    for r in result.rounds:
-        print(f"{r.index:3d} {r.lambdas[0]:8.3f} {r.lambdas[1]:8.3f} "
-              f"{100 * r.success_rates.max():6.1f}% {100 * r.prior_success_rate:9.1f}% "
-              f"{r.scanned:8d}")  # fmt: skip
+    from sahgrasp.tables import format_table
+
+    print(format_table(SUMMARY_HEADERS, summary_rows(result)))
     print(f"{result.cells_computed} cells and {result.ik_runs_computed} IK runs computed in "
           f"{result.wall_seconds:.1f} s")  # fmt: skip
     print(f"wrote {out}/sequence.json, search.json, fig4.png")

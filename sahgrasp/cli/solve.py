@@ -27,6 +27,7 @@ from sahgrasp.cli.common import (
     nonnegative_int,
     positive_int,
     printable,
+    scheduler_address,
 )
 
 if TYPE_CHECKING:
@@ -90,7 +91,11 @@ def add_parser(sub: Any) -> None:
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
     where.add_argument(
-        "--scheduler", default=None, metavar="ADDR", help="Dask scheduler, e.g. tcp://host:8786"
+        "--scheduler",
+        type=scheduler_address,
+        default=None,
+        metavar="ADDR",
+        help="Dask scheduler, e.g. tcp://host:8786",
     )
     p.add_argument(
         "--resume",

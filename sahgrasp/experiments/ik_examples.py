@@ -194,15 +194,16 @@ def show_examples(
         hand: The hand.
         examples: The solved grasps.
         facing: Turn each grasp so that its palm lies behind the object (+y) as the camera, in
-            front (-y) and above, sees it. False: each grasp keeps its world orientation, the
-            object at its placement relative to the hand; grasps are only shifted along x.
+            front (-y) and above, sees it. False (a targets file's grasps): turn each grasp about
+            the vertical only, so that the camera sees the palm side while every object stays
+            as upright as the world has it, at its placement relative to the hand.
     """
     extents, cursor = [], 0.0
     paths: set[str] = set()
     for ex in examples:
         path = _unused(f"grasps/{scene_name(ex.name)}", paths)
         paths.add(path)
-        T = _facing_placement(ex) if facing else np.eye(4)
+        T = _facing_placement(ex) if facing else _upright_placement(ex)
         extent = transform_points(T, grasp_points(hand, ex.result.q, ex.obj))
         shift = cursor - extent[:, 0].min()
         T[0, 3] += shift
@@ -240,6 +241,22 @@ def _unused(path: str, used: set[str]) -> str:
         k += 1
         candidate = f"{path}-{k}"
     return candidate
+
+
+def _upright_placement(example: SolvedGrasp) -> NDArray[np.float64]:
+    """Placement turning a grasp about the vertical so that its palm is behind the object, centred.
+
+    The horizontal direction from the contacts' centre to the wrist goes to +y (away from the
+    camera); the vertical is kept, so a grasp from straight above or below only moves.
+    """
+    back = example.result.q[:3] - example.contact_centre_m
+    angle = 0.0
+    if np.hypot(back[0], back[1]) > 1e-9:
+        angle = 0.5 * np.pi - float(np.arctan2(back[1], back[0]))
+    T = np.eye(4)
+    T[:3, :3] = pin.utils.rotate("z", angle)
+    T[:3, 3] = -T[:3, :3] @ example.contact_centre_m
+    return T
 
 
 def _facing_placement(example: SolvedGrasp) -> NDArray[np.float64]:

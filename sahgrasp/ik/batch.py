@@ -34,12 +34,18 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
-from sahgrasp.errors import InvalidTargetError, SahGraspError, SequenceFileError
+from sahgrasp.errors import (
+    InvalidSettingsError,
+    InvalidTargetError,
+    SahGraspError,
+    SequenceFileError,
+)
 from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.learned import GraspDatabase
 from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
+from sahgrasp.parallel import check_workers
 
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
@@ -388,11 +394,24 @@ def solve_many(
             :func:`solve_ik`); each distinct object is built once per worker.
 
     Raises:
-        InvalidTargetError: An ``obstacle`` is not a GraspObject, or the list has another length.
+        InvalidTargetError: ``targets`` is not a list of GraspTarget; an ``obstacle`` is not a
+            GraspObject, or the list has another length.
+        InvalidSettingsError: ``settings`` is not an IKSettings, or ``workers`` is not an
+            integer in 1 .. 4 per core.
     """
+    if not isinstance(targets, list | tuple) or not all(
+        isinstance(t, GraspTarget) for t in targets
+    ):
+        raise InvalidTargetError(f"targets must be a list of GraspTarget, got {targets!r:.80}")
+    if executor is None:
+        workers = check_workers(workers)  # None: one per core, as process_pool
+    if settings is not None and not isinstance(settings, IKSettings):
+        raise InvalidSettingsError(
+            f"settings must be an IKSettings (or None: the defaults), got {type(settings).__name__}"
+        )
     settings = settings or IKSettings()
     items = list(_keyed(targets, obstacle))
-    if executor is None and workers <= 1:
+    if not items or (executor is None and workers <= 1):
         return list(solve_stream(hand, items, settings, sequence, output="result"))  # type: ignore[arg-type]
     from sahgrasp.sequence.executors import open_executor
 

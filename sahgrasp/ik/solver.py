@@ -70,6 +70,10 @@ REASONS: tuple[Reason, ...] = get_args(Reason)
 """Values of :attr:`IKResult.reason`."""
 MAX_INITS_LIMIT = 1000
 """Largest accepted ``IKSettings.max_inits``."""
+MAX_ITERATIONS_LIMIT = 1_000_000
+"""Largest accepted ``max_iterations``, ``stall_iterations`` and ``repair_iterations``: far above
+any useful value (the IK converges in tens of iterations or not at all), and within the C
+solver's ``int``."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +88,8 @@ class IKSettings:
             Fig. 9).
         learned_starts: With ``init="learned"``, how many database neighbours come first.
         max_inits: ``i_max``, initial configurations tried (1 .. :data:`MAX_INITS_LIMIT`).
-        max_iterations: ``k_max``, Jacobian iterations per initial configuration.
+        max_iterations: ``k_max``, Jacobian iterations per initial configuration
+            (1 .. :data:`MAX_ITERATIONS_LIMIT`, as the two other iteration counts).
         d_min_m: Eq. (9) tolerance on contact points and sphere centres [m].
         s_min_m: Eq. (10) threshold of "no progress" [m].
         stall_iterations: ``n`` of Step 13: consecutive iterations without progress.
@@ -122,7 +127,7 @@ class IKSettings:
         _check_int("max_inits", self.max_inits, 1, MAX_INITS_LIMIT)
         _check_int("learned_starts", self.learned_starts, 0, MAX_INITS_LIMIT)
         for name in ("max_iterations", "stall_iterations", "repair_iterations"):
-            _check_int(name, getattr(self, name), 1)
+            _check_int(name, getattr(self, name), 1, MAX_ITERATIONS_LIMIT)
         _check_int("seed", self.seed, 0)
         for name in ("d_min_m", "s_min_m", "alpha", "refine_m", "collision_margin_m"):
             value = getattr(self, name)
@@ -605,10 +610,12 @@ def solve_ik(
             refused when the target is built); an obstacle that is not a GraspObject.
         SequenceFileError: ``sequence`` was made for another hand (``database``: a
             :class:`~sahgrasp.ik.learned.GraspDatabaseError`).
+        InvalidSettingsError: ``settings`` is not an :class:`IKSettings`, an override is not one
+            of its fields or out of its range, or another argument has the wrong type.
     """
-    s = settings
-    if s is None or overrides:  # replace() validates the settings again: about 8 us a solve
-        s = replace(settings or IKSettings(), **overrides)
+    s = _checked_settings(settings)
+    if overrides:  # replace() validates the settings again: about 8 us a solve
+        s = replace(s, **_checked_overrides(overrides))
     inner = INNER_SOLVERS[s.method]
     return run_algorithm1(hand, target, inner, s, sequence, free_fingers, obstacle, database)
 
@@ -629,6 +636,7 @@ def run_algorithm1(
     :data:`AttemptFn` alone, which then starts from finger coordinates only. The other arguments
     are those of :func:`solve_ik`.
     """
+    free_fingers = _check_arguments(hand, target, settings, sequence, free_fingers, database)
     solver = inner if isinstance(inner, InnerSolver) else InnerSolver(inner)
     # The shipped sequence and database are loaded once per hand, on first use: not timed.
     sequence = sequence or default_sequence(hand)
@@ -650,6 +658,68 @@ def run_algorithm1(
             return _result(hand, problem, attempt, attempts, True, start)
     best = min(attempts, key=lambda a: a.error_m)
     return _result(hand, problem, best, attempts, False, start)
+
+
+def _checked_settings(settings: object) -> IKSettings:
+    if settings is None:
+        return IKSettings()
+    if not isinstance(settings, IKSettings):
+        raise InvalidSettingsError(
+            f"settings must be an IKSettings (or None: the defaults), got {type(settings).__name__}"
+        )
+    return settings
+
+
+_SETTING_NAMES = frozenset(IKSettings.__dataclass_fields__)
+
+
+def _checked_overrides(overrides: dict[str, Any]) -> dict[str, Any]:
+    unknown = sorted(set(overrides) - _SETTING_NAMES)
+    if unknown:
+        raise InvalidSettingsError(
+            f"unknown IK setting(s) {unknown}; valid: {sorted(_SETTING_NAMES)}"
+        )
+    return overrides
+
+
+def _check_arguments(
+    hand: object,
+    target: object,
+    settings: object,
+    sequence: object,
+    free_fingers: object,
+    database: object,
+) -> tuple[str, ...]:
+    """Refuse arguments of the wrong type with a typed error; the free fingers as a tuple.
+
+    The values themselves (fingers, contacts, a sequence's hand) are checked where they are used.
+    """
+    if not isinstance(hand, Hand):
+        raise InvalidSettingsError(
+            f"hand must be a Hand (sahgrasp.load_hand('sah')), got {type(hand).__name__}"
+        )
+    if not isinstance(target, GraspTarget):
+        raise InvalidTargetError(
+            f"target must be a GraspTarget (one ContactTarget per finger), got "
+            f"{type(target).__name__}"
+        )
+    _checked_settings(settings)
+    for name, value, kind in (
+        ("sequence", sequence, Sequence),
+        ("database", database, GraspDatabase),
+    ):
+        if value is not None and not isinstance(value, kind):
+            raise InvalidSettingsError(
+                f"{name} must be a {kind.__name__} or None (the hand's shipped one), got "
+                f"{type(value).__name__}"
+            )
+    if isinstance(free_fingers, str) or not isinstance(free_fingers, tuple | list):
+        raise InvalidTargetError(
+            f"free_fingers must be a tuple of finger names, e.g. ('ring',), got {free_fingers!r}"
+        )
+    if not all(isinstance(f, str) for f in free_fingers):
+        raise InvalidTargetError(f"free_fingers must hold finger names, got {free_fingers!r}")
+    return tuple(free_fingers)
 
 
 def _checked(problem: ContactProblem, attempt: Attempt, free_fingers: tuple[str, ...]) -> Attempt:

@@ -22,7 +22,7 @@ from sahgrasp.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
 from sahgrasp.quality import principal_projection
 from sahgrasp.viz.colors import hex_color, quality_colors
-from sahgrasp.viz.grasp_view import show_grasp
+from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.viewer import Viewer, translation
 
 __all__ = [
@@ -46,7 +46,7 @@ COLLIDING_RGB = (0.55, 0.25, 0.75)
 _INVALID_RGB = (0.6, 0.6, 0.6)
 _LINK_RGB = (0.3, 0.3, 0.3)
 _VIEW = (0.0, -1.0, 0.35)
-_ASPECT = 2.0  # the scene is a row: atlas between two grasps
+_ASPECT = 1.5  # the row (atlas between two grasps) fits a 1200x800 window, and any wider
 _POINT_SIZE_M = 0.035 * ATLAS_SIZE_M
 
 DrawExtreme = Callable[[str, int, NDArray[np.float64]], NDArray[np.float64]]
@@ -234,8 +234,9 @@ def show_atlas_grasps(
         grasp = grasps[path]
         T = T_scene @ translation(-hand.contact_state(grasp.q).points.mean(axis=0))
         show_grasp(viewer, path, hand, grasp.q, grasp.obj, T_scene=T)
-        links = [M.translation for M in hand.frame_placements(grasp.q).values()]
-        return transform_points(T, links)
+        # The drawn shapes (each link's visual box, the object's vertices), not only the link
+        # origins: framed on those, the palm and the object stood outside the view.
+        return transform_points(T, grasp_points(hand, grasp.q, grasp.obj))
 
     return show_atlas_scene(
         viewer, points, values, singular_below, draw, best.chart, worst.chart, colliding

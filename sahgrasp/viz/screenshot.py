@@ -22,7 +22,15 @@ from pathlib import Path
 
 from sahgrasp.errors import SahGraspError
 
-__all__ = ["CHROMIUM_NAMES", "ScreenshotError", "find_chromium", "screenshot"]
+__all__ = [
+    "CHROMIUM_NAMES",
+    "MAX_SIDE_PX",
+    "MIN_SIDE_PX",
+    "ScreenshotError",
+    "chromium_flags",
+    "find_chromium",
+    "screenshot",
+]
 
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome")
 """Executables tried, in order, by :func:`find_chromium`."""
@@ -33,9 +41,14 @@ _ATTEMPTS = 3
 _TIMEOUT_S = 60.0  # measured: 3-5 s for a small scene, 15-50 s for the demo on a loaded machine
 _POLL_S = 0.2
 _SETTLED_S = 1.0  # an image unchanged this long is complete even if Chromium has not exited
+MIN_SIDE_PX = 16
+"""Smallest window width or height [px]."""
+MAX_SIDE_PX = 8192
+"""Largest window width or height [px]: an 8K screen's width; Chromium's software renderer
+needs some 4 bytes per pixel per buffer, so larger images cost gigabytes for no use."""
+
 _FLAGS = (
     "--headless",
-    "--no-sandbox",
     "--disable-gpu",
     "--disable-background-networking",
     "--use-angle=swiftshader",
@@ -49,6 +62,20 @@ _FLAGS = (
 
 class ScreenshotError(SahGraspError):
     """No Chromium, or Chromium failed or hung on every attempt to render a page."""
+
+
+def chromium_flags(as_root: bool | None = None) -> tuple[str, ...]:
+    """The flags of every headless Chromium run.
+
+    Chromium's sandbox stays on, except for root, for whom Chromium refuses to start with it
+    (containers and CI usually run as root).
+
+    Args:
+        as_root: Whether the browser runs as root (default: whether this process does).
+    """
+    if as_root is None:
+        as_root = hasattr(os, "geteuid") and os.geteuid() == 0
+    return (*_FLAGS, "--no-sandbox") if as_root else _FLAGS
 
 
 def find_chromium() -> str | None:
@@ -74,7 +101,7 @@ def screenshot(
     Args:
         html: The scene's HTML file.
         png: The image to write.
-        size: Window width and height [px].
+        size: Window width and height [px], each in ``MIN_SIDE_PX .. MAX_SIDE_PX`` (16 .. 8192).
         settle_ms: Virtual time the page runs before the shot [ms] (animations play meanwhile).
         timeout_s: Wall time one Chromium run may take [s] before it is killed.
         attempts: Chromium runs tried before giving up.
@@ -106,13 +133,18 @@ def screenshot(
 
 
 def _check(page: Path, size: tuple[int, int], settle_ms: int, timeout_s: float, n: int) -> None:
-    """Refuse a missing page and non-positive sizes, times and counts."""
+    """Refuse a missing page, sizes out of range, and non-positive times and counts."""
     if not page.is_file():
         raise ScreenshotError(f"no page to render: {page} is not a file")
-    if min(size) < 1 or settle_ms < 0 or not timeout_s > 0 or n < 1:
+    sides_ok = (
+        isinstance(size, tuple) and len(size) == 2
+        and all(isinstance(v, int) and MIN_SIDE_PX <= v <= MAX_SIDE_PX for v in size)
+    )  # fmt: skip
+    if not sides_ok or settle_ms < 0 or not timeout_s > 0 or n < 1:
         raise ScreenshotError(
-            f"size must be positive pixels, settle_ms >= 0, timeout_s > 0 and attempts >= 1; "
-            f"got size={size}, settle_ms={settle_ms}, timeout_s={timeout_s}, attempts={n}"
+            f"size must be (width, height) in {MIN_SIDE_PX}..{MAX_SIDE_PX} px, settle_ms >= 0, "
+            f"timeout_s > 0 and attempts >= 1; got size={size}, settle_ms={settle_ms}, "
+            f"timeout_s={timeout_s}, attempts={n}"
         )
 
 
@@ -127,7 +159,7 @@ def _run_chromium(
     with tempfile.TemporaryDirectory(prefix="sahgrasp-chromium-") as work:
         shot = Path(work) / "shot.png"
         command = [
-            chromium, *_FLAGS, f"--user-data-dir={Path(work) / 'profile'}",
+            chromium, *chromium_flags(), f"--user-data-dir={Path(work) / 'profile'}",
             f"--screenshot={shot}", f"--window-size={size[0]},{size[1]}",
             f"--virtual-time-budget={settle_ms}", html.as_uri(),
         ]  # fmt: skip
