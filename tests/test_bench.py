@@ -186,6 +186,7 @@ def test_bench_atlas_draws_progress_on_a_terminal_unless_quiet(
     bench_atlas.run(repeats=1, cases=["S2"])
     assert capsys.readouterr().err == ""  # stderr is no terminal here: no bars in a log
     monkeypatch.setattr(report, "_is_terminal", lambda stream: True)
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # the bars draw on a terminal only
     bench_atlas.run(repeats=1, cases=["S2"])
     assert "bench atlas: cases" in capsys.readouterr().err
     bench_atlas.run(repeats=1, cases=["S2"], quiet=True)

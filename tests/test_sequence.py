@@ -411,7 +411,9 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(
         raise OSError("disk full")
 
     monkeypatch.setattr(os, "replace", fail)
-    with pytest.raises(OSError, match="disk full"):
+    from sahgrasp.fileio import OutputWriteError
+
+    with pytest.raises(OutputWriteError, match=r"cannot write .*round-001\.json: disk full"):
         write_bytes_atomic(path, b"new")
     assert [p.name for p in tmp_path.iterdir()] == ["round-001.json"]
     assert path.read_text() == "old"

@@ -24,6 +24,8 @@ def is_editable_install(distribution: str = "sahgrasp") -> bool:
         dist = metadata.distribution(distribution)
     except metadata.PackageNotFoundError:
         return True
+    if str(getattr(dist, "_path", "")).endswith(".egg-info"):
+        return True  # setuptools' metadata in a source checkout, found first from inside it
     try:
         direct = json.loads(dist.read_text("direct_url.json") or "{}")
     except ValueError:
