@@ -792,15 +792,6 @@ static PyTypeObject PolytopeType = {
 
 /* -- the compatibility test of a wave's tries (builder._Builder._compatible) ---------------- */
 
-/* A C-contiguous float64 buffer of ``ndim`` dimensions (writable if asked); its shape goes to
- * ``shape``. */
-static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shape,
-                      const char *what, int writable) {
-    if (get_array(obj, view, ndim, 0, writable, what) < 0) return -1;
-    memcpy(shape, view->shape, sizeof(Py_ssize_t) * (size_t)ndim);
-    return 0;
-}
-
 /* Smallest eigenvalue of the symmetric k x k matrix g (destroyed), by cyclic Jacobi sweeps. */
 static double min_eigenvalue(double *g, Py_ssize_t k) {
     for (int sweep = 0; sweep < 64; sweep++) {
@@ -896,23 +887,19 @@ static PyObject *compatible(PyObject *mod, PyObject *args) {
     static const char *names[5] = {"centres", "parent_centres", "phi", "parent_phi", "vertices"};
     static const int dims[5] = {2, 2, 3, 3, 2};
     Py_buffer views[5];
-    Py_ssize_t shapes[5][3];
     int got = 0;
     PyObject *result = NULL, *fast = NULL;
     double *work = NULL;
     for (; got < 5; got++)
-        if (read_array(objs[got], &views[got], dims[got], shapes[got], names[got], 0) < 0) goto done;
-    Py_ssize_t count = shapes[0][0], n = shapes[0][1];
-    int k = (int)shapes[2][2];
+        if (get_array(objs[got], &views[got], dims[got], 0, 0, names[got]) < 0) goto done;
+    /* count centres of n coordinates, charts of dimension k (phi's last axis). */
+    Py_ssize_t count = views[0].shape[0], n = views[0].shape[1];
+    int k = (int)views[2].shape[2];
     if (check_k(k) < 0) goto done;
-    for (int i = 1; i < 5; i++) {
-        if (shapes[i][0] != count || shapes[i][1] != (i == 4 ? k : n) ||
-            (dims[i] == 3 && shapes[i][2] != k)) {
-            PyErr_Format(PyExc_ValueError, "%s does not match %zd centres of %zd coordinates, k = %d",
-                         names[i], count, n, k);
-            goto done;
-        }
-    }
+    const Py_ssize_t shapes[5][3] = {{count, n}, {count, n}, {count, n, k}, {count, n, k},
+                                     {count, k}};
+    for (int i = 1; i < 5; i++)
+        if (check_shape(&views[i], dims[i], shapes[i], names[i]) < 0) goto done;
     fast = PySequence_Fast(polys, "polys must be a sequence of polytopes");
     if (fast == NULL) goto done;
     if (PySequence_Fast_GET_SIZE(fast) != count) {
@@ -1022,15 +1009,16 @@ static int get_stack(PyObject *const *args, Py_ssize_t nargs, const char *name, 
         PyErr_Format(PyExc_TypeError, "%s(a, out) takes 2 arguments", name);
         return -1;
     }
-    Py_ssize_t shape[3];
-    if (read_array(args[0], in, 3, shape, "a", 0) < 0) return -1;
-    if (read_array(args[1], out, 1, shape, "out", 1) < 0) {
+    if (get_array(args[0], in, 3, 0, 0, "a") < 0) return -1;
+    if (get_array(args[1], out, 1, 0, 1, "out") < 0) {
         PyBuffer_Release(in);
         return -1;
     }
-    if (out->shape[0] != in->shape[0] || (square && in->shape[1] != in->shape[2])) {
-        PyErr_Format(PyExc_ValueError, "%s: a must be (B, %s) and out (B,)", name,
-                     square ? "n, n" : "rows, cols");
+    const Py_ssize_t out_shape[1] = {in->shape[0]};
+    if (square && in->shape[1] != in->shape[2])
+        PyErr_Format(PyExc_ValueError, "a: expected a stack of square matrices (B, n, n), got "
+                     "(%zd, %zd, %zd)", in->shape[0], in->shape[1], in->shape[2]);
+    if (PyErr_Occurred() || check_shape(out, 1, out_shape, "out") < 0) {
         PyBuffer_Release(in);
         PyBuffer_Release(out);
         return -1;
@@ -1144,15 +1132,7 @@ static struct PyModuleDef module = {
 };
 
 PyMODINIT_FUNC PyInit__polytope(void) {
-    if (PyType_Ready(&PolytopeType) < 0) return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL) return NULL;
-    Py_INCREF(&PolytopeType);
-    if (PyModule_AddObject(m, "Polytope", (PyObject *)&PolytopeType) < 0) {
-        Py_DECREF(&PolytopeType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    PyModule_AddIntConstant(m, "MAX_FACES", MAX_FACES);
-    return m;
+    static PyTypeObject *types[] = {&PolytopeType, NULL};
+    static const IntConstant constants[] = {{"MAX_FACES", MAX_FACES}, {NULL, 0}};
+    return create_module(&module, types, constants);
 }
