@@ -732,10 +732,10 @@ static PyObject *Tree_stack(Tree *self, PyObject *args) {
         return NULL;
     Py_buffer b[4];
     int nf, held = 3, ok = 0, jac = jac_obj != Py_None;
-    if (take_finger_buffers(self, q_obj, 0, fingers_obj, stack_obj, 1, "stack", b, &nf) < 0)
+    if (take_finger_buffers(self, q_obj, 0, fingers_obj, stack_obj, 1, "stack_out", b, &nf) < 0)
         return NULL;
     if (jac) {
-        if (get_items(jac_obj, &b[3], (Py_ssize_t)6 * nf * self->nv, 0, 1, "jacobian") < 0) {
+        if (get_items(jac_obj, &b[3], (Py_ssize_t)6 * nf * self->nv, 0, 1, "jacobian_out") < 0) {
             release_buffers(b, held);
             return NULL;
         }

@@ -72,6 +72,7 @@ def tree_joint(pinocchio_joint: int) -> int:
     """
     return _lm.FIXED_JOINT + pinocchio_joint
 
+
 _TREES: weakref.WeakKeyDictionary[Hand, Tree] = weakref.WeakKeyDictionary()
 
 
@@ -128,6 +129,22 @@ tolerance may differ."""
 
 
 def _export(hand: Hand) -> Tree:
+    tree = Tree(**_tree_arguments(hand))
+    shapes = _shapes(hand.collision.geometry_model)
+    if shapes is not None:
+        tree.set_shapes(**shapes)
+    return tree
+
+
+def _tree_arguments(hand: Hand) -> dict[str, Any]:
+    """The keyword arguments of :class:`Tree` for ``hand``.
+
+    The tree's joints are Pinocchio's after its universe, numbered by :func:`tree_joint`. Per
+    joint: its parent, placement in the parent (rotation row-major, then translation), unit axis
+    in its own frame, whether it slides, configuration and velocity index, and the mimic scale
+    and offset (1 and 0 for a joint of its own); per finger the joint that carries its contact
+    frame ("yaw"); the fingertip radius [m] and the actuated joints' limits.
+    """
     model = hand.model
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
@@ -146,26 +163,23 @@ def _export(hand: Hand) -> Tree:
         for placement in model.jointPlacements[1:]
     ]
     yaw = [tree_joint(model.frames[hand.contact_frame_id(f)].parentJoint) for f in hand.fingers]
-    tree = Tree(
-        parents=np.array([tree_joint(model.parents[j]) for j in joints], dtype=np.int64),
-        placements=np.ascontiguousarray(placements, dtype=np.float64),
-        axes=np.ascontiguousarray(axes, dtype=np.float64),
-        prismatic=np.array(prismatic, dtype=np.int64),
-        q_index=np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
-        v_index=np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
-        scale=np.array(scale),
-        offset=np.array(offset),
-        yaw=np.array(yaw, dtype=np.int64),
-        radius=hand.radius_m,
-        lower=np.ascontiguousarray(hand.lower),
-        upper=np.ascontiguousarray(hand.upper),
-        nq=hand.nq,
-        nv=hand.nv,
-    )
-    shapes = _shapes(hand.collision.geometry_model)
-    if shapes is not None:
-        tree.set_shapes(**shapes)
-    return tree
+    return {
+        "parents": np.array([tree_joint(model.parents[j]) for j in joints], dtype=np.int64),
+        "placements": np.ascontiguousarray(placements, dtype=np.float64),
+        "axes": np.ascontiguousarray(axes, dtype=np.float64),
+        "prismatic": np.array(prismatic, dtype=np.int64),
+        "q_index": np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
+        "v_index": np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
+        "scale": np.array(scale, dtype=np.float64),
+        "offset": np.array(offset, dtype=np.float64),
+        "yaw": np.array(yaw, dtype=np.int64),
+        "radius": hand.radius_m,
+        "lower": np.ascontiguousarray(hand.lower, dtype=np.float64),
+        "upper": np.ascontiguousarray(hand.upper, dtype=np.float64),
+        "nq": hand.nq,
+        "nv": hand.nv,
+    }
+
 
 CLIMB_ABOVE = 16
 """Convex shapes with more vertices than this find their support points by hill climbing on
