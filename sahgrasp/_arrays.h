@@ -2,8 +2,9 @@
  * atlas/_quality.c, ik/_lm.c); docs/contributing.md, "The C extensions' conventions".
  *
  * Arguments: numpy arrays reach the modules through the buffer protocol and every one is read
- * by get_array, get_items or get_shaped below, which check its type, item type, contiguity,
- * writability and shape, and name the array at fault in the error:
+ * by get_array or get_items below (check_shape for a shape that follows from another array),
+ * which check its type, item type, contiguity, writability and shape, and name the array at
+ * fault in the error:
  *   TypeError  "NAME must be a C-contiguous float64 array ..., got ..." (not an array, wrong item
  *              type, not C-contiguous, read-only where written);
  *   ValueError "NAME: expected ..., got ..." (wrong number of dimensions, shape or size), and
@@ -108,17 +109,6 @@ static inline int check_shape(const Py_buffer *view, int ndim, const Py_ssize_t 
     PyErr_Format(PyExc_ValueError, "%s: expected shape (%s%s), got (%s%s)", what, expected,
                  ndim == 1 ? "," : "", got, view->ndim == 1 ? "," : "");
     return -1;
-}
-
-/* get_array of the ``ndim`` dimensions in ``shape`` (-1: any length on that axis). */
-static inline int get_shaped(PyObject *obj, Py_buffer *view, int ndim, const Py_ssize_t *shape,
-                             int integer, int writable, const char *what) {
-    if (get_array(obj, view, -1, integer, writable, what) < 0) return -1;
-    if (check_shape(view, ndim, shape, what) < 0) {
-        PyBuffer_Release(view);
-        return -1;
-    }
-    return 0;
 }
 
 /* Module boilerplate: a module's int constants, a table ended by a NULL name. */

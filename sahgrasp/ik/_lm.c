@@ -843,7 +843,8 @@ static int repair_step(const Tree *T, const double *q, const double *target,
                        double *out) {
     int nv = T->nv, m = 6 * nf, rows = m + np;
     Pose *M = PyMem_Malloc((size_t)T->nj * sizeof(Pose));
-    double *buf = PyMem_Malloc(((size_t)rows * (nv + 2) + (size_t)nv * (2 * nv + 3)) * sizeof(double));
+    double *buf =
+        PyMem_Malloc(((size_t)rows * (nv + 2) + (size_t)nv * (2 * nv + 3)) * sizeof(double));
     int *free_cols = PyMem_Malloc((size_t)nv * sizeof(int));
     if (!M || !buf || !free_cols) {
         PyMem_Free(M), PyMem_Free(buf), PyMem_Free(free_cols);
@@ -953,7 +954,8 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args, PyObject *kwds) {
     int held = 0, ns = 0, ok = 0;
     for (; held < N_ARGS; held++) {
         Py_ssize_t sizes[N_ARGS] = {-1, 12 * ns, ns, 4 * ns, 4 * ns, -1};
-        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0) break;
+        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0)
+            break;
         if (held == JOINTS) ns = (int)(b[0].len / 8);
     }
     if (held == N_ARGS) {
@@ -982,7 +984,8 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args, PyObject *kwds) {
                 PyErr_Format(PyExc_ValueError, "set_shapes: pairs: shape %lld of pair %d is not "
                              "one of the %d shapes", pairs[k], k / 2, ns);
             }
-        int *joint = PyMem_Malloc((size_t)ns * sizeof(int) + 1), *pair = PyMem_Malloc(2 * (size_t)npairs * sizeof(int) + 1);
+        int *joint = PyMem_Malloc((size_t)ns * sizeof(int) + 1),
+            *pair = PyMem_Malloc(2 * (size_t)npairs * sizeof(int) + 1);
         Pose *place = PyMem_Malloc((size_t)ns * sizeof(Pose) + 1);
         GjkShape *shapes = PyMem_Calloc((size_t)ns + 1, sizeof(GjkShape));
         double *ball = PyMem_Malloc(4 * (size_t)ns * sizeof(double) + 1);
@@ -1009,7 +1012,8 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args, PyObject *kwds) {
             joint = NULL, pair = NULL, place = NULL, shapes = NULL, ball = NULL;
             ok = 1;
         }
-        PyMem_Free(joint), PyMem_Free(pair), PyMem_Free(place), PyMem_Free(shapes), PyMem_Free(ball);
+        PyMem_Free(joint), PyMem_Free(pair), PyMem_Free(place), PyMem_Free(shapes);
+        PyMem_Free(ball);
     }
     release_buffers(b, held);
     if (!ok) return NULL;
@@ -1140,7 +1144,8 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
     int held = 0, status = -1, n = 0, ncells = 0;
     for (; held < N_ARGS; held++) {
         Py_ssize_t sizes[N_ARGS] = {-1, 12 * n, 4 * n, 4 * n, n + 1, -1, -1, -1, -1, -1, n};
-        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0) goto out;
+        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0)
+            goto out;
         if (held == KINDS) n = (int)(b[KINDS].len / 8);
         if (held == CBALLS) ncells = (int)(b[CBALLS].len / 32);
     }
@@ -1160,7 +1165,8 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
     for (int p = 0; p < n && !fault; p++)
         if (kinds[p] < SHAPE_POINT || kinds[p] > SHAPE_CONVEX)
             fault = "kinds", valid = "SHAPE_POINT to SHAPE_CONVEX";
-        else if (vstart[p + 1] < vstart[p] || (kinds[p] == SHAPE_CONVEX) != (vstart[p + 1] > vstart[p]))
+        else if (vstart[p + 1] < vstart[p] ||
+                 (kinds[p] == SHAPE_CONVEX) != (vstart[p + 1] > vstart[p]))
             fault = "vertex_start", valid = "ascending offsets, vertices for convex pieces only";
     for (int k = 0; k < ncells && !fault; k++)
         if (cstart[k + 1] < cstart[k]) fault = "cell_start", valid = "ascending offsets";
@@ -1406,7 +1412,8 @@ typedef struct {
 } ObjectQuery;
 
 static void object_query_free(ObjectQuery *Q) {
-    PyMem_Free(Q->shapes), PyMem_Free(Q->balls), PyMem_Free(Q->gaps), PyMem_Free(Q->bounds), PyMem_Free(Q->order);
+    PyMem_Free(Q->shapes), PyMem_Free(Q->balls), PyMem_Free(Q->gaps), PyMem_Free(Q->bounds);
+    PyMem_Free(Q->order);
 }
 
 /* Q for the tree at q and an object at the 4 x 4 row-major T_world_object: 0, or -1 with
@@ -1698,7 +1705,9 @@ static PyTypeObject TreeType = {
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, .m_name = "sahgrasp.ik._lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
+    PyModuleDef_HEAD_INIT,
+    .m_name = "sahgrasp.ik._lm",
+    .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
     .m_size = -1, .m_methods = module_methods,
 };
 
