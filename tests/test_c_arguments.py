@@ -449,3 +449,30 @@ def test_the_tree_numbers_joints_by_the_one_mapping() -> None:
         assert shapes["joints"][k] == tree_joint(g.parentJoint)
         kinds = {compiled.POINT: ("Sphere",), compiled.CYLINDER: ("Capsule", "Cylinder")}
         assert type(g.geometry).__name__ in kinds.get(int(shapes["kinds"][k]), ("Box", "Ellipsoid"))
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        (lambda p: p.cut(None, 0.1, 1e-9), TypeError, r"^a must be a sequence of 2 floats"),
+        (lambda p: p.cut([1.0], 0.1, 1e-9), ValueError, r"^a must have 2 entries, got 1"),
+        (lambda p: p.cut(["x", 1.0], 0.1, 1e-9), TypeError, r"^a\[0\] must be a real number"),
+        (lambda p: p.index(None), TypeError, r"^vertex must be a sequence of 2 floats"),
+        (lambda p: p.index([1.0, 2.0, 3.0]), ValueError, r"^vertex must have 2 entries"),
+        (
+            lambda p: Polytope.from_planes(2, 0.1, [[1.0, 0.0, 0.0]], [0.1], 1e-9),
+            ValueError,
+            r"^planes\[0\] must have 2 entries",
+        ),
+        (
+            lambda p: Polytope.from_planes(2, 0.1, [[1.0, 0.0]], ["x"], 1e-9),
+            TypeError,
+            r"^offsets\[0\] must be a real number, got str",
+        ),
+    ],
+)
+def test_polytope_vectors_are_refused_by_name(
+    call: Callable[[Polytope], object], error: type[Exception], message: str
+) -> None:
+    with pytest.raises(error, match=message):
+        call(Polytope.cube(2, 0.1))

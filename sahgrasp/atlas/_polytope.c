@@ -206,7 +206,14 @@ static int poly_replace(Polytope *p, Polytope *out) {
 /* Read ``k`` floats of a sequence into out; -1 with an exception if it is not that. */
 static int read_vector(PyObject *seq, int k, double *out, const char *what) {
     PyObject *fast = PySequence_Fast(seq, what);
-    if (fast == NULL) return -1;
+    if (fast == NULL) {
+        if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be a sequence of %d floats, got %.100s", what,
+                         k, Py_TYPE(seq)->tp_name);
+        }
+        return -1;
+    }
     if (PySequence_Fast_GET_SIZE(fast) != k) {
         PyErr_Format(PyExc_ValueError, "%s must have %d entries, got %zd", what, k,
                      PySequence_Fast_GET_SIZE(fast));
@@ -217,6 +224,11 @@ static int read_vector(PyObject *seq, int k, double *out, const char *what) {
     for (int d = 0; d < k; d++) {
         out[d] = PyFloat_AsDouble(items[d]);
         if (out[d] == -1.0 && PyErr_Occurred()) {
+            if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+                PyErr_Clear();
+                PyErr_Format(PyExc_TypeError, "%s[%d] must be a real number, got %.100s", what, d,
+                             Py_TYPE(items[d])->tp_name);
+            }
             Py_DECREF(fast);
             return -1;
         }
@@ -447,9 +459,19 @@ static int read_planes(PyObject *planes, PyObject *offsets, int k, double **a, d
         goto done;
     }
     for (Py_ssize_t h = 0; h < n; h++) {
-        if (read_vector(PySequence_Fast_GET_ITEM(fp, h), k, *a + h * k, "a plane") < 0) goto done;
-        (*b)[h] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fo, h));
-        if ((*b)[h] == -1.0 && PyErr_Occurred()) goto done;
+        char plane[48];
+        PyOS_snprintf(plane, sizeof plane, "planes[%zd]", h);
+        if (read_vector(PySequence_Fast_GET_ITEM(fp, h), k, *a + h * k, plane) < 0) goto done;
+        PyObject *offset = PySequence_Fast_GET_ITEM(fo, h);
+        (*b)[h] = PyFloat_AsDouble(offset);
+        if ((*b)[h] == -1.0 && PyErr_Occurred()) {
+            if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+                PyErr_Clear();
+                PyErr_Format(PyExc_TypeError, "offsets[%zd] must be a real number, got %.100s", h,
+                             Py_TYPE(offset)->tp_name);
+            }
+            goto done;
+        }
     }
     *count = n;
     status = 0;
