@@ -20,6 +20,7 @@
 
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
+#include <limits.h>
 #include <string.h>
 
 /* Whether a buffer's item format is float64 ('d') or int64 (numpy's 'l' where a C long has 64
@@ -109,6 +110,31 @@ static inline int check_shape(const Py_buffer *view, int ndim, const Py_ssize_t 
     PyErr_Format(PyExc_ValueError, "%s: expected shape (%s%s), got (%s%s)", what, expected,
                  ndim == 1 ? "," : "", got, view->ndim == 1 ? "," : "");
     return -1;
+}
+
+/* An int argument ``obj`` in [low, high] into ``out``: 0, or -1 with a TypeError (not an
+ * integer) or a ValueError (out of range) naming ``what``. */
+static inline int get_int(PyObject *obj, int *out, long low, long high, const char *what) {
+    PyObject *index = PyIndex_Check(obj) ? PyNumber_Index(obj) : NULL;
+    if (index == NULL) {
+        if (!PyErr_Occurred() || PyErr_ExceptionMatches(PyExc_TypeError)) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be an integer, got %.100s", what,
+                         Py_TYPE(obj)->tp_name);
+        }
+        return -1;
+    }
+    int overflow = 0;
+    long value = PyLong_AsLongAndOverflow(index, &overflow);
+    Py_DECREF(index);
+    if (value == -1 && PyErr_Occurred()) return -1;
+    if (overflow != 0 || value < low || value > high) {
+        PyErr_Format(PyExc_ValueError, "%s must be an integer in [%ld, %ld], got %R", what, low,
+                     high, obj);
+        return -1;
+    }
+    *out = (int)value;
+    return 0;
 }
 
 /* Module boilerplate: a module's int constants, a table ended by a NULL name. */

@@ -476,3 +476,22 @@ def test_polytope_vectors_are_refused_by_name(
 ) -> None:
     with pytest.raises(error, match=message):
         call(Polytope.cube(2, 0.1))
+
+
+@pytest.mark.parametrize(
+    ("max_iterations", "stall", "error", "message"),
+    [
+        (10**12, 3, ValueError, r"^max_iterations must be an integer in \[0, "),
+        (-1, 3, ValueError, r"^max_iterations must be an integer in \[0, "),
+        (5.0, 3, TypeError, r"^max_iterations must be an integer, got float"),
+        (5, 0, ValueError, r"^stall must be an integer in \[1, "),
+        (5, None, TypeError, r"^stall must be an integer, got NoneType"),
+    ],
+)
+def test_the_loops_counts_are_refused_by_name(
+    max_iterations: object, stall: object, error: type[Exception], message: str
+) -> None:
+    q, target, fingers = _q(), np.zeros(6), np.array([0], np.int64)
+    with pytest.raises(error, match=message):
+        _tree().solve(q, target, fingers, max_iterations, 0.0, 1e-4, stall, None)
+    _tree().solve(q, target, fingers, np.int64(2), 0.0, 1e-4, np.int64(3), None)  # numpy ints

@@ -691,13 +691,12 @@ static PyObject *Tree_solve(Tree *self, PyObject *args) {
     PyObject *q_obj, *target_obj, *fingers_obj, *history;
     int max_iterations, stall;
     double refine_m, d_min_m;
-    if (!PyArg_ParseTuple(args, "OOOiddiO:solve", &q_obj, &target_obj, &fingers_obj,
-                          &max_iterations, &refine_m, &d_min_m, &stall, &history))
+    PyObject *iterations_obj, *stall_obj;
+    if (!PyArg_ParseTuple(args, "OOOOddOO:solve", &q_obj, &target_obj, &fingers_obj,
+                          &iterations_obj, &refine_m, &d_min_m, &stall_obj, &history) ||
+        get_int(iterations_obj, &max_iterations, 0, INT_MAX - 1, "max_iterations") < 0 ||
+        get_int(stall_obj, &stall, 1, INT_MAX, "stall") < 0)
         return NULL;
-    if (max_iterations < 0 || stall < 1) {
-        PyErr_SetString(PyExc_ValueError, "max_iterations must be >= 0 and stall >= 1");
-        return NULL;
-    }
     Py_buffer b[3]; /* fingers, q, target */
     int nf;
     if (take_finger_buffers(self, q_obj, 1, fingers_obj, target_obj, 0, "target", b, &nf) < 0)
