@@ -495,3 +495,10 @@ def test_the_loops_counts_are_refused_by_name(
     with pytest.raises(error, match=message):
         _tree().solve(q, target, fingers, max_iterations, 0.0, 1e-4, stall, None)
     _tree().solve(q, target, fingers, np.int64(2), 0.0, 1e-4, np.int64(3), None)  # numpy ints
+
+
+def test_the_polytope_dimension_is_refused_by_name() -> None:
+    with pytest.raises(ValueError, match=r"^k must be an integer in \[1, "):
+        Polytope.cube(10**12, 0.1)
+    with pytest.raises(TypeError, match=r"^k must be an integer, got float"):
+        Polytope.from_planes(2.0, 0.1, [[1.0, 0.0]], [0.1], 1e-9)

@@ -491,16 +491,20 @@ done:
 static PyObject *Polytope_cube(PyObject *cls, PyObject *args) {
     int k;
     double r;
-    if (!PyArg_ParseTuple(args, "id:cube", &k, &r)) return NULL;
+    PyObject *k_obj;
+    if (!PyArg_ParseTuple(args, "Od:cube", &k_obj, &r) ||
+        get_int(k_obj, &k, 1, MAX_FACES / 2, "k") < 0)
+        return NULL;
     return (PyObject *)cube(k, r);
 }
 
 static PyObject *Polytope_from_planes(PyObject *cls, PyObject *args) {
     int k;
     double r, tol;
-    PyObject *planes, *offsets;
-    if (!PyArg_ParseTuple(args, "idOOd:from_planes", &k, &r, &planes, &offsets, &tol)) return NULL;
-    if (check_k(k) < 0) return NULL;
+    PyObject *k_obj, *planes, *offsets;
+    if (!PyArg_ParseTuple(args, "OdOOd:from_planes", &k_obj, &r, &planes, &offsets, &tol) ||
+        get_int(k_obj, &k, 1, MAX_FACES / 2, "k") < 0)
+        return NULL;
     double *a, *b;
     Py_ssize_t n;
     if (read_planes(planes, offsets, k, &a, &b, &n) < 0) return NULL;
