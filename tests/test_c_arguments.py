@@ -502,3 +502,20 @@ def test_the_polytope_dimension_is_refused_by_name() -> None:
         Polytope.cube(10**12, 0.1)
     with pytest.raises(TypeError, match=r"^k must be an integer, got float"):
         Polytope.from_planes(2.0, 0.1, [[1.0, 0.0]], [0.1], 1e-9)
+
+
+@pytest.mark.parametrize(
+    ("argument", "at", "value", "message"),
+    [
+        ("parents", 0, 0, r"^Tree: parents\[0\] = 0: expected FIXED_JOINT"),
+        ("parents", 2, 5, r"^Tree: parents\[2\] = 5: expected an earlier joint"),
+        ("q_index", 3, 99, r"^Tree: q_index\[3\] = 99"),
+        ("yaw", 1, 0, r"^Tree: yaw\[1\] = 0: expected a finger joint"),
+    ],
+)
+def test_tree_values_are_refused_by_name(argument: str, at: int, value: int, message: str) -> None:
+    arguments = _tree_arguments(_sah())
+    arguments[argument] = arguments[argument].copy()
+    arguments[argument][at] = value
+    with pytest.raises(ValueError, match=message):
+        _lm.Tree(**arguments)

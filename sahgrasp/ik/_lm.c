@@ -521,14 +521,23 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
     for (Py_ssize_t j = 0; j < nj; j++) {
         int bad_parent = j == 0 ? parents[0] != FIXED_JOINT : (parents[j] < 0 || parents[j] >= j);
         int bad_index = j > 0 && (qi[j] < 7 || qi[j] >= nq || vi[j] < 6 || vi[j] >= nv);
-        if (bad_parent || bad_index) {
-            PyErr_Format(PyExc_ValueError, "Tree: joint %zd has an invalid parent or index", j);
+        if (bad_parent) {
+            PyErr_Format(PyExc_ValueError, "Tree: parents[%zd] = %lld: expected %s", j,
+                         parents[j], j == 0 ? "FIXED_JOINT (-1) for the root"
+                                            : "an earlier joint (0 to its own index - 1)");
+            goto out;
+        }
+        if (bad_index) {
+            PyErr_Format(PyExc_ValueError, "Tree: q_index[%zd] = %lld, v_index[%zd] = %lld: "
+                         "expected 7 to nq - 1 = %d and 6 to nv - 1 = %d", j, qi[j], j, vi[j],
+                         nq - 1, nv - 1);
             goto out;
         }
     }
     for (Py_ssize_t f = 0; f < nf; f++)
         if (yaw[f] < 1 || yaw[f] >= nj) {
-            PyErr_SetString(PyExc_ValueError, "Tree: a yaw joint index is out of range");
+            PyErr_Format(PyExc_ValueError, "Tree: yaw[%zd] = %lld: expected a finger joint, 1 to "
+                         "%zd", f, yaw[f], nj - 1);
             goto out;
         }
     self->nj = (int)nj;
@@ -610,7 +619,8 @@ static void work_free(Work *w) {
 static int check_fingers(const Tree *T, const long long *fingers, int nf) {
     for (int b = 0; b < nf; b++)
         if (fingers[b] < 0 || fingers[b] >= T->nf) {
-            PyErr_SetString(PyExc_ValueError, "finger index out of range");
+            PyErr_Format(PyExc_ValueError, "fingers[%d] = %lld: finger index out of range 0 to "
+                         "%d", b, fingers[b], T->nf - 1);
             return -1;
         }
     return 0;
