@@ -19,6 +19,8 @@
 #include <math.h>
 #include <string.h>
 
+/* The shape kinds; sahgrasp/ik/_lm.c exports them as module constants SHAPE_*, which
+ * sahgrasp/ik/compiled.py reads (never a copy). */
 enum { SHAPE_POINT = 0, SHAPE_BOX = 1, SHAPE_CYLINDER = 2, SHAPE_ELLIPSOID = 3, SHAPE_CONVEX = 4 };
 
 typedef struct {

@@ -16,7 +16,9 @@ from sahgrasp.hand import Hand, load_hand, sah_description
 from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems, solve_ik
 from sahgrasp.ik._lm import Tree
 from sahgrasp.ik.compiled import (
+    CYLINDER,
     OUTCOMES,
+    POINT,
     _export,
     _shapes,
     compiled_tree,
@@ -367,14 +369,14 @@ def test_capsules_are_inflated_segments(sah: Hand) -> None:
         geometry.addGeometryObject(pin.GeometryObject(name, 1, pin.SE3.Identity(), shape))
     shapes = _shapes(geometry)
     assert shapes is not None
-    joints, placements, kinds, sizes, balls, _ = shapes
-    assert kinds.tolist() == [0, 2]  # a point and a cylinder of radius 0, both inflated
+    placements, kinds, sizes = shapes["placements"], shapes["kinds"], shapes["sizes"]
+    assert kinds.tolist() == [POINT, CYLINDER]  # a point and a cylinder of radius 0, inflated
     np.testing.assert_allclose(sizes, [[0, 0, 0, 0.01], [0, 0.05, 0, 0.02]])
     tree, out, pair = _export(sah), np.empty(1, dtype=np.int64), np.array([[0, 1]], np.int64)
     # The capsule moved along x from the sphere's centre: they touch at x = 0.03 m.
     for x_m, touching in ((0.0299, True), (0.0301, False)):
         moved = np.array([placements[0], [*np.eye(3).ravel(), x_m, 0.0, 0.0]])
-        tree.set_shapes(joints, moved, kinds, sizes, balls, pair)
+        tree.set_shapes(**{**shapes, "placements": moved, "pairs": pair})
         assert (tree.pairs_within(sah.configuration(), 0.0, out) == 1) is touching
 
 

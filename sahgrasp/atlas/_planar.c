@@ -38,17 +38,14 @@ static PyObject *jacobian(PyObject *mod, PyObject *const *args, Py_ssize_t nargs
     for (; got < 6; got++)
         if (get_array(args[got], &views[got], dims[got], got == 2, got == 5, names[got]) < 0)
             goto done;
+    /* x (B, N_VARS), constant (size,), where (values,), radii (3,), rates (s, 12) and out
+     * (B, rows, N_VARS), for s = len(rates). */
     Py_ssize_t count = views[0].shape[0], s = views[4].shape[0];
     Py_ssize_t rows = 16 + s, size = rows * N_VARS, values = GRASP_VALUES + 12 * s;
-    if (views[0].shape[1] != N_VARS || views[1].shape[0] != size || views[2].shape[0] != values ||
-        views[3].shape[0] != 3 || views[4].shape[1] != 12 || views[5].shape[0] != count ||
-        views[5].shape[1] != rows || views[5].shape[2] != N_VARS) {
-        PyErr_Format(PyExc_ValueError,
-                     "jacobian needs x (B, %d), constant (%zd,), where (%zd,), radii (3,), rates "
-                     "(s, 12) and out (B, %zd, %d) for s = %zd",
-                     N_VARS, size, values, rows, N_VARS, s);
-        goto done;
-    }
+    const Py_ssize_t shapes[6][3] = {{count, N_VARS}, {size}, {values}, {3}, {s, 12},
+                                     {count, rows, N_VARS}};
+    for (int i = 0; i < 6; i++)
+        if (check_shape(&views[i], dims[i], shapes[i], names[i]) < 0) goto done;
     const double *x_all = views[0].buf, *constant = views[1].buf, *radii = views[3].buf,
                  *rates = views[4].buf;
     const int64_t *where = views[2].buf;
@@ -108,14 +105,9 @@ static PyObject *features(PyObject *mod, PyObject *const *args, Py_ssize_t nargs
     for (; got < 4; got++)
         if (get_array(args[got], &views[got], dims[got], 0, got >= 2, names[got]) < 0) goto done;
     Py_ssize_t count = views[0].shape[0];
-    if (views[0].shape[1] != N_VARS || views[1].shape[0] != N_VARS ||
-        views[2].shape[0] != count || views[2].shape[1] != FEATURES ||
-        views[3].shape[0] != count || views[3].shape[1] != 6) {
-        PyErr_Format(PyExc_ValueError,
-                     "features needs x (B, %d), reference (%d,), out (B, %d) and cosines (B, 6)",
-                     N_VARS, N_VARS, FEATURES);
-        goto done;
-    }
+    const Py_ssize_t shapes[4][2] = {{count, N_VARS}, {N_VARS}, {count, FEATURES}, {count, 6}};
+    for (int i = 0; i < 4; i++)
+        if (check_shape(&views[i], dims[i], shapes[i], names[i]) < 0) goto done;
     const double *x_all = views[0].buf, *ref = views[1].buf;
     double *out_all = views[2].buf, *cos_all = views[3].buf;
     for (Py_ssize_t b = 0; b < count; b++) {
@@ -163,4 +155,4 @@ static struct PyModuleDef module = {
     .m_methods = methods,
 };
 
-PyMODINIT_FUNC PyInit__planar(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__planar(void) { return create_module(&module, NULL, NULL); }

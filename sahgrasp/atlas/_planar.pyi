@@ -1,4 +1,9 @@
-"""Type stub of the planar hand's compiled Jacobian (``_planar.c``)."""
+"""Type stub of the planar hand's compiled Jacobian (``_planar.c``).
+
+Arrays are C-contiguous float64 (``where``: int64); a bad one raises TypeError (not such an
+array, read-only where written) or ValueError (its shape or values), naming it
+(``sahgrasp/_arrays.h``).
+"""
 
 import numpy as np
 from numpy.typing import NDArray

@@ -206,7 +206,14 @@ static int poly_replace(Polytope *p, Polytope *out) {
 /* Read ``k`` floats of a sequence into out; -1 with an exception if it is not that. */
 static int read_vector(PyObject *seq, int k, double *out, const char *what) {
     PyObject *fast = PySequence_Fast(seq, what);
-    if (fast == NULL) return -1;
+    if (fast == NULL) {
+        if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+            PyErr_Clear();
+            PyErr_Format(PyExc_TypeError, "%s must be a sequence of %d floats, got %.100s", what,
+                         k, Py_TYPE(seq)->tp_name);
+        }
+        return -1;
+    }
     if (PySequence_Fast_GET_SIZE(fast) != k) {
         PyErr_Format(PyExc_ValueError, "%s must have %d entries, got %zd", what, k,
                      PySequence_Fast_GET_SIZE(fast));
@@ -217,6 +224,11 @@ static int read_vector(PyObject *seq, int k, double *out, const char *what) {
     for (int d = 0; d < k; d++) {
         out[d] = PyFloat_AsDouble(items[d]);
         if (out[d] == -1.0 && PyErr_Occurred()) {
+            if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+                PyErr_Clear();
+                PyErr_Format(PyExc_TypeError, "%s[%d] must be a real number, got %.100s", what, d,
+                             Py_TYPE(items[d])->tp_name);
+            }
             Py_DECREF(fast);
             return -1;
         }
@@ -447,9 +459,19 @@ static int read_planes(PyObject *planes, PyObject *offsets, int k, double **a, d
         goto done;
     }
     for (Py_ssize_t h = 0; h < n; h++) {
-        if (read_vector(PySequence_Fast_GET_ITEM(fp, h), k, *a + h * k, "a plane") < 0) goto done;
-        (*b)[h] = PyFloat_AsDouble(PySequence_Fast_GET_ITEM(fo, h));
-        if ((*b)[h] == -1.0 && PyErr_Occurred()) goto done;
+        char plane[48];
+        PyOS_snprintf(plane, sizeof plane, "planes[%zd]", h);
+        if (read_vector(PySequence_Fast_GET_ITEM(fp, h), k, *a + h * k, plane) < 0) goto done;
+        PyObject *offset = PySequence_Fast_GET_ITEM(fo, h);
+        (*b)[h] = PyFloat_AsDouble(offset);
+        if ((*b)[h] == -1.0 && PyErr_Occurred()) {
+            if (PyErr_ExceptionMatches(PyExc_TypeError)) {
+                PyErr_Clear();
+                PyErr_Format(PyExc_TypeError, "offsets[%zd] must be a real number, got %.100s", h,
+                             Py_TYPE(offset)->tp_name);
+            }
+            goto done;
+        }
     }
     *count = n;
     status = 0;
@@ -469,16 +491,20 @@ done:
 static PyObject *Polytope_cube(PyObject *cls, PyObject *args) {
     int k;
     double r;
-    if (!PyArg_ParseTuple(args, "id:cube", &k, &r)) return NULL;
+    PyObject *k_obj;
+    if (!PyArg_ParseTuple(args, "Od:cube", &k_obj, &r) ||
+        get_int(k_obj, &k, 1, MAX_FACES / 2, "k") < 0)
+        return NULL;
     return (PyObject *)cube(k, r);
 }
 
 static PyObject *Polytope_from_planes(PyObject *cls, PyObject *args) {
     int k;
     double r, tol;
-    PyObject *planes, *offsets;
-    if (!PyArg_ParseTuple(args, "idOOd:from_planes", &k, &r, &planes, &offsets, &tol)) return NULL;
-    if (check_k(k) < 0) return NULL;
+    PyObject *k_obj, *planes, *offsets;
+    if (!PyArg_ParseTuple(args, "OdOOd:from_planes", &k_obj, &r, &planes, &offsets, &tol) ||
+        get_int(k_obj, &k, 1, MAX_FACES / 2, "k") < 0)
+        return NULL;
     double *a, *b;
     Py_ssize_t n;
     if (read_planes(planes, offsets, k, &a, &b, &n) < 0) return NULL;
@@ -792,15 +818,6 @@ static PyTypeObject PolytopeType = {
 
 /* -- the compatibility test of a wave's tries (builder._Builder._compatible) ---------------- */
 
-/* A C-contiguous float64 buffer of ``ndim`` dimensions (writable if asked); its shape goes to
- * ``shape``. */
-static int read_array(PyObject *obj, Py_buffer *view, int ndim, Py_ssize_t *shape,
-                      const char *what, int writable) {
-    if (get_array(obj, view, ndim, 0, writable, what) < 0) return -1;
-    memcpy(shape, view->shape, sizeof(Py_ssize_t) * (size_t)ndim);
-    return 0;
-}
-
 /* Smallest eigenvalue of the symmetric k x k matrix g (destroyed), by cyclic Jacobi sweeps. */
 static double min_eigenvalue(double *g, Py_ssize_t k) {
     for (int sweep = 0; sweep < 64; sweep++) {
@@ -896,23 +913,19 @@ static PyObject *compatible(PyObject *mod, PyObject *args) {
     static const char *names[5] = {"centres", "parent_centres", "phi", "parent_phi", "vertices"};
     static const int dims[5] = {2, 2, 3, 3, 2};
     Py_buffer views[5];
-    Py_ssize_t shapes[5][3];
     int got = 0;
     PyObject *result = NULL, *fast = NULL;
     double *work = NULL;
     for (; got < 5; got++)
-        if (read_array(objs[got], &views[got], dims[got], shapes[got], names[got], 0) < 0) goto done;
-    Py_ssize_t count = shapes[0][0], n = shapes[0][1];
-    int k = (int)shapes[2][2];
+        if (get_array(objs[got], &views[got], dims[got], 0, 0, names[got]) < 0) goto done;
+    /* count centres of n coordinates, charts of dimension k (phi's last axis). */
+    Py_ssize_t count = views[0].shape[0], n = views[0].shape[1];
+    int k = (int)views[2].shape[2];
     if (check_k(k) < 0) goto done;
-    for (int i = 1; i < 5; i++) {
-        if (shapes[i][0] != count || shapes[i][1] != (i == 4 ? k : n) ||
-            (dims[i] == 3 && shapes[i][2] != k)) {
-            PyErr_Format(PyExc_ValueError, "%s does not match %zd centres of %zd coordinates, k = %d",
-                         names[i], count, n, k);
-            goto done;
-        }
-    }
+    const Py_ssize_t shapes[5][3] = {{count, n}, {count, n}, {count, n, k}, {count, n, k},
+                                     {count, k}};
+    for (int i = 1; i < 5; i++)
+        if (check_shape(&views[i], dims[i], shapes[i], names[i]) < 0) goto done;
     fast = PySequence_Fast(polys, "polys must be a sequence of polytopes");
     if (fast == NULL) goto done;
     if (PySequence_Fast_GET_SIZE(fast) != count) {
@@ -1022,15 +1035,16 @@ static int get_stack(PyObject *const *args, Py_ssize_t nargs, const char *name, 
         PyErr_Format(PyExc_TypeError, "%s(a, out) takes 2 arguments", name);
         return -1;
     }
-    Py_ssize_t shape[3];
-    if (read_array(args[0], in, 3, shape, "a", 0) < 0) return -1;
-    if (read_array(args[1], out, 1, shape, "out", 1) < 0) {
+    if (get_array(args[0], in, 3, 0, 0, "a") < 0) return -1;
+    if (get_array(args[1], out, 1, 0, 1, "out") < 0) {
         PyBuffer_Release(in);
         return -1;
     }
-    if (out->shape[0] != in->shape[0] || (square && in->shape[1] != in->shape[2])) {
-        PyErr_Format(PyExc_ValueError, "%s: a must be (B, %s) and out (B,)", name,
-                     square ? "n, n" : "rows, cols");
+    const Py_ssize_t out_shape[1] = {in->shape[0]};
+    if (square && in->shape[1] != in->shape[2])
+        PyErr_Format(PyExc_ValueError, "a: expected a stack of square matrices (B, n, n), got "
+                     "(%zd, %zd, %zd)", in->shape[0], in->shape[1], in->shape[2]);
+    if (PyErr_Occurred() || check_shape(out, 1, out_shape, "out") < 0) {
         PyBuffer_Release(in);
         PyBuffer_Release(out);
         return -1;
@@ -1144,15 +1158,7 @@ static struct PyModuleDef module = {
 };
 
 PyMODINIT_FUNC PyInit__polytope(void) {
-    if (PyType_Ready(&PolytopeType) < 0) return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL) return NULL;
-    Py_INCREF(&PolytopeType);
-    if (PyModule_AddObject(m, "Polytope", (PyObject *)&PolytopeType) < 0) {
-        Py_DECREF(&PolytopeType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    PyModule_AddIntConstant(m, "MAX_FACES", MAX_FACES);
-    return m;
+    static PyTypeObject *types[] = {&PolytopeType, NULL};
+    static const IntConstant constants[] = {{"MAX_FACES", MAX_FACES}, {NULL, 0}};
+    return create_module(&module, types, constants);
 }

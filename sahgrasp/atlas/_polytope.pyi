@@ -1,4 +1,8 @@
-"""Type stub of the compiled chart polytopes (``_polytope.c``)."""
+"""Type stub of the compiled chart polytopes (``_polytope.c``).
+
+Arrays are C-contiguous float64; a bad one raises TypeError (not such an array, read-only where
+written) or ValueError (its shape), naming it (``sahgrasp/_arrays.h``).
+"""
 
 from collections.abc import Sequence
 

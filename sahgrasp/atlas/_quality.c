@@ -36,13 +36,16 @@ static PyObject *orthogonal_tail(PyObject *mod, PyObject *const *args, Py_ssize_
         if (get_array(args[got], &views[got], dims[got], 0, got == 2, names[got]) < 0) goto done;
     Py_ssize_t count = views[0].shape[0], m = views[0].shape[1], n = views[0].shape[2];
     Py_ssize_t rest = n - m;
-    if (m < 1 || rest < 1 || views[1].shape[0] != count || views[1].shape[1] != m ||
-        views[2].shape[0] != count || views[2].shape[1] != n || views[2].shape[2] != rest) {
+    if (m < 1 || rest < 1) {
         PyErr_Format(PyExc_ValueError,
-                     "orthogonal_tail needs h (B, m, n) with 1 <= m < n, tau (B, m) and out "
-                     "(B, n, n - m)");
+                     "orthogonal_tail needs h of shape (B, m, n) with 1 <= m < n, got (%zd, %zd, "
+                     "%zd)", count, m, n);
         goto done;
     }
+    const Py_ssize_t tau_shape[2] = {count, m}, out_shape[3] = {count, n, rest};
+    if (check_shape(&views[1], 2, tau_shape, "tau") < 0 ||
+        check_shape(&views[2], 3, out_shape, "out") < 0)
+        goto done;
     const double *h_all = views[0].buf, *tau_all = views[1].buf;
     double *out_all = views[2].buf;
     for (Py_ssize_t b = 0; b < count; b++) {
@@ -147,13 +150,16 @@ static PyObject *semi_axes(PyObject *mod, PyObject *const *args, Py_ssize_t narg
         if (get_array(args[got], &views[got], dims[got], 0, got == 2, names[got]) < 0) goto done;
     Py_ssize_t count = views[0].shape[0], na = views[0].shape[1], t = views[0].shape[2];
     Py_ssize_t no = views[1].shape[1];
-    if (t < 1 || na < 1 || no < 1 || views[1].shape[0] != count || views[1].shape[2] != t ||
-        views[2].shape[0] != count || views[2].shape[1] != no) {
-        PyErr_SetString(PyExc_ValueError,
-                        "semi_axes needs actuated (B, a, t), obj (B, o, t) and out (B, o), all "
-                        "sizes >= 1");
+    if (t < 1 || na < 1 || no < 1) {
+        PyErr_Format(PyExc_ValueError,
+                     "semi_axes needs actuated (B, a, t) and obj (B, o, t) with a, o, t >= 1, got "
+                     "a = %zd, o = %zd, t = %zd", na, no, t);
         goto done;
     }
+    const Py_ssize_t obj_shape[3] = {count, no, t}, out_shape[2] = {count, no};
+    if (check_shape(&views[1], 3, obj_shape, "obj") < 0 ||
+        check_shape(&views[2], 2, out_shape, "out") < 0)
+        goto done;
     Py_ssize_t thin = na < t ? na : t; /* the thin SVD's singular values of A */
     work = PyMem_Malloc(sizeof(double) * (size_t)(na * t + t * t + no * thin + 2 * t));
     order = PyMem_Malloc(sizeof(Py_ssize_t) * (size_t)t);
@@ -211,4 +217,4 @@ static struct PyModuleDef module = {
     .m_methods = methods,
 };
 
-PyMODINIT_FUNC PyInit__quality(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__quality(void) { return create_module(&module, NULL, NULL); }

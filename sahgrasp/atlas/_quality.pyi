@@ -1,4 +1,9 @@
-"""Type stub of the compiled part of the quality indices (``_quality.c``)."""
+"""Type stub of the compiled part of the quality indices (``_quality.c``).
+
+Arrays are C-contiguous float64; a bad one raises TypeError (not such an
+array, read-only where written) or ValueError (its shape or values), naming it
+(``sahgrasp/_arrays.h``).
+"""
 
 import numpy as np
 from numpy.typing import NDArray

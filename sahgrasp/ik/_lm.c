@@ -288,6 +288,10 @@ static double max_error(const double *r, int m) {
 
 enum { CONVERGED = 0, NO_PROGRESS = 1, MAX_ITERATIONS = 2 };
 
+/* The tree's joints are numbered from 0, the root (the wrist); the fixed world, the root's
+ * parent and the body of a hand-object contact's object, is joint FIXED_JOINT. */
+enum { FIXED_JOINT = -1 };
+
 typedef struct {
     const Tree *T;
     const long long *fingers;
@@ -436,41 +440,41 @@ static int lm_loop(Work *w, double *q, int max_iterations, double refine_m, doub
 
 /* ------------------------------------------------------------------- Python interface -- */
 
-/* get_array of any shape holding ``n`` items (any number if ``n`` < 0): 0, or -1 with a
- * TypeError (type) or a ValueError (size). */
-static int get_buffer(PyObject *obj, Py_buffer *view, Py_ssize_t n, int writable,
-                      const char *format, const char *what) {
-    if (get_array(obj, view, -1, format[0] == 'q', writable, what) < 0) return -1;
-    if (n >= 0 && view->len != n * view->itemsize) {
-        PyErr_Format(PyExc_ValueError, "%s: expected %zd values, got %zd", what, n,
-                     view->len / view->itemsize);
-        PyBuffer_Release(view);
-        return -1;
+/* 0 if ``kwds`` holds every name of ``kwlist`` (a type's keyword-only arguments, all
+ * required), or -1 with a TypeError naming the first one missing. */
+static int missing_keyword(const char *type, char **kwlist, PyObject *kwds) {
+    for (char **name = kwlist; *name != NULL; name++) {
+        PyObject *value = kwds == NULL ? NULL : PyDict_GetItemString(kwds, *name);
+        if (value == NULL) {
+            PyErr_Format(PyExc_TypeError, "%s() missing required keyword argument '%s'", type,
+                         *name);
+            return -1;
+        }
     }
     return 0;
 }
 
 static void Tree_dealloc(Tree *self) {
-    free(self->parent);
-    free(self->place);
-    free(self->axis);
-    free(self->prismatic);
-    free(self->q_index);
-    free(self->v_index);
-    free(self->scale);
-    free(self->offset);
-    free(self->yaw);
-    free(self->chain);
-    free(self->chain_len);
-    free(self->columns);
-    free(self->columns_len);
-    free(self->lower);
-    free(self->upper);
-    free(self->shape_joint);
-    free(self->shape_place);
-    free(self->shapes);
-    free(self->ball);
-    free(self->pairs);
+    PyMem_Free(self->parent);
+    PyMem_Free(self->place);
+    PyMem_Free(self->axis);
+    PyMem_Free(self->prismatic);
+    PyMem_Free(self->q_index);
+    PyMem_Free(self->v_index);
+    PyMem_Free(self->scale);
+    PyMem_Free(self->offset);
+    PyMem_Free(self->yaw);
+    PyMem_Free(self->chain);
+    PyMem_Free(self->chain_len);
+    PyMem_Free(self->columns);
+    PyMem_Free(self->columns_len);
+    PyMem_Free(self->lower);
+    PyMem_Free(self->upper);
+    PyMem_Free(self->shape_joint);
+    PyMem_Free(self->shape_place);
+    PyMem_Free(self->shapes);
+    PyMem_Free(self->ball);
+    PyMem_Free(self->pairs);
     Py_TYPE(self)->tp_free((PyObject *)self);
 }
 
@@ -479,11 +483,12 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
                              "scale", "offset", "yaw", "radius", "lower", "upper", "nq", "nv",
                              NULL};
     PyObject *o[11];
-    double radius;
-    int nq, nv;
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOOdOOii", kwlist, &o[0], &o[1], &o[2],
+    double radius = 0.0;
+    int nq = 0, nv = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|$OOOOOOOOOdOOii", kwlist, &o[0], &o[1], &o[2],
                                      &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &radius, &o[9],
-                                     &o[10], &nq, &nv))
+                                     &o[10], &nq, &nv) ||
+        missing_keyword("Tree", kwlist, kwds) < 0)
         return -1;
     if (self->parent != NULL) {
         PyErr_SetString(PyExc_RuntimeError, "Tree is already initialised");
@@ -495,28 +500,44 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
                              "scale", "offset", "yaw", "lower", "upper"};
     const char *formats[11] = {"q", "d", "d", "q", "q", "q", "d", "d", "q", "d", "d"};
     for (; got < 11; got++)
-        if (get_buffer(o[got], &b[got], -1, 0, formats[got], names[got]) < 0) goto out;
+        if (get_items(o[got], &b[got], -1, formats[got][0] == 'q', 0, names[got]) < 0) goto out;
     Py_ssize_t nj = b[0].len / 8, nf = b[8].len / 8;
-    if (nj < 1 || b[1].len != nj * 12 * 8 || b[2].len != nj * 3 * 8 || b[3].len != nj * 8 ||
-        b[4].len != nj * 8 || b[5].len != nj * 8 || b[6].len != nj * 8 || b[7].len != nj * 8 ||
-        nf < 1 || nq < 7 || nv != nq - 1 || b[9].len != (nq - 7) * 8 ||
-        b[10].len != (nq - 7) * 8) {
-        PyErr_SetString(PyExc_ValueError, "Tree: inconsistent array sizes");
+    if (nj < 1 || nf < 1 || nq < 7 || nv != nq - 1) {
+        PyErr_Format(PyExc_ValueError, "Tree: expected at least one joint in parents (got %zd), "
+                     "one finger in yaw (got %zd), nq >= 7 (got %d) and nv = nq - 1 (got %d)",
+                     nj, nf, nq, nv);
         goto out;
     }
+    /* Values per joint of placements .. offset, per actuated coordinate of lower and upper. */
+    const Py_ssize_t expected[11] = {nj, 12 * nj, 3 * nj, nj, nj, nj, nj, nj, nf, nq - 7, nq - 7};
+    for (int k = 1; k < 11; k++)
+        if (b[k].len != expected[k] * 8) {
+            PyErr_Format(PyExc_ValueError, "Tree: %s: expected %zd values, got %zd", names[k],
+                         expected[k], b[k].len / 8);
+            goto out;
+        }
     const long long *parents = b[0].buf, *prismatic = b[3].buf, *qi = b[4].buf, *vi = b[5].buf,
                     *yaw = b[8].buf;
     for (Py_ssize_t j = 0; j < nj; j++) {
-        int bad_parent = j == 0 ? parents[0] != -1 : (parents[j] < 0 || parents[j] >= j);
+        int bad_parent = j == 0 ? parents[0] != FIXED_JOINT : (parents[j] < 0 || parents[j] >= j);
         int bad_index = j > 0 && (qi[j] < 7 || qi[j] >= nq || vi[j] < 6 || vi[j] >= nv);
-        if (bad_parent || bad_index) {
-            PyErr_Format(PyExc_ValueError, "Tree: joint %zd has an invalid parent or index", j);
+        if (bad_parent) {
+            PyErr_Format(PyExc_ValueError, "Tree: parents[%zd] = %lld: expected %s", j,
+                         parents[j], j == 0 ? "FIXED_JOINT (-1) for the root"
+                                            : "an earlier joint (0 to its own index - 1)");
+            goto out;
+        }
+        if (bad_index) {
+            PyErr_Format(PyExc_ValueError, "Tree: q_index[%zd] = %lld, v_index[%zd] = %lld: "
+                         "expected 7 to nq - 1 = %d and 6 to nv - 1 = %d", j, qi[j], j, vi[j],
+                         nq - 1, nv - 1);
             goto out;
         }
     }
     for (Py_ssize_t f = 0; f < nf; f++)
         if (yaw[f] < 1 || yaw[f] >= nj) {
-            PyErr_SetString(PyExc_ValueError, "Tree: a yaw joint index is out of range");
+            PyErr_Format(PyExc_ValueError, "Tree: yaw[%zd] = %lld: expected a finger joint, 1 to "
+                         "%zd", f, yaw[f], nj - 1);
             goto out;
         }
     self->nj = (int)nj;
@@ -524,21 +545,21 @@ static int Tree_init(Tree *self, PyObject *args, PyObject *kwds) {
     self->nv = nv;
     self->nf = (int)nf;
     self->radius = radius;
-    self->parent = malloc(nj * sizeof(int));
-    self->place = malloc(nj * sizeof(Pose));
-    self->axis = malloc(nj * 3 * sizeof(double));
-    self->prismatic = malloc(nj * sizeof(int));
-    self->q_index = malloc(nj * sizeof(int));
-    self->v_index = malloc(nj * sizeof(int));
-    self->scale = malloc(nj * sizeof(double));
-    self->offset = malloc(nj * sizeof(double));
-    self->yaw = malloc(nf * sizeof(int));
-    self->chain = malloc(nf * nj * sizeof(int));
-    self->chain_len = malloc(nf * sizeof(int));
-    self->columns = malloc(nf * nv * sizeof(int));
-    self->columns_len = malloc(nf * sizeof(int));
-    self->lower = malloc((nq - 7) * sizeof(double));
-    self->upper = malloc((nq - 7) * sizeof(double));
+    self->parent = PyMem_Malloc(nj * sizeof(int));
+    self->place = PyMem_Malloc(nj * sizeof(Pose));
+    self->axis = PyMem_Malloc(nj * 3 * sizeof(double));
+    self->prismatic = PyMem_Malloc(nj * sizeof(int));
+    self->q_index = PyMem_Malloc(nj * sizeof(int));
+    self->v_index = PyMem_Malloc(nj * sizeof(int));
+    self->scale = PyMem_Malloc(nj * sizeof(double));
+    self->offset = PyMem_Malloc(nj * sizeof(double));
+    self->yaw = PyMem_Malloc(nf * sizeof(int));
+    self->chain = PyMem_Malloc(nf * nj * sizeof(int));
+    self->chain_len = PyMem_Malloc(nf * sizeof(int));
+    self->columns = PyMem_Malloc(nf * nv * sizeof(int));
+    self->columns_len = PyMem_Malloc(nf * sizeof(int));
+    self->lower = PyMem_Malloc((nq - 7) * sizeof(double));
+    self->upper = PyMem_Malloc((nq - 7) * sizeof(double));
     if (!self->parent || !self->place || !self->axis || !self->prismatic || !self->q_index ||
         !self->v_index || !self->scale || !self->offset || !self->yaw || !self->chain ||
         !self->chain_len || !self->columns || !self->columns_len || !self->lower || !self->upper) {
@@ -587,10 +608,10 @@ static int check_ready(const Tree *self) {
 }
 
 static void work_free(Work *w) {
-    free(w->M);
-    free(w->stack);
-    free(w->free_cols);
-    free(w->position);
+    PyMem_Free(w->M);
+    PyMem_Free(w->stack);
+    PyMem_Free(w->free_cols);
+    PyMem_Free(w->position);
 }
 
 /* Buffers of one call (the costs of up to `iterations` steps), one allocation for the doubles. */
@@ -598,7 +619,8 @@ static void work_free(Work *w) {
 static int check_fingers(const Tree *T, const long long *fingers, int nf) {
     for (int b = 0; b < nf; b++)
         if (fingers[b] < 0 || fingers[b] >= T->nf) {
-            PyErr_SetString(PyExc_ValueError, "finger index out of range");
+            PyErr_Format(PyExc_ValueError, "fingers[%d] = %lld: finger index out of range 0 to "
+                         "%d", b, fingers[b], T->nf - 1);
             return -1;
         }
     return 0;
@@ -609,14 +631,14 @@ static int check_fingers(const Tree *T, const long long *fingers, int nf) {
 static int stack_at(const Tree *T, const double *q, const long long *fingers, int nf,
                     double *stack) {
     if (check_fingers(T, fingers, nf) < 0) return -1;
-    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
+    Pose *M = PyMem_Malloc((size_t)T->nj * sizeof(Pose));
     if (M == NULL) {
         PyErr_NoMemory();
         return -1;
     }
     forward(T, q, M);
     stack_of(T, M, fingers, nf, stack);
-    free(M);
+    PyMem_Free(M);
     return 0;
 }
 
@@ -628,10 +650,10 @@ static int work_init(Work *w, const Tree *T, const long long *fingers, int nf,
     *w = (Work){.T = T, .fingers = fingers, .nf = nf, .m = m, .nv = nv, .target = target};
     size_t doubles = (size_t)m * 4 + (size_t)m * nv + (size_t)nv * (2 * nv + 3) + T->nq +
                      (size_t)iterations + 1;
-    w->M = malloc((size_t)T->nj * sizeof(Pose));
-    w->stack = malloc(doubles * sizeof(double));
-    w->free_cols = malloc((size_t)nv * sizeof(int));
-    w->position = malloc((size_t)nv * sizeof(int));
+    w->M = PyMem_Malloc((size_t)T->nj * sizeof(Pose));
+    w->stack = PyMem_Malloc(doubles * sizeof(double));
+    w->free_cols = PyMem_Malloc((size_t)nv * sizeof(int));
+    w->position = PyMem_Malloc((size_t)nv * sizeof(int));
     if (!w->M || !w->stack || !w->free_cols || !w->position) {
         work_free(w);
         PyErr_NoMemory();
@@ -657,13 +679,13 @@ static int take_finger_buffers(const Tree *self, PyObject *q_obj, int q_writable
                                PyObject *fingers_obj, PyObject *vec_obj, int vec_writable,
                                const char *vec_name, Py_buffer b[3], int *nf) {
     if (check_ready(self) < 0) return -1;
-    if (get_buffer(fingers_obj, &b[0], -1, 0, "q", "fingers") < 0) return -1;
+    if (get_items(fingers_obj, &b[0], -1, 1, 0, "fingers") < 0) return -1;
     *nf = (int)(b[0].len / 8);
-    if (get_buffer(q_obj, &b[1], self->nq, q_writable, "d", "q") < 0) {
+    if (get_items(q_obj, &b[1], self->nq, 0, q_writable, "q") < 0) {
         PyBuffer_Release(&b[0]);
         return -1;
     }
-    if (get_buffer(vec_obj, &b[2], 6 * *nf, vec_writable, "d", vec_name) < 0) {
+    if (get_items(vec_obj, &b[2], 6 * *nf, 0, vec_writable, vec_name) < 0) {
         PyBuffer_Release(&b[1]);
         PyBuffer_Release(&b[0]);
         return -1;
@@ -679,13 +701,12 @@ static PyObject *Tree_solve(Tree *self, PyObject *args) {
     PyObject *q_obj, *target_obj, *fingers_obj, *history;
     int max_iterations, stall;
     double refine_m, d_min_m;
-    if (!PyArg_ParseTuple(args, "OOOiddiO:solve", &q_obj, &target_obj, &fingers_obj,
-                          &max_iterations, &refine_m, &d_min_m, &stall, &history))
+    PyObject *iterations_obj, *stall_obj;
+    if (!PyArg_ParseTuple(args, "OOOOddOO:solve", &q_obj, &target_obj, &fingers_obj,
+                          &iterations_obj, &refine_m, &d_min_m, &stall_obj, &history) ||
+        get_int(iterations_obj, &max_iterations, 0, INT_MAX - 1, "max_iterations") < 0 ||
+        get_int(stall_obj, &stall, 1, INT_MAX, "stall") < 0)
         return NULL;
-    if (max_iterations < 0 || stall < 1) {
-        PyErr_SetString(PyExc_ValueError, "max_iterations must be >= 0 and stall >= 1");
-        return NULL;
-    }
     Py_buffer b[3]; /* fingers, q, target */
     int nf;
     if (take_finger_buffers(self, q_obj, 1, fingers_obj, target_obj, 0, "target", b, &nf) < 0)
@@ -720,10 +741,10 @@ static PyObject *Tree_stack(Tree *self, PyObject *args) {
         return NULL;
     Py_buffer b[4];
     int nf, held = 3, ok = 0, jac = jac_obj != Py_None;
-    if (take_finger_buffers(self, q_obj, 0, fingers_obj, stack_obj, 1, "stack", b, &nf) < 0)
+    if (take_finger_buffers(self, q_obj, 0, fingers_obj, stack_obj, 1, "stack_out", b, &nf) < 0)
         return NULL;
     if (jac) {
-        if (get_buffer(jac_obj, &b[3], (Py_ssize_t)6 * nf * self->nv, 1, "d", "jacobian") < 0) {
+        if (get_items(jac_obj, &b[3], (Py_ssize_t)6 * nf * self->nv, 0, 1, "jacobian_out") < 0) {
             release_buffers(b, held);
             return NULL;
         }
@@ -752,11 +773,11 @@ static PyObject *Tree_errors(Tree *self, PyObject *args) {
     int nf, ok = 0;
     if (take_finger_buffers(self, q_obj, 0, fingers_obj, target_obj, 0, "target", b, &nf) < 0)
         return NULL;
-    if (get_buffer(out_obj, &b[3], 2 * (Py_ssize_t)nf, 1, "d", "out") < 0) {
+    if (get_items(out_obj, &b[3], 2 * (Py_ssize_t)nf, 0, 1, "out") < 0) {
         release_buffers(b, 3);
         return NULL;
     }
-    double *stack = malloc(6 * (size_t)nf * sizeof(double) + 1);
+    double *stack = PyMem_Malloc(6 * (size_t)nf * sizeof(double) + 1);
     if (stack == NULL) {
         PyErr_NoMemory();
     } else if (stack_at(self, b[1].buf, b[0].buf, nf, stack) == 0) {
@@ -769,7 +790,7 @@ static PyObject *Tree_errors(Tree *self, PyObject *args) {
         }
         ok = 1;
     }
-    free(stack);
+    PyMem_Free(stack);
     release_buffers(b, 4);
     if (!ok) return NULL;
     Py_RETURN_NONE;
@@ -782,12 +803,12 @@ static PyObject *Tree_integrate(Tree *self, PyObject *args) {
     if (!PyArg_ParseTuple(args, "OOOp:integrate", &q_obj, &v_obj, &out_obj, &clamp)) return NULL;
     if (check_ready(self) < 0) return NULL;
     Py_buffer qb, vb, ob;
-    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) return NULL;
-    if (get_buffer(v_obj, &vb, self->nv, 0, "d", "v") < 0) {
+    if (get_items(q_obj, &qb, self->nq, 0, 0, "q") < 0) return NULL;
+    if (get_items(v_obj, &vb, self->nv, 0, 0, "v") < 0) {
         PyBuffer_Release(&qb);
         return NULL;
     }
-    if (get_buffer(out_obj, &ob, self->nq, 1, "d", "out") < 0) {
+    if (get_items(out_obj, &ob, self->nq, 0, 1, "out") < 0) {
         PyBuffer_Release(&vb);
         PyBuffer_Release(&qb);
         return NULL;
@@ -830,11 +851,12 @@ static int repair_step(const Tree *T, const double *q, const double *target,
                        const double *points, const double *normals, const double *depths, int np,
                        double *out) {
     int nv = T->nv, m = 6 * nf, rows = m + np;
-    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
-    double *buf = malloc(((size_t)rows * (nv + 2) + (size_t)nv * (2 * nv + 3)) * sizeof(double));
-    int *free_cols = malloc((size_t)nv * sizeof(int));
+    Pose *M = PyMem_Malloc((size_t)T->nj * sizeof(Pose));
+    double *buf =
+        PyMem_Malloc(((size_t)rows * (nv + 2) + (size_t)nv * (2 * nv + 3)) * sizeof(double));
+    int *free_cols = PyMem_Malloc((size_t)nv * sizeof(int));
     if (!M || !buf || !free_cols) {
-        free(M), free(buf), free(free_cols);
+        PyMem_Free(M), PyMem_Free(buf), PyMem_Free(free_cols);
         return -1;
     }
     double *J = buf, *e = J + (size_t)rows * nv, *stack = e + rows, *g = stack + m;
@@ -871,7 +893,7 @@ static int repair_step(const Tree *T, const double *q, const double *target,
         for (int a = 0; a < n; a++) step[free_cols[a]] = x[a];
         integrate_clamped(T, q, step, out, 1);
     }
-    free(M), free(buf), free(free_cols);
+    PyMem_Free(M), PyMem_Free(buf), PyMem_Free(free_cols);
     return ok;
 }
 
@@ -893,18 +915,23 @@ static PyObject *Tree_repair(Tree *self, PyObject *args) {
     for (; held < N_ARGS; held++) {
         int i = order[held];
         Py_ssize_t sizes[N_ARGS] = {self->nq, 6 * nf, -1, 2 * np, 6 * np, 3 * np, -1, self->nq};
-        if (get_buffer(o[i], &b[i], sizes[i], i == OUT, formats[i], names[i]) < 0) break;
+        if (get_items(o[i], &b[i], sizes[i], formats[i][0] == 'q', i == OUT, names[i]) < 0) break;
         if (i == FINGERS) nf = (int)(b[i].len / 8);
         if (i == DEPTHS) np = (int)(b[i].len / 8);
     }
     if (held == N_ARGS) {
         const long long *f = b[FINGERS].buf, *j = b[JOINTS].buf;
         int bad = nf < 1;
-        for (int k = 0; k < nf; k++) bad |= f[k] < 0 || f[k] >= self->nf;
-        for (int k = 0; k < 2 * np; k++) bad |= j[k] < -1 || j[k] >= self->nj;
-        if (bad) {
-            PyErr_SetString(PyExc_ValueError, "fingers empty, or a finger or joint out of range");
-        } else {
+        if (bad) PyErr_SetString(PyExc_ValueError, "repair: fingers must not be empty");
+        for (int k = 0; k < nf && !bad; k++)
+            if ((bad = f[k] < 0 || f[k] >= self->nf))
+                PyErr_Format(PyExc_ValueError, "repair: fingers[%d] = %lld: finger index out of "
+                             "range 0 to %d", k, f[k], self->nf - 1);
+        for (int k = 0; k < 2 * np && !bad; k++)
+            if ((bad = j[k] < FIXED_JOINT || j[k] >= self->nj))
+                PyErr_Format(PyExc_ValueError, "repair: joints: joint out of range: %lld (valid: "
+                             "-1, the fixed world, to %d)", j[k], self->nj - 1);
+        if (!bad) {
             status = repair_step(self, b[Q].buf, b[TARGET].buf, f, nf, j, b[POINTS].buf,
                                  b[NORMALS].buf, b[DEPTHS].buf, np, b[OUT].buf);
             if (status < 0) PyErr_NoMemory();
@@ -921,10 +948,13 @@ static PyObject *Tree_repair(Tree *self, PyObject *args) {
  * (tree joint, placement in it as 12 values, kind of _gjk.h up to the ellipsoid, 4 sizes: box
  * half extents, cylinder radius and half length or ellipsoid radii, then the inflation), their
  * bounding balls (local centre, radius) and the pairs to check. */
-static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
+static PyObject *Tree_set_shapes(Tree *self, PyObject *args, PyObject *kwds) {
     enum { JOINTS, PLACEMENTS, KINDS, SIZES, BALLS, PAIRS, N_ARGS };
+    static char *kwlist[] = {"joints", "placements", "kinds", "sizes", "balls", "pairs", NULL};
     PyObject *o[N_ARGS];
-    if (!PyArg_ParseTuple(args, "OOOOOO:set_shapes", &o[0], &o[1], &o[2], &o[3], &o[4], &o[5]))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|$OOOOOO:set_shapes", kwlist, &o[0], &o[1],
+                                     &o[2], &o[3], &o[4], &o[5]) ||
+        missing_keyword("set_shapes", kwlist, kwds) < 0)
         return NULL;
     if (check_ready(self) < 0) return NULL;
     static const char *names[N_ARGS] = {"joints", "placements", "kinds", "sizes", "balls", "pairs"};
@@ -933,22 +963,43 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
     int held = 0, ns = 0, ok = 0;
     for (; held < N_ARGS; held++) {
         Py_ssize_t sizes[N_ARGS] = {-1, 12 * ns, ns, 4 * ns, 4 * ns, -1};
-        if (get_buffer(o[held], &b[held], sizes[held], 0, formats[held], names[held]) < 0) break;
+        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0)
+            break;
         if (held == JOINTS) ns = (int)(b[0].len / 8);
     }
     if (held == N_ARGS) {
         const long long *joints = b[JOINTS].buf, *kinds = b[KINDS].buf, *pairs = b[PAIRS].buf;
-        int npairs = (int)(b[PAIRS].len / 16), bad = b[PAIRS].len % 16 != 0;
-        for (int k = 0; k < ns; k++)
-            bad |= joints[k] < 0 || joints[k] >= self->nj || kinds[k] < SHAPE_POINT ||
-                   kinds[k] > SHAPE_ELLIPSOID;
-        for (int k = 0; k < 2 * npairs; k++) bad |= pairs[k] < 0 || pairs[k] >= ns;
-        int *joint = malloc((size_t)ns * sizeof(int) + 1), *pair = malloc(2 * (size_t)npairs * sizeof(int) + 1);
-        Pose *place = malloc((size_t)ns * sizeof(Pose) + 1);
-        GjkShape *shapes = calloc((size_t)ns + 1, sizeof(GjkShape));
-        double *ball = malloc(4 * (size_t)ns * sizeof(double) + 1);
+        int npairs = (int)(b[PAIRS].len / 16), bad = 0;
+        if (b[PAIRS].len % 16 != 0) {
+            bad = 1;
+            PyErr_Format(PyExc_ValueError, "set_shapes: pairs: expected an even number of "
+                         "values (pairs of shapes), got %zd", b[PAIRS].len / 8);
+        }
+        for (int k = 0; k < ns && !bad; k++) {
+            bad = 1;
+            if (joints[k] < 0 || joints[k] >= self->nj)
+                PyErr_Format(PyExc_ValueError, "set_shapes: joints[%d] = %lld: expected a joint "
+                             "of the tree, 0 to %d", k, joints[k], self->nj - 1);
+            else if (kinds[k] < SHAPE_POINT || kinds[k] > SHAPE_ELLIPSOID)
+                PyErr_Format(PyExc_ValueError, "set_shapes: kinds[%d] = %lld: expected "
+                             "SHAPE_POINT to SHAPE_ELLIPSOID, %d to %d", k, kinds[k],
+                             SHAPE_POINT, SHAPE_ELLIPSOID);
+            else
+                bad = 0;
+        }
+        for (int k = 0; k < 2 * npairs && !bad; k++)
+            if (pairs[k] < 0 || pairs[k] >= ns) {
+                bad = 1;
+                PyErr_Format(PyExc_ValueError, "set_shapes: pairs: shape %lld of pair %d is not "
+                             "one of the %d shapes", pairs[k], k / 2, ns);
+            }
+        int *joint = PyMem_Malloc((size_t)ns * sizeof(int) + 1),
+            *pair = PyMem_Malloc(2 * (size_t)npairs * sizeof(int) + 1);
+        Pose *place = PyMem_Malloc((size_t)ns * sizeof(Pose) + 1);
+        GjkShape *shapes = PyMem_Calloc((size_t)ns + 1, sizeof(GjkShape));
+        double *ball = PyMem_Malloc(4 * (size_t)ns * sizeof(double) + 1);
         if (bad) {
-            PyErr_SetString(PyExc_ValueError, "set_shapes: a joint, kind or pair is out of range");
+            /* the error is set */
         } else if (!joint || !pair || !place || !shapes || !ball) {
             PyErr_NoMemory();
         } else {
@@ -963,14 +1014,15 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
             }
             for (int k = 0; k < 2 * npairs; k++) pair[k] = (int)pairs[k];
             memcpy(ball, b[BALLS].buf, 4 * (size_t)ns * sizeof(double));
-            free(self->shape_joint), free(self->shape_place), free(self->shapes);
-            free(self->ball), free(self->pairs);
+            PyMem_Free(self->shape_joint), PyMem_Free(self->shape_place), PyMem_Free(self->shapes);
+            PyMem_Free(self->ball), PyMem_Free(self->pairs);
             self->shape_joint = joint, self->shape_place = place, self->shapes = shapes;
             self->ball = ball, self->pairs = pair, self->ns = ns, self->npairs = npairs;
             joint = NULL, pair = NULL, place = NULL, shapes = NULL, ball = NULL;
             ok = 1;
         }
-        free(joint), free(pair), free(place), free(shapes), free(ball);
+        PyMem_Free(joint), PyMem_Free(pair), PyMem_Free(place), PyMem_Free(shapes);
+        PyMem_Free(ball);
     }
     release_buffers(b, held);
     if (!ok) return NULL;
@@ -981,9 +1033,9 @@ static PyObject *Tree_set_shapes(Tree *self, PyObject *args) {
  * pair order): how many; -1 if out of memory. */
 static int pairs_within(const Tree *T, const double *q, double margin_m, long long *found,
                         int most) {
-    Pose *M = malloc((size_t)T->nj * sizeof(Pose));
-    GjkShape *shapes = malloc((size_t)T->ns * sizeof(GjkShape) + 1);
-    double *centres = malloc(3 * (size_t)T->ns * sizeof(double) + 1);
+    Pose *M = PyMem_Malloc((size_t)T->nj * sizeof(Pose));
+    GjkShape *shapes = PyMem_Malloc((size_t)T->ns * sizeof(GjkShape) + 1);
+    double *centres = PyMem_Malloc(3 * (size_t)T->ns * sizeof(double) + 1);
     int count = -1;
     if (M && shapes && centres) {
         forward(T, q, M);
@@ -1007,7 +1059,7 @@ static int pairs_within(const Tree *T, const double *q, double margin_m, long lo
             if (gjk_within(&shapes[a], &shapes[b], margin_m)) found[count++] = p;
         }
     }
-    free(M), free(shapes), free(centres);
+    PyMem_Free(M), PyMem_Free(shapes), PyMem_Free(centres);
     return count;
 }
 
@@ -1023,8 +1075,8 @@ static PyObject *Tree_pairs_within(Tree *self, PyObject *args) {
         return NULL;
     }
     Py_buffer qb, ob;
-    if (get_buffer(q_obj, &qb, self->nq, 0, "d", "q") < 0) return NULL;
-    if (get_buffer(out_obj, &ob, -1, 1, "q", "out") < 0) {
+    if (get_items(q_obj, &qb, self->nq, 0, 0, "q") < 0) return NULL;
+    if (get_items(out_obj, &ob, -1, 1, 1, "out") < 0) {
         PyBuffer_Release(&qb);
         return NULL;
     }
@@ -1062,7 +1114,7 @@ static void pieces_clear(Pieces *self) {
                        (void **)&self->cell_ball,  (void **)&self->cell_start,
                        (void **)&self->cell_members};
     for (size_t k = 0; k < sizeof arrays / sizeof arrays[0]; k++) {
-        free(*arrays[k]);
+        PyMem_Free(*arrays[k]);
         *arrays[k] = NULL;
     }
 }
@@ -1085,8 +1137,9 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
                              "first", "neighbours", "cell_balls", "cell_start", "cell_members",
                              NULL};
     PyObject *o[N_ARGS];
-    if (!PyArg_ParseTupleAndKeywords(args, kwds, "OOOOOOOOOOO", kwlist, &o[0], &o[1], &o[2], &o[3],
-                                     &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10]))
+    if (!PyArg_ParseTupleAndKeywords(args, kwds, "|$OOOOOOOOOOO", kwlist, &o[0], &o[1], &o[2],
+                                     &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10]) ||
+        missing_keyword("Pieces", kwlist, kwds) < 0)
         return -1;
     if (self->shapes != NULL) {
         PyErr_SetString(PyExc_RuntimeError, "Pieces is already initialised");
@@ -1100,35 +1153,50 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
     int held = 0, status = -1, n = 0, ncells = 0;
     for (; held < N_ARGS; held++) {
         Py_ssize_t sizes[N_ARGS] = {-1, 12 * n, 4 * n, 4 * n, n + 1, -1, -1, -1, -1, -1, n};
-        if (get_buffer(o[held], &b[held], sizes[held], 0, formats[held], names[held]) < 0) goto out;
+        if (get_items(o[held], &b[held], sizes[held], formats[held][0] == 'q', 0, names[held]) < 0)
+            goto out;
         if (held == KINDS) n = (int)(b[KINDS].len / 8);
         if (held == CBALLS) ncells = (int)(b[CBALLS].len / 32);
     }
     const long long *kinds = b[KINDS].buf, *vstart = b[VSTART].buf, *first = b[FIRST].buf,
                     *nb = b[NEIGHBOURS].buf, *cstart = b[CSTART].buf, *members = b[CMEMBERS].buf;
     Py_ssize_t nvert = b[VERTICES].len / 24, nfirst = b[FIRST].len / 8, nnb = b[NEIGHBOURS].len / 8;
-    int bad = b[VERTICES].len % 24 != 0 || b[CBALLS].len % 32 != 0 ||
-              b[CSTART].len != 8 * (Py_ssize_t)(ncells + 1) || vstart[0] != 0 || vstart[n] != nvert ||
-              cstart[0] != 0 || cstart[ncells] != n;
-    for (int p = 0; p < n && !bad; p++)
-        bad = kinds[p] < SHAPE_POINT || kinds[p] > SHAPE_CONVEX || vstart[p + 1] < vstart[p] ||
-              (kinds[p] == SHAPE_CONVEX) != (vstart[p + 1] > vstart[p]);
-    for (int k = 0; k < ncells && !bad; k++) bad = cstart[k + 1] < cstart[k];
-    for (int k = 0; k < n && !bad; k++) bad = members[k] < 0 || members[k] >= n;
-    for (Py_ssize_t e = 0; e < nnb && !bad; e++) bad = nb[e] < 0;
-    if (bad) {
-        PyErr_SetString(PyExc_ValueError, "Pieces: inconsistent arrays");
+    /* The first array at fault and what it must be. */
+    const char *fault = NULL, *valid = NULL;
+    if (b[VERTICES].len % 24 != 0)
+        fault = "vertices", valid = "rows of 3 coordinates";
+    else if (b[CBALLS].len % 32 != 0)
+        fault = "cell_balls", valid = "rows of 4 values (centre, radius)";
+    else if (b[CSTART].len != 8 * (Py_ssize_t)(ncells + 1) || cstart[0] != 0 || cstart[ncells] != n)
+        fault = "cell_start", valid = "one offset per cell and one more, from 0 to the pieces";
+    else if (vstart[0] != 0 || vstart[n] != nvert)
+        fault = "vertex_start", valid = "offsets from 0 to the vertices";
+    for (int p = 0; p < n && !fault; p++)
+        if (kinds[p] < SHAPE_POINT || kinds[p] > SHAPE_CONVEX)
+            fault = "kinds", valid = "SHAPE_POINT to SHAPE_CONVEX";
+        else if (vstart[p + 1] < vstart[p] ||
+                 (kinds[p] == SHAPE_CONVEX) != (vstart[p + 1] > vstart[p]))
+            fault = "vertex_start", valid = "ascending offsets, vertices for convex pieces only";
+    for (int k = 0; k < ncells && !fault; k++)
+        if (cstart[k + 1] < cstart[k]) fault = "cell_start", valid = "ascending offsets";
+    for (int k = 0; k < n && !fault; k++)
+        if (members[k] < 0 || members[k] >= n) fault = "cell_members", valid = "piece indices";
+    for (Py_ssize_t e = 0; e < nnb && !fault; e++)
+        if (nb[e] < 0) fault = "neighbours", valid = "vertex indices >= 0";
+    if (fault != NULL) {
+        PyErr_Format(PyExc_ValueError, "Pieces: %s: expected %s", fault, valid);
         goto out;
     }
-    self->shapes = calloc((size_t)n + 1, sizeof(GjkShape));
-    self->ball = malloc(4 * (size_t)n * sizeof(double) + 1);
-    self->vertices = malloc(3 * (size_t)nvert * sizeof(double) + 1);
-    self->first = malloc((size_t)nfirst * sizeof(int) + 1);
-    self->neighbours = malloc((size_t)nnb * sizeof(int) + 1);
-    self->cell_ball = malloc(4 * (size_t)ncells * sizeof(double) + 1);
-    self->cell_start = malloc(((size_t)ncells + 1) * sizeof(int));
-    self->cell_members = malloc((size_t)n * sizeof(int) + 1);
-    self->starts = malloc((size_t)n * GJK_DIRECTIONS * sizeof(int) + 1);
+    int bad = 0;
+    self->shapes = PyMem_Calloc((size_t)n + 1, sizeof(GjkShape));
+    self->ball = PyMem_Malloc(4 * (size_t)n * sizeof(double) + 1);
+    self->vertices = PyMem_Malloc(3 * (size_t)nvert * sizeof(double) + 1);
+    self->first = PyMem_Malloc((size_t)nfirst * sizeof(int) + 1);
+    self->neighbours = PyMem_Malloc((size_t)nnb * sizeof(int) + 1);
+    self->cell_ball = PyMem_Malloc(4 * (size_t)ncells * sizeof(double) + 1);
+    self->cell_start = PyMem_Malloc(((size_t)ncells + 1) * sizeof(int));
+    self->cell_members = PyMem_Malloc((size_t)n * sizeof(int) + 1);
+    self->starts = PyMem_Malloc((size_t)n * GJK_DIRECTIONS * sizeof(int) + 1);
     if (!self->shapes || !self->ball || !self->vertices || !self->first || !self->neighbours ||
         !self->cell_ball || !self->cell_start || !self->cell_members || !self->starts) {
         PyErr_NoMemory();
@@ -1186,7 +1254,9 @@ static int Pieces_init(Pieces *self, PyObject *args, PyObject *kwds) {
         }
     }
     if (bad || at != nfirst) {
-        PyErr_SetString(PyExc_ValueError, "Pieces: inconsistent neighbour offsets");
+        PyErr_SetString(PyExc_ValueError, "Pieces: first, neighbours: expected per convex piece "
+                        "with neighbours its vertices' offsets into neighbours and one more, "
+                        "each neighbour a vertex of that piece, per piece without -1");
         goto out;
     }
     self->n = n;
@@ -1245,7 +1315,7 @@ static double shape_to_pieces(const Pieces *P, const GjkShape *shape, const doub
  * their bounding balls there (4 values each); 0, or -1 out of memory. */
 static int shapes_in_object(const Tree *T, const double *q, const double *T_world_object,
                             GjkShape *shapes, double *balls) {
-    Pose *M = malloc((size_t)T->nj * sizeof(Pose)), object, inverse;
+    Pose *M = PyMem_Malloc((size_t)T->nj * sizeof(Pose)), object, inverse;
     if (M == NULL) return -1;
     forward(T, q, M);
     memcpy(object.R, T_world_object, 9 * sizeof(double));
@@ -1268,7 +1338,7 @@ static int shapes_in_object(const Tree *T, const double *q, const double *T_worl
                                local.R[3 * i + 2] * c[2] + local.t[i];
         balls[4 * k + 3] = c[3];
     }
-    free(M);
+    PyMem_Free(M);
     return 0;
 }
 
@@ -1284,12 +1354,12 @@ static int take_object_buffers(const Tree *self, PyObject *pieces, PyObject *q_o
         PyErr_SetString(PyExc_ValueError, "the tree has no collision shapes (set_shapes)");
         return -1;
     }
-    if (get_buffer(q_obj, &b[0], self->nq, 0, "d", "q") < 0) return -1;
-    if (get_buffer(T_obj, &b[1], 16, 0, "d", "T_world_object") < 0) {
+    if (get_items(q_obj, &b[0], self->nq, 0, 0, "q") < 0) return -1;
+    if (get_items(T_obj, &b[1], 16, 0, 0, "T_world_object") < 0) {
         release_buffers(b, 1);
         return -1;
     }
-    if (get_buffer(th_obj, &b[2], self->ns, 0, "d", "thresholds") < 0) {
+    if (get_items(th_obj, &b[2], self->ns, 0, 0, "thresholds") < 0) {
         release_buffers(b, 2);
         return -1;
     }
@@ -1351,7 +1421,8 @@ typedef struct {
 } ObjectQuery;
 
 static void object_query_free(ObjectQuery *Q) {
-    free(Q->shapes), free(Q->balls), free(Q->gaps), free(Q->bounds), free(Q->order);
+    PyMem_Free(Q->shapes), PyMem_Free(Q->balls), PyMem_Free(Q->gaps), PyMem_Free(Q->bounds);
+    PyMem_Free(Q->order);
 }
 
 /* Q for the tree at q and an object at the 4 x 4 row-major T_world_object: 0, or -1 with
@@ -1360,11 +1431,11 @@ static int object_query_init(const Tree *T, const Pieces *P, const double *q,
                              const double *T_world_object, ObjectQuery *Q) {
     int ns = T->ns;
     double placement[12];
-    Q->shapes = malloc((size_t)ns * sizeof(GjkShape));
-    Q->balls = malloc(4 * (size_t)ns * sizeof(double));
-    Q->gaps = malloc(((size_t)P->ncells + 1) * sizeof(double));
-    Q->bounds = malloc((size_t)ns * sizeof(double));
-    Q->order = malloc((size_t)ns * sizeof(int));
+    Q->shapes = PyMem_Malloc((size_t)ns * sizeof(GjkShape));
+    Q->balls = PyMem_Malloc(4 * (size_t)ns * sizeof(double));
+    Q->gaps = PyMem_Malloc(((size_t)P->ncells + 1) * sizeof(double));
+    Q->bounds = PyMem_Malloc((size_t)ns * sizeof(double));
+    Q->order = PyMem_Malloc((size_t)ns * sizeof(int));
     pose_values(T_world_object, placement);
     if (!Q->shapes || !Q->balls || !Q->gaps || !Q->bounds || !Q->order ||
         shapes_in_object(T, q, placement, Q->shapes, Q->balls) < 0) {
@@ -1408,7 +1479,7 @@ static PyObject *Tree_shapes_near(Tree *self, PyObject *args) {
         return NULL;
     Py_buffer b[4];
     if (take_object_buffers(self, pieces, q_obj, T_obj, th_obj, b) < 0) return NULL;
-    if (get_buffer(out_obj, &b[3], self->ns, 1, "q", "out") < 0) {
+    if (get_items(out_obj, &b[3], self->ns, 1, 1, "out") < 0) {
         release_buffers(b, 3);
         return NULL;
     }
@@ -1519,7 +1590,7 @@ static PyObject *Tree_align(Tree *self, PyObject *args) {
     int nf, ok = 0;
     if (take_finger_buffers(self, q_obj, 1, fingers_obj, goal_obj, 0, "goal", b, &nf) < 0)
         return NULL;
-    double *stack = malloc(6 * (size_t)nf * sizeof(double) + 1);
+    double *stack = PyMem_Malloc(6 * (size_t)nf * sizeof(double) + 1);
     if (nf < 1) {
         PyErr_SetString(PyExc_ValueError, "fingers must not be empty");
     } else if (stack == NULL) {
@@ -1528,7 +1599,7 @@ static PyObject *Tree_align(Tree *self, PyObject *args) {
         align_wrist(b[1].buf, stack, b[2].buf, 2 * nf);
         ok = 1;
     }
-    free(stack);
+    PyMem_Free(stack);
     release_buffers(b, 3);
     if (!ok) return NULL;
     Py_RETURN_NONE;
@@ -1544,15 +1615,15 @@ static PyObject *rigid_key(PyObject *module, PyObject *args) {
     double scale;
     if (!PyArg_ParseTuple(args, "OOdO:rigid_key", &p_obj, &n_obj, &scale, &out_obj)) return NULL;
     Py_buffer pb, nb, ob;
-    if (get_buffer(p_obj, &pb, -1, 0, "d", "points") < 0) return NULL;
+    if (get_items(p_obj, &pb, -1, 0, 0, "points") < 0) return NULL;
     int nf = (int)(pb.len / 24), ok = 0;
     if (nf < 3 || pb.len != 24 * (Py_ssize_t)nf) {
         PyErr_SetString(PyExc_ValueError, "points must hold F >= 3 rows of 3");
         PyBuffer_Release(&pb);
         return NULL;
     }
-    if (get_buffer(n_obj, &nb, 3 * nf, 0, "d", "normals") < 0) goto release_p;
-    if (get_buffer(out_obj, &ob, 6 * nf, 1, "d", "out") < 0) goto release_n;
+    if (get_items(n_obj, &nb, 3 * nf, 0, 0, "normals") < 0) goto release_p;
+    if (get_items(out_obj, &ob, 6 * nf, 0, 1, "out") < 0) goto release_n;
     const double *p = pb.buf, *n = nb.buf;
     double *out = ob.buf, c[3] = {0, 0, 0}, x[3], y[3], z[3], side[3];
     for (int i = 0; i < nf; i++)
@@ -1607,8 +1678,8 @@ static PyMethodDef Tree_methods[] = {
     {"repair", (PyCFunction)Tree_repair, METH_VARARGS,
      "repair(q, target, fingers, joints, points, normals, depths, out) -> bool: one collision "
      "repair step into out; False if its rows are degenerate."},
-    {"set_shapes", (PyCFunction)Tree_set_shapes, METH_VARARGS,
-     "set_shapes(joints, placements, kinds, sizes, balls, pairs): the collision shapes and the "
+    {"set_shapes", (PyCFunction)(void (*)(void))Tree_set_shapes, METH_VARARGS | METH_KEYWORDS,
+     "set_shapes(*, joints, placements, kinds, sizes, balls, pairs): the collision shapes and the "
      "pairs the self-collision verdicts check."},
     {"pairs_within", (PyCFunction)Tree_pairs_within, METH_VARARGS,
      "pairs_within(q, margin_m, out) -> int: the checked pairs closer than margin_m at q "
@@ -1643,28 +1714,26 @@ static PyTypeObject TreeType = {
 };
 
 static struct PyModuleDef module = {
-    PyModuleDef_HEAD_INIT, .m_name = "sahgrasp.ik._lm", .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
+    PyModuleDef_HEAD_INIT,
+    .m_name = "sahgrasp.ik._lm",
+    .m_doc = "Compiled Levenberg-Marquardt loop of the IK.",
     .m_size = -1, .m_methods = module_methods,
 };
 
 PyMODINIT_FUNC PyInit__lm(void) {
-    if (PyType_Ready(&TreeType) < 0 || PyType_Ready(&PiecesType) < 0) return NULL;
-    PyObject *m = PyModule_Create(&module);
-    if (m == NULL) return NULL;
-    Py_INCREF(&TreeType);
-    if (PyModule_AddObject(m, "Tree", (PyObject *)&TreeType) < 0) {
-        Py_DECREF(&TreeType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    Py_INCREF(&PiecesType);
-    if (PyModule_AddObject(m, "Pieces", (PyObject *)&PiecesType) < 0) {
-        Py_DECREF(&PiecesType);
-        Py_DECREF(m);
-        return NULL;
-    }
-    PyModule_AddIntConstant(m, "CONVERGED", CONVERGED);
-    PyModule_AddIntConstant(m, "NO_PROGRESS", NO_PROGRESS);
-    PyModule_AddIntConstant(m, "MAX_ITERATIONS", MAX_ITERATIONS);
-    return m;
+    static PyTypeObject *types[] = {&TreeType, &PiecesType, NULL};
+    /* The Python side (sahgrasp/ik/compiled.py) reads these, never a copy. */
+    static const IntConstant constants[] = {
+        {"CONVERGED", CONVERGED},
+        {"NO_PROGRESS", NO_PROGRESS},
+        {"MAX_ITERATIONS", MAX_ITERATIONS},
+        {"SHAPE_POINT", SHAPE_POINT},
+        {"SHAPE_BOX", SHAPE_BOX},
+        {"SHAPE_CYLINDER", SHAPE_CYLINDER},
+        {"SHAPE_ELLIPSOID", SHAPE_ELLIPSOID},
+        {"SHAPE_CONVEX", SHAPE_CONVEX},
+        {"FIXED_JOINT", FIXED_JOINT},
+        {NULL, 0},
+    };
+    return create_module(&module, types, constants);
 }

@@ -21,7 +21,8 @@ from numpy.typing import NDArray
 
 from sahgrasp.errors import HandModelError
 from sahgrasp.hand import Hand
-from sahgrasp.ik._lm import CONVERGED, MAX_ITERATIONS, NO_PROGRESS, Tree
+from sahgrasp.ik import _lm
+from sahgrasp.ik._lm import Tree
 
 __all__ = [
     "BOX",
@@ -37,14 +38,40 @@ __all__ = [
     "describe_shape",
     "near_pairs",
     "self_collides",
+    "tree_joint",
 ]
 
 OUTCOMES: Final = {
-    CONVERGED: "converged",
-    NO_PROGRESS: "no_progress",
-    MAX_ITERATIONS: "max_iterations",
+    _lm.CONVERGED: "converged",
+    _lm.NO_PROGRESS: "no_progress",
+    _lm.MAX_ITERATIONS: "max_iterations",
 }
-"""Outcome of :meth:`Tree.solve`, by the code it returns."""
+"""Outcome of :meth:`Tree.solve`, by the code it returns (the codes are ``_lm.c``'s)."""
+
+# The shape kinds of the compiled verdicts, as ``sahgrasp/_gjk.h`` numbers them (read from the
+# compiled module, never copied).
+POINT: Final = _lm.SHAPE_POINT
+"""A point, inflated: a sphere (sizes unused)."""
+BOX: Final = _lm.SHAPE_BOX
+"""A box (sizes: its half extents [m])."""
+CYLINDER: Final = _lm.SHAPE_CYLINDER
+"""A cylinder along z (sizes: radius and half length [m]); of radius 0 and inflated, a capsule."""
+ELLIPSOID: Final = _lm.SHAPE_ELLIPSOID
+"""An ellipsoid (sizes: its radii [m])."""
+CONVEX: Final = _lm.SHAPE_CONVEX
+"""A convex hull of vertices (an object's piece; the hand's own shapes are never hulls)."""
+
+
+def tree_joint(pinocchio_joint: int) -> int:
+    """The compiled tree's number of Pinocchio joint ``pinocchio_joint``.
+
+    The one mapping between the two numberings: the tree leaves out Pinocchio's universe
+    (joint 0), which is the tree's fixed world ``_lm.FIXED_JOINT`` (-1), and keeps Pinocchio's
+    order after it: the wrist (Pinocchio's joint 1) is the tree's root, 0. A contact's object
+    is attached to the universe, so it is the tree's fixed world too.
+    """
+    return _lm.FIXED_JOINT + pinocchio_joint
+
 
 _TREES: weakref.WeakKeyDictionary[Hand, Tree] = weakref.WeakKeyDictionary()
 
@@ -102,6 +129,22 @@ tolerance may differ."""
 
 
 def _export(hand: Hand) -> Tree:
+    tree = Tree(**_tree_arguments(hand))
+    shapes = _shapes(hand.collision.geometry_model)
+    if shapes is not None:
+        tree.set_shapes(**shapes)
+    return tree
+
+
+def _tree_arguments(hand: Hand) -> dict[str, Any]:
+    """The keyword arguments of :class:`Tree` for ``hand``.
+
+    The tree's joints are Pinocchio's after its universe, numbered by :func:`tree_joint`. Per
+    joint: its parent, placement in the parent (rotation row-major, then translation), unit axis
+    in its own frame, whether it slides, configuration and velocity index, and the mimic scale
+    and offset (1 and 0 for a joint of its own); per finger the joint that carries its contact
+    frame ("yaw"); the fingertip radius [m] and the actuated joints' limits.
+    """
     model = hand.model
     data = model.createData()
     pin.computeJointJacobians(model, data, pin.neutral(model))
@@ -119,31 +162,24 @@ def _export(hand: Hand) -> Tree:
         np.concatenate([placement.rotation.ravel(), placement.translation])
         for placement in model.jointPlacements[1:]
     ]
-    yaw = [model.frames[hand.contact_frame_id(f)].parentJoint - 1 for f in hand.fingers]
-    tree = Tree(
-        parents=np.array([model.parents[j] - 1 for j in joints], dtype=np.int64),
-        placements=np.ascontiguousarray(placements, dtype=np.float64),
-        axes=np.ascontiguousarray(axes, dtype=np.float64),
-        prismatic=np.array(prismatic, dtype=np.int64),
-        q_index=np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
-        v_index=np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
-        scale=np.array(scale),
-        offset=np.array(offset),
-        yaw=np.array(yaw, dtype=np.int64),
-        radius=hand.radius_m,
-        lower=np.ascontiguousarray(hand.lower),
-        upper=np.ascontiguousarray(hand.upper),
-        nq=hand.nq,
-        nv=hand.nv,
-    )
-    shapes = _shapes(hand.collision.geometry_model)
-    if shapes is not None:
-        tree.set_shapes(*shapes)
-    return tree
+    yaw = [tree_joint(model.frames[hand.contact_frame_id(f)].parentJoint) for f in hand.fingers]
+    return {
+        "parents": np.array([tree_joint(model.parents[j]) for j in joints], dtype=np.int64),
+        "placements": np.ascontiguousarray(placements, dtype=np.float64),
+        "axes": np.ascontiguousarray(axes, dtype=np.float64),
+        "prismatic": np.array(prismatic, dtype=np.int64),
+        "q_index": np.array([model.joints[j].idx_q for j in joints], dtype=np.int64),
+        "v_index": np.array([model.joints[j].idx_v for j in joints], dtype=np.int64),
+        "scale": np.array(scale, dtype=np.float64),
+        "offset": np.array(offset, dtype=np.float64),
+        "yaw": np.array(yaw, dtype=np.int64),
+        "radius": hand.radius_m,
+        "lower": np.ascontiguousarray(hand.lower, dtype=np.float64),
+        "upper": np.ascontiguousarray(hand.upper, dtype=np.float64),
+        "nq": hand.nq,
+        "nv": hand.nv,
+    }
 
-
-POINT, BOX, CYLINDER, ELLIPSOID, CONVEX = range(5)
-"""Shape kinds of the compiled verdicts (``sahgrasp/_gjk.h``)."""
 
 CLIMB_ABOVE = 16
 """Convex shapes with more vertices than this find their support points by hill climbing on
@@ -186,8 +222,8 @@ def describe_shape(geometry: coal.CollisionGeometry) -> ShapeDescription | None:
     return None
 
 
-def _shapes(geometry_model: pin.GeometryModel) -> tuple[NDArray[Any], ...] | None:
-    """The arguments of :meth:`Tree.set_shapes`, None if a shape cannot be compiled.
+def _shapes(geometry_model: pin.GeometryModel) -> dict[str, NDArray[Any]] | None:
+    """The keyword arguments of :meth:`Tree.set_shapes`, None if a shape cannot be compiled.
 
     A hull, a shape of a kind :func:`describe_shape` does not know, or one that hangs from no
     joint of the tree leaves the hand's verdicts to coal.
@@ -198,20 +234,20 @@ def _shapes(geometry_model: pin.GeometryModel) -> tuple[NDArray[Any], ...] | Non
         if described is None or described[0] == CONVEX or g.parentJoint < 1:
             return None
         g.geometry.computeLocalAABB()
-        joints.append(g.parentJoint - 1)
+        joints.append(tree_joint(g.parentJoint))
         placements.append(np.concatenate([g.placement.rotation.ravel(), g.placement.translation]))
         kinds.append(described[0])
         sizes.append(described[1])
         balls.append([*np.asarray(g.geometry.aabb_center).tolist(), float(g.geometry.aabb_radius)])
     pairs = [(p.first, p.second) for p in geometry_model.collisionPairs]
-    return (
-        np.array(joints, dtype=np.int64),
-        np.ascontiguousarray(placements, dtype=np.float64),
-        np.array(kinds, dtype=np.int64),
-        np.array(sizes, dtype=np.float64),
-        np.array(balls, dtype=np.float64),
-        np.array(pairs, dtype=np.int64).reshape(-1, 2),
-    )
+    return {
+        "joints": np.array(joints, dtype=np.int64),
+        "placements": np.ascontiguousarray(placements, dtype=np.float64),
+        "kinds": np.array(kinds, dtype=np.int64),
+        "sizes": np.array(sizes, dtype=np.float64),
+        "balls": np.array(balls, dtype=np.float64),
+        "pairs": np.array(pairs, dtype=np.int64).reshape(-1, 2),
+    }
 
 
 def _joint_axis(model: pin.Model, data: pin.Data, j: int) -> tuple[list[float], bool]:

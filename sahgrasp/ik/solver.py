@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.hand import ContactState, Hand
-from sahgrasp.ik.compiled import OUTCOMES, compiled_tree, near_pairs, self_collides
+from sahgrasp.ik.compiled import OUTCOMES, compiled_tree, near_pairs, self_collides, tree_joint
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, contact_key, default_database
 from sahgrasp.ik.obstacle import Obstacle, checker_of
@@ -513,9 +513,10 @@ def _separate(
         lows_m = np.minimum(lows_m, depth_m)
         if stalled >= patience:
             return q, k
-        # The compiled step (sahgrasp/ik/_lm.c): Pinocchio joint j is the tree's joint j - 1,
-        # and the object (joint 0) is the world, -1.
-        joints = np.array([(p.joint_a - 1, p.joint_b - 1) for p in penetrations], dtype=np.int64)
+        # The compiled step (sahgrasp/ik/_lm.c) numbers joints as its tree (the object: its world).
+        joints = np.array(
+            [(tree_joint(p.joint_a), tree_joint(p.joint_b)) for p in penetrations], dtype=np.int64
+        )
         points = np.array([(p.point_a, p.point_b) for p in penetrations])
         normals = np.array([p.normal for p in penetrations])
         args = (problem.target_stack, problem.rows, joints, points, normals, depths, out)
