@@ -1,0 +1,102 @@
+"""The planner: 2-, 3- and 4-finger grasps of a box mesh, planned and verified independently."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from sahgrasp.cli import main
+from sahgrasp.hand import load_hand
+from sahgrasp.objects import load_mesh
+from sahgrasp.planner import PlanSettings, PlanningError, plan_grasps
+from sahgrasp.planner.verify import GraspVerifier
+
+
+@pytest.fixture(scope="module")
+def hand():  # type: ignore[no-untyped-def]
+    return load_hand("sah")
+
+
+@pytest.fixture(scope="module")
+def box_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("meshes") / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.07, 0.09)).export(path)
+    return path
+
+
+@pytest.mark.parametrize("count", [2, 3, 4])
+def test_box_grasps_of_each_finger_count_are_verified(hand, box_file: Path, count: int) -> None:  # type: ignore[no-untyped-def]
+    obj = load_mesh(box_file)
+    plan = plan_grasps(hand, obj, PlanSettings(fingers=(count,), candidates=6, grasps=3, seed=1))
+    assert plan.grasps, plan.summary
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    verifier = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces)
+    for entry in plan.to_dict()["grasps"]:
+        assert len(entry["fingers"]) == count
+        assert entry["fingers"][0] == "thumb"
+        verdict = verifier.check(entry["wrist"], entry["joints"], entry["contacts"])
+        assert verdict.ok, verdict.problems
+        assert max(verdict.contact_errors_m) <= 1.5e-3
+        assert verdict.max_link_depth_m <= 5e-4
+        assert entry["quality"]["force_closure"] == (entry["quality"]["epsilon_l1"] > 0.0)
+    if count == 2:  # two hard-finger contacts never resist a torque about their line
+        assert not any(g.force_closure for g in plan.grasps)
+    else:
+        assert any(g.force_closure for g in plan.grasps)
+
+
+def test_verifier_refuses_a_grasp_moved_into_the_object(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    obj = load_mesh(box_file)
+    plan = plan_grasps(hand, obj, PlanSettings(fingers=(3,), candidates=4, grasps=1, seed=2))
+    entry = plan.to_dict()["grasps"][0]
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    verifier = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces)
+    normal = np.array(entry["contacts"][0]["normal"])
+    moved = {**entry["wrist"], "xyz": (np.array(entry["wrist"]["xyz"]) - 0.02 * normal).tolist()}
+    verdict = verifier.check(moved, entry["joints"], entry["contacts"])
+    assert not verdict.ok
+    joints = dict(entry["joints"])
+    joints["index_j1"] += 5.0
+    assert not verifier.check(entry["wrist"], joints, entry["contacts"]).ok
+
+
+def test_same_seed_same_plan(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    settings = PlanSettings(candidates=6, grasps=3, seed=5)
+    a = plan_grasps(hand, load_mesh(box_file), settings).to_dict()
+    b = plan_grasps(hand, load_mesh(box_file), settings).to_dict()
+    assert a["grasps"] == b["grasps"]
+
+
+def test_settings_are_checked() -> None:
+    with pytest.raises(PlanningError, match="fingers"):
+        PlanSettings(fingers=(5,))
+    with pytest.raises(PlanningError, match="rank"):
+        PlanSettings(rank="nope")
+
+
+def test_cli_plans_a_mesh_and_writes_json(box_file: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "plan.json"
+    code = main(["plan", str(box_file), "--candidates", "6", "--grasps", "2", "--json", str(out),
+                 "--quiet"])  # fmt: skip
+    assert code == 0
+    doc = json.loads(out.read_text())
+    assert doc["hand"] == "sah"
+    assert doc["object"]["mesh"] == str(box_file.resolve())
+    assert set(doc["summary"]) >= {"grasps", "force_closure", "candidates", "time_to_first_s",
+                                   "time_s"}  # fmt: skip
+    grasp = doc["grasps"][0]
+    assert grasp["rank"] == 1
+    assert set(grasp) >= {"fingers", "contacts", "wrist", "joints", "quality",
+                          "object_clearance_mm", "closest_link", "seed"}  # fmt: skip
+
+
+def test_cli_broken_mesh_is_one_line_exit_2(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    broken = tmp_path / "broken.stl"
+    broken.write_text("solid nothing\nendsolid nothing\n")
+    assert main(["plan", str(broken), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("sahgrasp: error:")
