@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.hand import Hand
 from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
-from sahgrasp.wrench import epsilon, primitive_wrenches
+from sahgrasp.wrench import CONE_EDGES, epsilon, primitive_wrenches
 
 __all__ = [
     "Candidate",
@@ -85,12 +85,15 @@ class Candidate:
         points_m: Contact points, world frame [m], (k, 3).
         normals: Outward unit normals there, (k, 3).
         seed: The seed of the draw that gave it (:meth:`CandidateDraw.draw` reproduces it).
+        epsilon_l1: The contact set's L1 epsilon (0: not force closure; always 0 for two
+            fingers).
     """
 
     fingers: tuple[str, ...]
     points_m: FloatArray
     normals: FloatArray
     seed: int
+    epsilon_l1: float = 0.0
 
 
 def finger_set(hand: Hand, count: int) -> tuple[str, ...]:
@@ -172,6 +175,7 @@ class CandidateDraw:
         frame: The object's centroid and radius (for the force-closure test).
         mu: Coulomb friction coefficient of the force-closure test.
         settings: Opposition and fit tolerances.
+        edges: Friction cone edges of the force-closure test.
     """
 
     def __init__(
@@ -181,8 +185,10 @@ class CandidateDraw:
         frame: ObjectFrame,
         mu: float,
         settings: SamplerSettings | None = None,
+        edges: int = CONE_EDGES,
     ) -> None:
         settings = settings or SamplerSettings()
+        self.edges = edges
         self.surface = surface
         self.reach = reach
         self.frame = frame
@@ -230,13 +236,22 @@ class CandidateDraw:
             ("opposition", self._opposed),
             ("hidden", self._exposed),
             ("fingertip_fit", self._fits),
-            ("no_closure", self._could_hold),
         ):
             if not check(contacts):
                 return reason
         points = np.array([p for p, _ in contacts])
         normals = np.array([n for _, n in contacts])
-        return Candidate(fingers, points, normals, seed)
+        if count == 2:
+            if not self._antipodal(contacts):
+                return "no_closure"
+            return Candidate(fingers, points, normals, seed, 0.0)
+        wrenches = primitive_wrenches(
+            points, normals, self.frame.centroid_m, self.frame.radius_m, self.mu, self.edges
+        )
+        quality = epsilon(wrenches.reshape(-1, 6))
+        if quality <= 0.0:
+            return "no_closure"
+        return Candidate(fingers, points, normals, seed, quality)
 
     def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
         point, normal = thumb
@@ -280,24 +295,16 @@ class CandidateDraw:
         radius = self.reach.fingertip_radius_m
         return all(self.surface.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
 
-    def _could_hold(self, contacts: list[Contact]) -> bool:
-        if len(contacts) == 2:
-            (p1, n1), (p2, n2) = contacts
-            axis = p2 - p1
-            length = float(np.linalg.norm(axis))
-            if length < 1e-9:
-                return False
-            axis /= length
-            # Each contact pushes along -n: the line must lie within both friction cones.
-            return bool(-n1 @ axis >= self.friction_cos and n2 @ axis >= self.friction_cos)
-        wrenches = primitive_wrenches(
-            [p for p, _ in contacts],
-            [n for _, n in contacts],
-            self.frame.centroid_m,
-            self.frame.radius_m,
-            self.mu,
-        )
-        return epsilon(wrenches.reshape(-1, 6)) > 0.0
+    def _antipodal(self, contacts: list[Contact]) -> bool:
+        """Two contacts: the line between them inside both friction cones."""
+        (p1, n1), (p2, n2) = contacts
+        axis = p2 - p1
+        length = float(np.linalg.norm(axis))
+        if length < 1e-9:
+            return False
+        axis /= length
+        # Each contact pushes along -n: the line must lie within both friction cones.
+        return bool(-n1 @ axis >= self.friction_cos and n2 @ axis >= self.friction_cos)
 
 
 def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:

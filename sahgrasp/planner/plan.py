@@ -37,6 +37,7 @@ from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.grasp_sampler import SurfaceMesh
 from sahgrasp.planner.candidates import Candidate, CandidateDraw, ObjectFrame, finger_set, hand_reach
+from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
 from sahgrasp.quality import INDICES, ellipsoid_indices, null_space
@@ -272,11 +273,12 @@ def plan_grasps(
         sets = {k: finger_set(hand, k) for k in settings.fingers}
     except ValueError as exc:
         raise PlanningError(f"hand {hand.description.name}: {exc}") from None
+    obj = planning_object(obj)
     mesh = obj.mesh().transformed(obj.T_world_object)
     surface = SurfaceMesh(mesh.vertices_m, mesh.faces)
     frame = ObjectFrame.of(surface.triangles.reshape(-1, 3),
                            np.arange(3 * len(surface)).reshape(-1, 3))  # fmt: skip
-    draw = CandidateDraw(surface, hand_reach(hand), frame, settings.mu)
+    draw = CandidateDraw(surface, hand_reach(hand), frame, settings.mu, edges=settings.cone_edges)
     verifier = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m,
                              settings.link_tolerance_m)  # fmt: skip
     ik = IKSettings(max_inits=settings.ik_max_inits, d_min_m=settings.d_min_m)
@@ -359,11 +361,10 @@ def _solve(
     if not verdict.ok:
         failed[verdict.problems[0].split(" ")[0]] += 1
         return None
-    wrench = grasp_quality(candidate.points_m, candidate.normals, frame.centroid_m,
-                           frame.radius_m, settings.mu, settings.cone_edges, linf=False)  # fmt: skip
+    # The quality of the contact set the IK reached (the draw computed it on the same targets).
     quality: dict[str, Any] = {
-        "force_closure": wrench.force_closure,
-        "epsilon_l1": wrench.epsilon_l1,
+        "force_closure": candidate.epsilon_l1 > 0.0,
+        "epsilon_l1": candidate.epsilon_l1,
         "epsilon_linf": None,
     }
     quality.update(manipulability_indices(hand, result.q, candidate.fingers, frame.centroid_m))
