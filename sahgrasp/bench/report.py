@@ -132,6 +132,12 @@ def _grasps_table(doc: Document) -> str:
     return f"bench grasps: {doc['hand']}, seed {doc['seed']}\n{grasps_table(doc)}"
 
 
+def _plan_table(doc: Document) -> str:
+    from sahgrasp.bench.plan import format_table as plan_table
+
+    return plan_table(doc)
+
+
 _TABLES: dict[str, Callable[[Document], str]] = {
     "ik": _ik_table,
     "atlas": _atlas_table,
@@ -139,6 +145,7 @@ _TABLES: dict[str, Callable[[Document], str]] = {
     "sequence": _sequence_table,
     "grasps": _grasps_table,
     "solve": _solve_table,
+    "plan": _plan_table,
 }
 
 
