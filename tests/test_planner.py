@@ -100,3 +100,20 @@ def test_cli_broken_mesh_is_one_line_exit_2(tmp_path: Path, capsys) -> None:  # 
     assert main(["plan", str(broken), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("sahgrasp: error:")
+
+
+def test_manipulability_indices_equal_the_atlas_ones_at_its_optimum() -> None:
+    from sahgrasp.experiments.setups import run_experiment
+    from sahgrasp.planner.plan import manipulability_indices
+
+    result = run_experiment("bottle", index="volume")
+    problem = result.problem
+    y = result.atlas.centres[result.best]
+    x = problem.x_of(y)
+    system = problem.system
+    reference = np.asarray(system.object_pose(x).translation)
+    fingers = tuple(c.finger for c in system.contacts)
+    mine = manipulability_indices(system.hand, system.configuration(x), fingers, reference)
+    atlas = problem.manipulability(y)
+    for name, value in mine.items():
+        assert value == pytest.approx(float(atlas.index(name)), rel=1e-9)

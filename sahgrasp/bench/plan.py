@@ -105,6 +105,45 @@ def _object_row(
     }
 
 
+ATLAS_OBJECTS = ("can", "bottle")
+"""The objects of the atlas paper, whose atlas optimum the planner's best grasp is compared with."""
+
+
+def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
+    """The planner's best three-finger grasp of ``name`` vs the atlas optimum, per index.
+
+    The atlas (``sahgrasp atlas NAME`` at its default radius) optimises over three-finger grasps
+    (thumb, index, middle) with the object's twist taken at the object frame's origin; the
+    planner's verified three-finger grasps are scored the same way (the indices at the object
+    origin, not the centroid the plan reports) and the best of them, per index, is compared.
+    """
+    import dataclasses
+
+    from sahgrasp.experiments.setups import run_experiment
+    from sahgrasp.objects import load_object
+    from sahgrasp.planner import plan_grasps
+    from sahgrasp.planner.plan import manipulability_indices
+    from sahgrasp.quality import INDICES
+
+    obj = load_object(name)
+    three = dataclasses.replace(settings, fingers=(3,), grasps=settings.candidates)
+    plan = plan_grasps(hand, obj, three)
+    origin = obj.T_world_object[:3, 3]
+    scored = [manipulability_indices(hand, g.q, g.fingers, origin) for g in plan.grasps]
+    out: dict[str, Any] = {"object": name, "planner_grasps": len(scored), "indices": {}}
+    for index in INDICES:
+        result = run_experiment(name, index=index)
+        atlas_best = float(result.values[result.best])
+        best = max((s[index] for s in scored), default=None)
+        out["indices"][index] = {
+            "atlas_optimum": atlas_best,
+            "atlas_charts": int(result.atlas.n_charts),
+            "planner_best": best,
+            "ratio": None if best is None else best / atlas_best,
+        }
+    return out
+
+
 def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict[str, Any]:
     from sahgrasp.parallel import process_pool
     from sahgrasp.planner.folder import plan_jobs
@@ -136,6 +175,7 @@ def run(
     grasps: int = 10,
     seed: int = 0,
     workers: Sequence[int] = (1, 2),
+    atlas: bool = True,
     quiet: bool = False,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (module docstring).
@@ -150,6 +190,7 @@ def run(
         grasps: Grasps returned per object.
         seed: The plan seed.
         workers: Worker counts of the folder run (empty: no folder run).
+        atlas: Compare with the atlas optimum on the can and the bottle (when among the objects).
         quiet: No progress bar.
     """
     from tqdm import tqdm
@@ -190,6 +231,8 @@ def run(
         jobs = [ObjectJob(p, 1.0, object_digest(p, settings, 1.0, the_hand.description.name))
                 for p, s in files.items() if s == 1.0]  # fmt: skip
         runs = [_folder_run(the_hand, jobs, settings, w) for w in workers] if jobs else []
+    comparison = [atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS
+                  if atlas and n in names]  # fmt: skip
     firsts = [r["time_to_first_s"] for r in rows]
     reached = [t for t in firsts if t is not None]
     speedup = None
@@ -210,6 +253,7 @@ def run(
             "returned": sum(r["returned"] for r in rows),
         },
         "folder_runs": runs,
+        "atlas_comparison": comparison,
         "speedup_2_workers": speedup,
         "load_average": list(os.getloadavg()),
     }
@@ -247,6 +291,12 @@ def format_table(doc: dict[str, Any]) -> str:
             f"{r['force_closure_per_s']:.1f} verified force-closure grasps/s "
             f"({r['verified_per_s']:.1f} verified grasps/s)"
         )
+    for c in doc.get("atlas_comparison", []):
+        parts = [f"{i} {v['planner_best']:.4g} vs {v['atlas_optimum']:.4g}"
+                 if v["planner_best"] is not None else f"{i} - vs {v['atlas_optimum']:.4g}"
+                 for i, v in c["indices"].items()]  # fmt: skip
+        lines.append(f"{c['object']}, best 3-finger grasp, planner vs atlas optimum: "
+                     + "; ".join(parts))  # fmt: skip
     if doc["speedup_2_workers"] is not None:
         lines.append(f"1 -> 2 workers: {doc['speedup_2_workers']:.2f}x")
     load = doc["load_average"]

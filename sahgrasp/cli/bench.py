@@ -164,6 +164,10 @@ def _plan(benches: Any) -> None:
         "--workers", type=positive_int, nargs="*", default=[1, 2],
         help="worker counts of the folder throughput run (none: skip it)",
     )  # fmt: skip
+    plan.add_argument(
+        "--no-atlas", dest="atlas", action="store_false",
+        help="no comparison with the atlas optimum on the can and the bottle",
+    )  # fmt: skip
     _add_quiet(plan)
     add_json_argument(plan, "the results")
 
