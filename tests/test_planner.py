@@ -117,3 +117,22 @@ def test_manipulability_indices_equal_the_atlas_ones_at_its_optimum() -> None:
     atlas = problem.manipulability(y)
     for name, value in mine.items():
         assert value == pytest.approx(float(atlas.index(name)), rel=1e-9)
+
+
+@pytest.mark.slow
+def test_plan_mug_example_writes_a_scene_of_the_ranked_grasps(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    import importlib.util
+
+    from sahgrasp.viz.recording import scene_commands
+
+    path = Path(__file__).resolve().parent.parent / "examples" / "plan_mug.py"
+    spec = importlib.util.spec_from_file_location("example_plan_mug", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = tmp_path / "plan.html"
+    assert module.main(["--candidates", "8", "--grasps", "2", "--html", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith("mug: ") and "#1: thumb+" in printed
+    drawn = {c["path"] for c in scene_commands(out.read_text()) if c["type"] == "set_object"}
+    assert {"/meshcat/plan/1/object", "/meshcat/labels/1"} <= drawn

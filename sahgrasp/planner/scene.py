@@ -3,12 +3,13 @@
 Each grasp (hand, object, contact targets) is turned about its contacts' centre so that the
 direction from its wrist to its contacts points at the camera (the camera looks into the palm,
 as :func:`sahgrasp.viz.frame_grasp` does for one grasp), then set beside the previous one along
-x. A label above each grasp gives its rank, finger count, force closure and L1 epsilon.
+x in rows. A label above each grasp gives its rank, finger count, force closure and L1 epsilon.
 """
 
 from __future__ import annotations
 
 import io
+import math
 import os
 from pathlib import Path
 
@@ -20,8 +21,9 @@ from sahgrasp.contacts import GraspTarget
 from sahgrasp.hand import Hand
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.planner.plan import GraspPlan, PlannedGrasp
+from sahgrasp.viz.viewer import Viewer
 
-__all__ = ["plan_scene", "write_plan_html"]
+__all__ = ["draw_plan", "plan_scene", "write_plan_html"]
 
 FloatArray = NDArray[np.float64]
 
@@ -67,47 +69,57 @@ def _label(grasp: PlannedGrasp, rank: int) -> str:
     return f"#{rank} {len(grasp.fingers)}f {closure} eps {q['epsilon_l1']:.3f}"
 
 
-def plan_scene(hand: Hand, obj: GraspObject, plan: GraspPlan, count: int = _MAX_SHOWN) -> object:
-    """The scene (:class:`sahgrasp.viz.Viewer`, offline) of the plan's first ``count`` grasps."""
-    from sahgrasp.viz import Viewer, grasp_points, show_grasp
-
+def plan_scene(hand: Hand, obj: GraspObject, plan: GraspPlan, count: int = _MAX_SHOWN) -> Viewer:
+    """The scene (an offline :class:`sahgrasp.viz.Viewer`) of the plan's first ``count`` grasps."""
     viewer = Viewer(title=f"sahgrasp plan: {obj.name}")
+    draw_plan(viewer, hand, obj, plan, count)
+    return viewer
+
+
+def draw_plan(
+    viewer: Viewer, hand: Hand, obj: GraspObject, plan: GraspPlan, count: int = _MAX_SHOWN
+) -> None:
+    """Draw the plan's first ``count`` grasps side by side into ``viewer`` (module docstring)."""
+    from sahgrasp.viz import grasp_points, show_grasp
+
     grasps = plan.grasps[:count]
-    offset_x = 0.0
-    everything = []
-    for rank, grasp in enumerate(grasps, start=1):
-        target = GraspTarget(f"#{rank}", grasp.contacts)
+    columns = max(1, math.ceil(math.sqrt(1.8 * len(grasps))))
+    turned = []
+    for grasp in grasps:
         centre = np.mean([c.point for c in grasp.contacts], axis=0)
         outward = centre - grasp.q[:3]
         outward /= max(float(np.linalg.norm(outward)), 1e-12)
         R = _rotation_to(outward, _TOWARDS_CAMERA)
-        points = (grasp_points(hand, grasp.q, obj) - centre) @ R.T
-        shift = np.array([offset_x - points[:, 0].min(), 0.0, 0.0])
+        turned.append((centre, R, (grasp_points(hand, grasp.q, obj) - centre) @ R.T))
+    cell_x = max(float(np.ptp(p[:, 0])) for _, _, p in turned) + _GAP_M if turned else 0.0
+    cell_z = max(float(np.ptp(p[:, 2])) for _, _, p in turned) + 3 * _LABEL_HEIGHT_M if turned else 0.0
+    everything = []
+    for rank, (grasp, (centre, R, points)) in enumerate(zip(grasps, turned, strict=True), 1):
+        row, column = divmod(rank - 1, columns)
+        mid = 0.5 * (points.min(axis=0) + points.max(axis=0))
+        shift = np.array([column * cell_x - mid[0], 0.0, -row * cell_z - mid[2]])
         T = np.eye(4)
         T[:3, :3] = R
         T[:3, 3] = shift - R @ centre
+        target = GraspTarget(f"#{rank}", grasp.contacts)
         show_grasp(viewer, f"plan/{rank}", hand, grasp.q, obj, target, T_scene=T)
         placed = points + shift
-        everything.append(placed)
-        top = placed[:, 2].max() + 0.6 * _LABEL_HEIGHT_M
         width = max(float(np.ptp(placed[:, 0])), 0.08)
+        height = width * 96 / 512
         node = viewer.meshcat[f"labels/{rank}"]
         texture = mg.ImageTexture(image=mg.PngImage(_label_png(_label(grasp, rank))))
-        node.set_object(mg.Box([width, 1e-4, width * 96 / 512]),
-                        mg.MeshBasicMaterial(map=texture))  # fmt: skip
+        node.set_object(mg.Box([width, 1e-4, height]), mg.MeshBasicMaterial(map=texture))
         T_label = np.eye(4)
-        T_label[:3, 3] = [0.5 * (placed[:, 0].min() + placed[:, 0].max()),
-                          placed[:, 1].min() - 0.01, top + 0.5 * width * 96 / 512]  # fmt: skip
+        T_label[:3, 3] = [column * cell_x, placed[:, 1].min() - 0.01,
+                          placed[:, 2].max() + 0.5 * _LABEL_HEIGHT_M + 0.5 * height]  # fmt: skip
         node.set_transform(T_label)
-        offset_x = placed[:, 0].max() + _GAP_M
+        everything += [placed, T_label[:3, 3][None]]
     if everything:
-        viewer.frame(np.concatenate(everything), np.array([0.0, -1.0, 0.35]), 16 / 9)
-    return viewer
+        viewer.frame(np.concatenate(everything), np.array([0.0, -1.0, 0.25]), 1.2)
 
 
 def write_plan_html(
     hand: Hand, obj: GraspObject, plan: GraspPlan, path: str | os.PathLike[str]
 ) -> Path:
     """Write :func:`plan_scene` as a standalone HTML file (atomically); returns the path."""
-    viewer = plan_scene(hand, obj, plan)
-    return viewer.save_html(path)  # type: ignore[attr-defined,no-any-return]
+    return plan_scene(hand, obj, plan).save_html(path)
