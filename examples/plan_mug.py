@@ -38,13 +38,17 @@ def main(argv: Sequence[str] | None = None) -> int:
     settings = sahgrasp.PlanSettings(grasps=args.grasps, candidates=args.candidates, seed=0)
     plan = sahgrasp.plan_grasps(hand, obj, settings)
     s = plan.summary
-    print(f"{obj.name}: {s.grasps} grasps ({s.force_closure} in force closure) of {s.verified} "
-          f"verified, from {s.candidates} candidates in {s.time_s:.2f} s")  # fmt: skip
+    print(
+        f"{obj.name}: {s.grasps} grasps ({s.force_closure} in force closure) of {s.verified} "
+        f"verified, from {s.candidates} candidates in {s.time_s:.2f} s"
+    )
     for rank, grasp in enumerate(plan.grasps, start=1):
         q = grasp.quality
-        print(f"  #{rank}: {'+'.join(grasp.fingers)}, force closure {q['force_closure']}, "
-              f"epsilon {q['epsilon_l1']:.4f}, volume {q['volume']:.3g}, clearance "
-              f"{1e3 * grasp.object_clearance_m:.2f} mm ({grasp.closest_link})")  # fmt: skip
+        print(
+            f"  #{rank}: {'+'.join(grasp.fingers)}, force closure {q['force_closure']}, "
+            f"epsilon {q['epsilon_l1']:.4f}, volume {q['volume']:.3g}, clearance "
+            f"{1e3 * grasp.object_clearance_m:.2f} mm ({grasp.closest_link})"
+        )
     present(lambda viewer: draw_plan(viewer, hand, obj, plan), args.html, f"plan: {obj.name}")
     return 0 if plan.grasps else 1
 

@@ -133,9 +133,9 @@ def cone_edges(normals: ArrayLike, mu: float = FRICTION, edges: int = CONE_EDGES
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
     t2 = np.cross(n, t1)
     angles = 2.0 * math.pi * np.arange(edges) / edges
-    tangential = np.cos(angles)[None, :, None] * t1[:, None] + np.sin(angles)[None, :, None] * t2[
-        :, None
-    ]
+    tangential = (
+        np.cos(angles)[None, :, None] * t1[:, None] + np.sin(angles)[None, :, None] * t2[:, None]
+    )
     return -n[:, None, :] + mu * tangential
 
 
@@ -247,4 +247,3 @@ def _minkowski_sum(w: FloatArray) -> FloatArray:
         choices = np.vstack([np.zeros((1, 6)), contact])
         total = (total[:, None, :] + choices[None, :, :]).reshape(-1, 6)
     return total
-

@@ -12,7 +12,7 @@ import trimesh
 from sahgrasp.cli import main
 from sahgrasp.hand import load_hand
 from sahgrasp.objects import load_mesh
-from sahgrasp.planner import PlanSettings, PlanningError, plan_grasps
+from sahgrasp.planner import PlanningError, PlanSettings, plan_grasps
 from sahgrasp.planner.verify import GraspVerifier
 
 
@@ -80,18 +80,32 @@ def test_settings_are_checked() -> None:
 
 def test_cli_plans_a_mesh_and_writes_json(box_file: Path, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "plan.json"
-    code = main(["plan", str(box_file), "--candidates", "6", "--grasps", "2", "--json", str(out),
-                 "--quiet"])  # fmt: skip
+    code = main(
+        ["plan", str(box_file), "--candidates", "6", "--grasps", "2", "--json", str(out), "--quiet"]
+    )
     assert code == 0
     doc = json.loads(out.read_text())
     assert doc["hand"] == "sah"
     assert doc["object"]["mesh"] == str(box_file.resolve())
-    assert set(doc["summary"]) >= {"grasps", "force_closure", "candidates", "time_to_first_s",
-                                   "time_s"}  # fmt: skip
+    assert set(doc["summary"]) >= {
+        "grasps",
+        "force_closure",
+        "candidates",
+        "time_to_first_s",
+        "time_s",
+    }
     grasp = doc["grasps"][0]
     assert grasp["rank"] == 1
-    assert set(grasp) >= {"fingers", "contacts", "wrist", "joints", "quality",
-                          "object_clearance_mm", "closest_link", "seed"}  # fmt: skip
+    assert set(grasp) >= {
+        "fingers",
+        "contacts",
+        "wrist",
+        "joints",
+        "quality",
+        "object_clearance_mm",
+        "closest_link",
+        "seed",
+    }
 
 
 def test_cli_broken_mesh_is_one_line_exit_2(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]

@@ -12,8 +12,8 @@ from typing import Any
 
 import pytest
 import trimesh
-
 from polling import until
+
 from sahgrasp.cli import main
 
 
@@ -60,8 +60,10 @@ def test_folder_resumed_after_a_kill_gives_the_same_documents(folder: Path, tmp_
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     process = subprocess.Popen(
         [sys.executable, "-m", "sahgrasp", "plan", str(folder), "--json", str(out), *ARGS],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-    )  # fmt: skip
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         assert until(lambda: part.exists() and len(part.read_text().splitlines()) >= 2, 120)
     finally:

@@ -82,8 +82,10 @@ def test_epsilon_scales_with_the_torque_radius_and_the_object_size() -> None:
 
 def test_more_friction_is_never_worse() -> None:
     points = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-    values = [grasp_quality(points, points, [0, 0, 0], 1.0, mu, linf=False).epsilon_l1
-              for mu in (0.2, 0.5, 1.0)]  # fmt: skip
+    values = [
+        grasp_quality(points, points, [0, 0, 0], 1.0, mu, linf=False).epsilon_l1
+        for mu in (0.2, 0.5, 1.0)
+    ]
     assert values[0] <= values[1] <= values[2]
 
 

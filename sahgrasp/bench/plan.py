@@ -26,18 +26,24 @@ from pathlib import Path
 from statistics import median
 from typing import Any
 
-import numpy as np
-
 __all__ = ["TEST_MESHES", "format_table", "run", "write_test_meshes"]
 
 SHIPPED_MESHES = ("mug.stl", "bottle.obj")
 """The meshes of ``examples/meshes``."""
 
 TEST_MESHES = (
-    "box_50x70x90.stl", "plate_120x80x30.stl", "cube_60.stl", "cylinder_r35_h120.stl",
-    "rod_r20_h150.stl", "sphere_r40.ply", "capsule_r25_h80.stl", "cone_r40_h100.obj",
-    "torus_R45_r15.obj", "tube_r20_r35_h60.stl", "box_mm_60x40x80.stl",
-)  # fmt: skip
+    "box_50x70x90.stl",
+    "plate_120x80x30.stl",
+    "cube_60.stl",
+    "cylinder_r35_h120.stl",
+    "rod_r20_h150.stl",
+    "sphere_r40.ply",
+    "capsule_r25_h80.stl",
+    "cone_r40_h100.obj",
+    "torus_R45_r15.obj",
+    "tube_r20_r35_h60.stl",
+    "box_mm_60x40x80.stl",
+)
 """The test meshes :func:`write_test_meshes` writes (file names say their sizes in mm)."""
 
 _MM = "box_mm_60x40x80.stl"
@@ -58,11 +64,12 @@ def write_test_meshes(folder: str | os.PathLike[str]) -> dict[str, float]:
         "sphere_r40.ply": c.icosphere(subdivisions=3, radius=0.04),
         "capsule_r25_h80.stl": c.capsule(radius=0.025, height=0.08, count=[24, 24]),
         "cone_r40_h100.obj": c.cone(radius=0.04, height=0.1, sections=64),
-        "torus_R45_r15.obj": c.torus(major_radius=0.045, minor_radius=0.015,
-                                     major_sections=64, minor_sections=24),
+        "torus_R45_r15.obj": c.torus(
+            major_radius=0.045, minor_radius=0.015, major_sections=64, minor_sections=24
+        ),
         "tube_r20_r35_h60.stl": c.annulus(r_min=0.02, r_max=0.035, height=0.06, sections=64),
         _MM: c.box(extents=(60.0, 40.0, 80.0)),
-    }  # fmt: skip
+    }
     for name, mesh in meshes.items():
         mesh.export(root / name)
     return {name: (1e-3 if name == _MM else 1.0) for name in meshes}
@@ -80,11 +87,10 @@ def _object_row(
     s = plan.summary
     doc = plan.to_dict()
     mesh = obj.mesh().transformed(obj.T_world_object)
-    check = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m,
-                          settings.link_tolerance_m)  # fmt: skip
-    failing = sum(
-        not check.check(g["wrist"], g["joints"], g["contacts"]).ok for g in doc["grasps"]
+    check = GraspVerifier(
+        hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m, settings.link_tolerance_m
     )
+    failing = sum(not check.check(g["wrist"], g["joints"], g["contacts"]).ok for g in doc["grasps"])
     epsilons = [g["quality"]["epsilon_l1"] for g in doc["grasps"] if g["quality"]["force_closure"]]
     return {
         "object": name,
@@ -211,8 +217,13 @@ def run(
     if folder is not None:
         from sahgrasp.objects.mesh_file import MESH_SUFFIXES
 
-        files.update({str(p): 1.0 for p in sorted(Path(folder).iterdir())
-                      if p.suffix.lower() in MESH_SUFFIXES})  # fmt: skip
+        files.update(
+            {
+                str(p): 1.0
+                for p in sorted(Path(folder).iterdir())
+                if p.suffix.lower() in MESH_SUFFIXES
+            }
+        )
     with tempfile.TemporaryDirectory(prefix="sahgrasp-bench-plan-") as tmp:
         if test_meshes:
             files.update({str(Path(tmp) / n): s for n, s in write_test_meshes(tmp).items()})
@@ -220,19 +231,33 @@ def run(
         total = len(names) + len(files)
         with tqdm(total=total, unit="object", disable=True if quiet else None) as bar:
             for name in names:
-                rows.append(_object_row(the_hand, name, lambda n=name: load_object(n), settings,
-                                        {"name": name}))  # fmt: skip
+                rows.append(
+                    _object_row(
+                        the_hand, name, lambda n=name: load_object(n), settings, {"name": name}
+                    )
+                )
                 bar.update()
             for path, scale in files.items():
                 spec = {"mesh": path, **({"scale": scale} if scale != 1.0 else {})}
-                rows.append(_object_row(the_hand, Path(path).name,
-                                        lambda p=path, s=scale: load_mesh(p, scale=s), settings, spec))  # fmt: skip
+                rows.append(
+                    _object_row(
+                        the_hand,
+                        Path(path).name,
+                        lambda p=path, s=scale: load_mesh(p, scale=s),
+                        settings,
+                        spec,
+                    )
+                )
                 bar.update()
-        jobs = [ObjectJob(p, 1.0, object_digest(p, settings, 1.0, the_hand.description.name))
-                for p, s in files.items() if s == 1.0]  # fmt: skip
+        jobs = [
+            ObjectJob(p, 1.0, object_digest(p, settings, 1.0, the_hand.description.name))
+            for p, s in files.items()
+            if s == 1.0
+        ]
         runs = [_folder_run(the_hand, jobs, settings, w) for w in workers] if jobs else []
-    comparison = [atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS
-                  if atlas and n in names]  # fmt: skip
+    comparison = [
+        atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS if atlas and n in names
+    ]
     firsts = [r["time_to_first_s"] for r in rows]
     reached = [t for t in firsts if t is not None]
     speedup = None
@@ -267,13 +292,30 @@ def format_table(doc: dict[str, Any]) -> str:
     for r in doc["objects"]:
         f = r["by_fingers"]
         first = r["time_to_first_s"]
-        rows.append((r["object"], r["faces"], "-" if first is None else round(first, 3),
-                     round(r["verified_per_s"], 1), round(100 * r["force_closure_share"]),
-                     round(r["median_epsilon"], 4), round(r["best_epsilon"], 4),
-                     f"{f.get('2', 0)}/{f.get('3', 0)}/{f.get('4', 0)}",
-                     r["returned_failing_recheck"]))  # fmt: skip
-    headers = ("object", "faces", "first FC [s]", "verified/s", "FC [%]", "median eps",
-               "best eps", "2/3/4 fingers", "re-check fails")  # fmt: skip
+        rows.append(
+            (
+                r["object"],
+                r["faces"],
+                "-" if first is None else round(first, 3),
+                round(r["verified_per_s"], 1),
+                round(100 * r["force_closure_share"]),
+                round(r["median_epsilon"], 4),
+                round(r["best_epsilon"], 4),
+                f"{f.get('2', 0)}/{f.get('3', 0)}/{f.get('4', 0)}",
+                r["returned_failing_recheck"],
+            )
+        )
+    headers = (
+        "object",
+        "faces",
+        "first FC [s]",
+        "verified/s",
+        "FC [%]",
+        "median eps",
+        "best eps",
+        "2/3/4 fingers",
+        "re-check fails",
+    )
     s = doc["summary"]
     first = s["median_time_to_first_s"]
     lines = [
@@ -292,11 +334,15 @@ def format_table(doc: dict[str, Any]) -> str:
             f"({r['verified_per_s']:.1f} verified grasps/s)"
         )
     for c in doc.get("atlas_comparison", []):
-        parts = [f"{i} {v['planner_best']:.4g} vs {v['atlas_optimum']:.4g}"
-                 if v["planner_best"] is not None else f"{i} - vs {v['atlas_optimum']:.4g}"
-                 for i, v in c["indices"].items()]  # fmt: skip
-        lines.append(f"{c['object']}, best 3-finger grasp, planner vs atlas optimum: "
-                     + "; ".join(parts))  # fmt: skip
+        parts = [
+            f"{i} {v['planner_best']:.4g} vs {v['atlas_optimum']:.4g}"
+            if v["planner_best"] is not None
+            else f"{i} - vs {v['atlas_optimum']:.4g}"
+            for i, v in c["indices"].items()
+        ]
+        lines.append(
+            f"{c['object']}, best 3-finger grasp, planner vs atlas optimum: " + "; ".join(parts)
+        )
     if doc["speedup_2_workers"] is not None:
         lines.append(f"1 -> 2 workers: {doc['speedup_2_workers']:.2f}x")
     load = doc["load_average"]

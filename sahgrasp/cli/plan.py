@@ -1,4 +1,4 @@
-"""``sahgrasp plan OBJECT``: ranked, verified grasps of a mesh file, a catalog object or a folder."""
+"""``sahgrasp plan OBJECT``: ranked, verified grasps of a mesh, a catalog object or a folder."""
 
 from __future__ import annotations
 
@@ -37,50 +37,104 @@ def _fingers(text: str) -> tuple[int, ...]:
     try:
         counts = tuple(int(t) for t in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected finger counts like 2,3,4, got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected finger counts like 2,3,4, got {text!r}"
+        ) from None
     if not counts or any(c not in (2, 3, 4) for c in counts) or len(set(counts)) != len(counts):
-        raise argparse.ArgumentTypeError(f"finger counts must be distinct values of 2, 3, 4: {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"finger counts must be distinct values of 2, 3, 4: {text!r}"
+        )
     return counts
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
     p = add_command(
-        sub, "plan", "ranked, verified grasps of an object (a mesh file, a catalog object, a folder)"
+        sub,
+        "plan",
+        "ranked, verified grasps of an object (a mesh file, a catalog object, a folder)",
     )
     p.add_argument("object", help=OBJECT_HELP)
     p.add_argument("--hand", default="sah", help=HAND_HELP)
-    p.add_argument("--fingers", type=_fingers, default=(3, 4, 2),
-                   help="finger counts to plan: 2 thumb+index, 3 +middle, 4 +ring")  # fmt: skip
+    p.add_argument(
+        "--fingers",
+        type=_fingers,
+        default=(3, 4, 2),
+        help="finger counts to plan: 2 thumb+index, 3 +middle, 4 +ring",
+    )
     p.add_argument("--grasps", type=positive_int, default=10, help="distinct grasps to return")
-    p.add_argument("--candidates", type=positive_int, default=60,
-                   help="contact sets solved per object: the deterministic budget")  # fmt: skip
-    p.add_argument("--time-limit", type=positive_float, default=None, metavar="S",
-                   help="cap on each object's planning time [s] (results then depend on speed)")  # fmt: skip
+    p.add_argument(
+        "--candidates",
+        type=positive_int,
+        default=60,
+        help="contact sets solved per object: the deterministic budget",
+    )
+    p.add_argument(
+        "--time-limit",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="cap on each object's planning time [s] (results then depend on speed)",
+    )
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
-    p.add_argument("--rank", default="epsilon",
-                   choices=("epsilon", "inverse_condition", "volume", "min_semiaxis"),
-                   help="rank force-closure grasps by the L1 epsilon or a manipulability index")  # fmt: skip
+    p.add_argument(
+        "--rank",
+        default="epsilon",
+        choices=("epsilon", "inverse_condition", "volume", "min_semiaxis"),
+        help="rank force-closure grasps by the L1 epsilon or a manipulability index",
+    )
     p.add_argument("--mu", type=positive_float, default=0.5, help="Coulomb friction coefficient")
-    p.add_argument("--scale", type=positive_float, default=1.0,
-                   help="factor from the mesh file's unit to metres (1e-3 for millimetres)")  # fmt: skip
-    p.add_argument("--xyz", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
-                   help="object position in the world [m] (default: the origin)")  # fmt: skip
-    p.add_argument("--quat", type=float, nargs=4, default=None, metavar=("X", "Y", "Z", "W"),
-                   help="object orientation in the world, unit quaternion (default: identity)")  # fmt: skip
+    p.add_argument(
+        "--scale",
+        type=positive_float,
+        default=1.0,
+        help="factor from the mesh file's unit to metres (1e-3 for millimetres)",
+    )
+    p.add_argument(
+        "--xyz",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="object position in the world [m] (default: the origin)",
+    )
+    p.add_argument(
+        "--quat",
+        type=float,
+        nargs=4,
+        default=None,
+        metavar=("X", "Y", "Z", "W"),
+        help="object orientation in the world, unit quaternion (default: identity)",
+    )
     where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=positive_int, default=1,
-                       help="worker processes for a folder (>= 1)")  # fmt: skip
-    where.add_argument("--scheduler", default=None, metavar="ADDR",
-                       help="Dask scheduler for a folder, e.g. tcp://host:8786")  # fmt: skip
-    p.add_argument("--resume", action="store_true",
-                   help="folder: continue the JSON Lines output of a stopped run")  # fmt: skip
-    p.add_argument("--html", default=None, metavar="OUT",
-                   help="write the top grasps side by side as one HTML scene (single object)")  # fmt: skip
+    where.add_argument(
+        "--workers", type=positive_int, default=1, help="worker processes for a folder (>= 1)"
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="Dask scheduler for a folder, e.g. tcp://host:8786",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="folder: continue the JSON Lines output of a stopped run",
+    )
+    p.add_argument(
+        "--html",
+        default=None,
+        metavar="OUT",
+        help="write the top grasps side by side as one HTML scene (single object)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--json", default=None, metavar="OUT",
-                   help="write the plan as JSON to OUT (a folder: JSON Lines, OUT.jsonl); "
-                   "'-': JSON alone on stdout")  # fmt: skip
+    p.add_argument(
+        "--json",
+        default=None,
+        metavar="OUT",
+        help="write the plan as JSON to OUT (a folder: JSON Lines, OUT.jsonl); "
+        "'-': JSON alone on stdout",
+    )
     p.set_defaults(run=run)
 
 
@@ -88,9 +142,14 @@ def _settings(args: argparse.Namespace) -> Any:
     from sahgrasp.planner import PlanSettings
 
     return PlanSettings(
-        fingers=args.fingers, grasps=args.grasps, candidates=args.candidates, seed=args.seed,
-        mu=args.mu, rank=args.rank, time_limit_s=args.time_limit,
-    )  # fmt: skip
+        fingers=args.fingers,
+        grasps=args.grasps,
+        candidates=args.candidates,
+        seed=args.seed,
+        mu=args.mu,
+        rank=args.rank,
+        time_limit_s=args.time_limit,
+    )
 
 
 def _placement(args: argparse.Namespace) -> Any:
@@ -135,14 +194,22 @@ def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     if args.object in OBJECT_NAMES and not path.exists():
         if args.scale != 1.0:
             raise InvalidTargetError("--scale applies to mesh files, not catalog objects")
-        return load_object(args.object, spec.placement()), {"name": args.object, "xyz": list(spec.xyz), "quat": list(spec.quat)}
+        return load_object(args.object, spec.placement()), {
+            "name": args.object,
+            "xyz": list(spec.xyz),
+            "quat": list(spec.quat),
+        }
     if not path.exists():
         raise InvalidTargetError(
             f"{args.object!r} is neither a mesh file, a folder, nor a catalog object "
             f"({', '.join(OBJECT_NAMES)})"
         )
     obj = load_mesh(path, scale=args.scale, T_world_object=spec.placement())
-    data: dict[str, Any] = {"mesh": str(path.resolve()), "xyz": list(spec.xyz), "quat": list(spec.quat)}
+    data: dict[str, Any] = {
+        "mesh": str(path.resolve()),
+        "xyz": list(spec.xyz),
+        "quat": list(spec.quat),
+    }
     if args.scale != 1.0:
         data["scale"] = args.scale
     return obj, data
@@ -157,8 +224,9 @@ def _run_object(args: argparse.Namespace) -> int:
     hand = load_hand(args.hand)
     obj, spec = _load(args)
     with _bar(args, settings.candidates, "candidate") as bar:
-        plan = plan_grasps(hand, obj, settings, object_spec=spec, started=_STARTED,
-                           on_candidate=bar.update)  # fmt: skip
+        plan = plan_grasps(
+            hand, obj, settings, object_spec=spec, started=_STARTED, on_candidate=bar.update
+        )
     for line in _lines(plan.to_dict()):
         print(line, file=out)
     if args.html:
@@ -174,15 +242,19 @@ def _run_object(args: argparse.Namespace) -> int:
 def _lines(doc: dict[str, Any]) -> list[str]:
     s = doc["summary"]
     name = doc["object"].get("name") or doc["object"].get("mesh")
-    lines = [f"{printable(str(name))}: {s['grasps']} grasps ({s['force_closure']} force closure) "
-             f"of {s['verified']} verified from {s['candidates']} candidates in {s['time_s']:.2f} s; "
-             f"first force-closure grasp at "
-             f"{'-' if s['time_to_first_s'] is None else format(s['time_to_first_s'], '.2f') + ' s'}"]  # fmt: skip
+    lines = [
+        f"{printable(str(name))}: {s['grasps']} grasps ({s['force_closure']} force closure) "
+        f"of {s['verified']} verified from {s['candidates']} candidates in {s['time_s']:.2f} s; "
+        f"first force-closure grasp at "
+        f"{'-' if s['time_to_first_s'] is None else format(s['time_to_first_s'], '.2f') + ' s'}"
+    ]
     for g in doc["grasps"]:
         q = g["quality"]
-        lines.append(f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} epsilon {q['epsilon_l1']:.4f}  "
-                     f"force closure {'yes' if q['force_closure'] else 'no ':<3}  "
-                     f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']})")  # fmt: skip
+        lines.append(
+            f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} epsilon {q['epsilon_l1']:.4f}  "
+            f"force closure {'yes' if q['force_closure'] else 'no ':<3}  "
+            f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']})"
+        )
     return lines
 
 
@@ -212,8 +284,10 @@ def _run_folder(args: argparse.Namespace) -> int:
                 bar.update()
                 failed += not doc.get("grasps")
                 if "error" in doc:
-                    print(f"{printable(doc['object']['mesh'])}: refused: {printable(doc['error'])}",
-                          file=sys.stderr)  # fmt: skip
+                    print(
+                        f"{printable(doc['object']['mesh'])}: refused: {printable(doc['error'])}",
+                        file=sys.stderr,
+                    )
                 else:
                     for line in _lines(doc)[:1]:
                         print(line, file=out)
@@ -237,11 +311,19 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
 
     from sahgrasp.stream import RESULTS_FORMAT
 
-    data = {"hand": hand.description.name, "hand_digest": hand.description.digest(),
-            "settings": {**settings.to_dict(), "scale": args.scale}, "sequence_digest": "plan"}  # fmt: skip
+    data = {
+        "hand": hand.description.name,
+        "hand_digest": hand.description.digest(),
+        "settings": {**settings.to_dict(), "scale": args.scale},
+        "sequence_digest": "plan",
+    }
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()
-    return {"format": RESULTS_FORMAT, **data, "targets": Path(args.object).name,
-            "settings_digest": digest}  # fmt: skip
+    return {
+        "format": RESULTS_FORMAT,
+        **data,
+        "targets": Path(args.object).name,
+        "settings_digest": digest,
+    }
 
 
 def _executor(args: argparse.Namespace) -> Any:
@@ -259,5 +341,11 @@ def _executor(args: argparse.Namespace) -> Any:
 def _bar(args: argparse.Namespace, total: int, unit: str, done: int = 0) -> Any:
     from tqdm import tqdm
 
-    return tqdm(total=total, initial=done, unit=unit, file=sys.stderr,
-                disable=True if args.quiet else None, dynamic_ncols=True)  # fmt: skip
+    return tqdm(
+        total=total,
+        initial=done,
+        unit=unit,
+        file=sys.stderr,
+        disable=True if args.quiet else None,
+        dynamic_ncols=True,
+    )

@@ -9,4 +9,11 @@ ranks them; :mod:`~sahgrasp.planner.folder` plans a folder of meshes on worker p
 from sahgrasp.planner.plan import GraspPlan, PlannedGrasp, PlanSummary, plan_grasps
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 
-__all__ = ["GraspPlan", "PlanSettings", "PlanSummary", "PlannedGrasp", "PlanningError", "plan_grasps"]
+__all__ = [
+    "GraspPlan",
+    "PlanSettings",
+    "PlanSummary",
+    "PlannedGrasp",
+    "PlanningError",
+    "plan_grasps",
+]

@@ -21,6 +21,7 @@ since nothing resists a torque about that line).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -126,8 +127,9 @@ def derive_reach(hand: Hand) -> HandReach:
 
     Finger spacing: from 0.7 to 1.0 times the mean distance between the bases of neighbouring
     non-thumb fingers (for the SAH, 28-40 mm, as measured with the IK). Span: up to the largest
-    thumb-to-finger contact distance (fingertip centres, less two radii) over random configurations whose thumb and finger
-    pads face each other within 45 degrees (a bound for the draw: the IK decides).
+    thumb-to-finger contact distance (fingertip centres, less two radii) over random
+    configurations whose thumb and finger pads face each other within 45 degrees (a bound for
+    the draw: the IK decides).
     """
     model, data = hand.model, hand.model.createData()
     pin.forwardKinematics(model, data, hand.configuration())
@@ -139,7 +141,7 @@ def derive_reach(hand: Hand) -> HandReach:
         first = int(hand.finger_coordinates[finger][0])
         joint = model.getJointId(hand.coordinate_names[first])
         bases.append(np.array(data.oMi[joint].translation))
-    gaps = [float(np.linalg.norm(a - b)) for a, b in zip(bases, bases[1:], strict=False)]
+    gaps = [float(np.linalg.norm(a - b)) for a, b in itertools.pairwise(bases)]
     spacing = float(np.mean(gaps)) if gaps else 0.04
     rng = np.random.default_rng(0)
     specs = dict(zip(hand.fingers, hand.description.fingers, strict=True))
@@ -268,8 +270,11 @@ class CandidateDraw:
     def _neighbour(
         self, start: FloatArray, direction: FloatArray, step_m: float, half: bool
     ) -> Contact | None:
-        """The surface point nearest to ``start + step * direction``, ``step`` stretched to reach
-        a chord of ``step_m`` (within the spacing range, halved for ``half``)."""
+        """The surface point nearest to ``start + step * direction``, at a chord of ``step_m``.
+
+        ``step`` is stretched while the surface curves away; the chord must be within the
+        spacing range (halved for ``half``).
+        """
         lo, hi = self.reach.finger_spacing_m
         if half:
             lo, hi = 0.5 * lo, 0.5 * hi

@@ -43,7 +43,9 @@ class ObjectJob:
     digest: str
 
 
-def object_digest(path: str | os.PathLike[str], settings: PlanSettings, scale: float, hand: str) -> str:
+def object_digest(
+    path: str | os.PathLike[str], settings: PlanSettings, scale: float, hand: str
+) -> str:
     """SHA-256 of a mesh file's bytes, the scale, the hand and the plan settings."""
     h = hashlib.sha256(Path(path).read_bytes())
     h.update(json.dumps([settings.to_dict(), scale, hand], sort_keys=True).encode("utf-8"))

@@ -36,7 +36,13 @@ from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.grasp_sampler import SurfaceMesh
-from sahgrasp.planner.candidates import Candidate, CandidateDraw, ObjectFrame, finger_set, hand_reach
+from sahgrasp.planner.candidates import (
+    Candidate,
+    CandidateDraw,
+    ObjectFrame,
+    finger_set,
+    hand_reach,
+)
 from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
@@ -74,7 +80,8 @@ class PlannedGrasp:
         q: The hand configuration (wrist + independent coordinates, :class:`sahgrasp.Hand`).
         joints: Every URDF joint's value [rad], mimic joints included.
         quality: ``force_closure``, ``epsilon_l1``, ``epsilon_linf`` (returned grasps; None
-            before), and the manipulability indices by name; ``check`` when an extra check scored it.
+            before), and the manipulability indices by name; ``check`` when an extra check
+            scored it.
         object_clearance_m: Smallest signed distance of a non-contact link to the mesh [m].
         closest_link: That link.
         seed: The draw's seed: the candidate (and the IK's starts) it reproduces.
@@ -276,11 +283,13 @@ def plan_grasps(
     obj = planning_object(obj)
     mesh = obj.mesh().transformed(obj.T_world_object)
     surface = SurfaceMesh(mesh.vertices_m, mesh.faces)
-    frame = ObjectFrame.of(surface.triangles.reshape(-1, 3),
-                           np.arange(3 * len(surface)).reshape(-1, 3))  # fmt: skip
+    frame = ObjectFrame.of(
+        surface.triangles.reshape(-1, 3), np.arange(3 * len(surface)).reshape(-1, 3)
+    )
     draw = CandidateDraw(surface, hand_reach(hand), frame, settings.mu, edges=settings.cone_edges)
-    verifier = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m,
-                             settings.link_tolerance_m)  # fmt: skip
+    verifier = GraspVerifier(
+        hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m, settings.link_tolerance_m
+    )
     ik = IKSettings(max_inits=settings.ik_max_inits, d_min_m=settings.d_min_m)
     counts = settings.fingers
     rejected: Counter[str] = Counter()
@@ -291,7 +300,10 @@ def plan_grasps(
     limited = False
     max_draws = settings.candidates * settings.max_draws_per_candidate
     while candidates < settings.candidates and draws < max_draws:
-        if settings.time_limit_s is not None and time.perf_counter() - start > settings.time_limit_s:
+        if (
+            settings.time_limit_s is not None
+            and time.perf_counter() - start > settings.time_limit_s
+        ):
             limited = True
             break
         seed = draw_seed(settings.seed, obj, draws)
@@ -327,8 +339,11 @@ def plan_grasps(
         time_s=time.perf_counter() - start,
         time_limited=limited,
     )
-    spec = object_spec or {"name": obj.name, "xyz": obj.T_world_object[:3, 3].tolist(),
-                           "quat": pin.Quaternion(obj.T_world_object[:3, :3]).coeffs().tolist()}  # fmt: skip
+    spec = object_spec or {
+        "name": obj.name,
+        "xyz": obj.T_world_object[:3, 3].tolist(),
+        "quat": pin.Quaternion(obj.T_world_object[:3, :3]).coeffs().tolist(),
+    }
     repairs = tuple(r for s in obj.solids for r in getattr(s, "repairs", ()))
     return GraspPlan(hand.description.name, spec, settings, tuple(chosen), summary, repairs)
 
@@ -351,8 +366,9 @@ def _solve(
     )
     free = tuple(f for f in hand.fingers if f not in candidate.fingers)
     target = GraspTarget(f"{obj.name}-{candidate.seed}", contacts)
-    result = solve_ik(hand, target, ik, free_fingers=free, obstacle=obj,
-                      seed=candidate.seed % (2**31))  # fmt: skip
+    result = solve_ik(
+        hand, target, ik, free_fingers=free, obstacle=obj, seed=candidate.seed % (2**31)
+    )
     if not result.success:
         return None
     joints = hand.joint_values(result.q)
@@ -432,9 +448,13 @@ def _select(
         wrench = grasp_quality(
             np.array([c.point for c in grasp.contacts]),
             np.array([c.normal for c in grasp.contacts]),
-            frame.centroid_m, frame.radius_m, settings.mu, settings.cone_edges,
-            linf=True, linf_edges=settings.linf_edges,
-        )  # fmt: skip
+            frame.centroid_m,
+            frame.radius_m,
+            settings.mu,
+            settings.cone_edges,
+            linf=True,
+            linf_edges=settings.linf_edges,
+        )
         grasp.quality["epsilon_linf"] = wrench.epsilon_linf
         out.append(grasp)
     return out

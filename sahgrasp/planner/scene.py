@@ -92,7 +92,9 @@ def draw_plan(
         R = _rotation_to(outward, _TOWARDS_CAMERA)
         turned.append((centre, R, (grasp_points(hand, grasp.q, obj) - centre) @ R.T))
     cell_x = max(float(np.ptp(p[:, 0])) for _, _, p in turned) + _GAP_M if turned else 0.0
-    cell_z = max(float(np.ptp(p[:, 2])) for _, _, p in turned) + 3 * _LABEL_HEIGHT_M if turned else 0.0
+    cell_z = (
+        max(float(np.ptp(p[:, 2])) for _, _, p in turned) + 3 * _LABEL_HEIGHT_M if turned else 0.0
+    )
     everything = []
     for rank, (grasp, (centre, R, points)) in enumerate(zip(grasps, turned, strict=True), 1):
         row, column = divmod(rank - 1, columns)
@@ -110,8 +112,11 @@ def draw_plan(
         texture = mg.ImageTexture(image=mg.PngImage(_label_png(_label(grasp, rank))))
         node.set_object(mg.Box([width, 1e-4, height]), mg.MeshBasicMaterial(map=texture))
         T_label = np.eye(4)
-        T_label[:3, 3] = [column * cell_x, placed[:, 1].min() - 0.01,
-                          placed[:, 2].max() + 0.5 * _LABEL_HEIGHT_M + 0.5 * height]  # fmt: skip
+        T_label[:3, 3] = [
+            column * cell_x,
+            placed[:, 1].min() - 0.01,
+            placed[:, 2].max() + 0.5 * _LABEL_HEIGHT_M + 0.5 * height,
+        ]
         node.set_transform(T_label)
         everything += [placed, T_label[:3, 3][None]]
     if everything:

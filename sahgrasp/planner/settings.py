@@ -67,16 +67,25 @@ class PlanSettings:
 
     def __post_init__(self) -> None:
         fingers = tuple(self.fingers)
-        if not fingers or any(f not in FINGER_COUNTS for f in fingers) or len(set(fingers)) != len(
-            fingers
+        if (
+            not fingers
+            or any(f not in FINGER_COUNTS for f in fingers)
+            or len(set(fingers)) != len(fingers)
         ):
             raise PlanningError(
                 f"fingers must be distinct finger counts among {list(FINGER_COUNTS)}, got "
                 f"{list(fingers)}"
             )
         object.__setattr__(self, "fingers", fingers)
-        for name, low in (("grasps", 1), ("candidates", 1), ("seed", 0), ("ik_max_inits", 1),
-                          ("max_draws_per_candidate", 1), ("cone_edges", 3), ("linf_edges", 3)):  # fmt: skip
+        for name, low in (
+            ("grasps", 1),
+            ("candidates", 1),
+            ("seed", 0),
+            ("ik_max_inits", 1),
+            ("max_draws_per_candidate", 1),
+            ("cone_edges", 3),
+            ("linf_edges", 3),
+        ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise PlanningError(f"{name} must be an integer >= {low}, got {value!r}")

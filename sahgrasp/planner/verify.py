@@ -128,9 +128,11 @@ class GraspVerifier:
         self.low, self.high = self.vertices.min(axis=0), self.vertices.max(axis=0)
         import trimesh
 
-        self.trimesh = trimesh.Trimesh(self.surface.triangles.reshape(-1, 3),
-                                       np.arange(3 * len(self.surface)).reshape(-1, 3),
-                                       process=True)  # fmt: skip
+        self.trimesh = trimesh.Trimesh(
+            self.surface.triangles.reshape(-1, 3),
+            np.arange(3 * len(self.surface)).reshape(-1, 3),
+            process=True,
+        )
 
     def configuration(self, wrist: dict[str, Any], joints: dict[str, float]) -> FloatArray:
         """The plain model's ``q`` from a grasp's wrist ``xyz``/``quat`` and joints by name.
@@ -183,8 +185,10 @@ class GraspVerifier:
         for j in range(2, self.model.njoints):
             i = self.model.joints[j].idx_q
             if not lower[i] - _LIMIT_TOL <= q[i] <= upper[i] + _LIMIT_TOL:
-                out.append(f"joint {self.model.names[j]} = {q[i]:.6g} outside "
-                           f"[{lower[i]:.6g}, {upper[i]:.6g}]")  # fmt: skip
+                out.append(
+                    f"joint {self.model.names[j]} = {q[i]:.6g} outside "
+                    f"[{lower[i]:.6g}, {upper[i]:.6g}]"
+                )
         for name, (leader, multiplier, offset) in self.mimic.items():
             expected = multiplier * joints[leader] + offset
             if abs(joints[name] - expected) > _MIMIC_TOL:
@@ -230,22 +234,30 @@ class GraspVerifier:
             centre = oMg.act(self.link_centres[k])
             reach = self.link_radii[k]
             if np.any(centre + reach < self.low) or np.any(centre - reach > self.high):
-                gap = float(np.linalg.norm(np.maximum(self.low - centre, 0.0)
-                                           + np.maximum(centre - self.high, 0.0))) - reach
+                gap = (
+                    float(
+                        np.linalg.norm(
+                            np.maximum(self.low - centre, 0.0) + np.maximum(centre - self.high, 0.0)
+                        )
+                    )
+                    - reach
+                )
                 if gap < clearance:  # a lower bound only matters when nothing is nearer
                     clearance, closest = max(gap, 0.0), link
                 continue
             placed = coal.Transform3s(oMg.rotation, oMg.translation)
-            hit = coal.collide(g.geometry, placed, self.bvh, self.identity, collide,
-                               coal.CollisionResult())  # fmt: skip
+            hit = coal.collide(
+                g.geometry, placed, self.bvh, self.identity, collide, coal.CollisionResult()
+            )
             if not hit:
                 if self._inside(oMg.translation):
                     depth = -float(self._signed_distance(np.array([oMg.translation]))[0])
                     problems.append(f"link {link} inside the object ({1e3 * depth:.2f} mm deep)")
                     deepest, clearance, closest = max(deepest, depth), -depth, link
                     continue
-                distance = coal.distance(g.geometry, placed, self.bvh, self.identity, request,
-                                         coal.DistanceResult())  # fmt: skip
+                distance = coal.distance(
+                    g.geometry, placed, self.bvh, self.identity, request, coal.DistanceResult()
+                )
                 if distance < clearance:
                     clearance, closest = float(distance), link
                 continue
@@ -258,8 +270,12 @@ class GraspVerifier:
         return deepest, clearance, closest, problems
 
     def _inside(self, point: FloatArray) -> bool:
-        return self.surface.shells_around(np.asarray(point, dtype=np.float64),
-                                          np.array([0.0, 0.0, 1.0])) > 0  # fmt: skip
+        return (
+            self.surface.shells_around(
+                np.asarray(point, dtype=np.float64), np.array([0.0, 0.0, 1.0])
+            )
+            > 0
+        )
 
     def _depth(self, k: int, oMg: pin.SE3) -> float:
         """How deep link ``k``'s shape crosses into the object [m] (module docstring, 3)."""
@@ -279,10 +295,13 @@ class GraspVerifier:
         for a, b in self.pairs:
             ta, tb = self.geometry_data.oMg[a], self.geometry_data.oMg[b]
             if coal.collide(
-                objects[a].geometry, coal.Transform3s(ta.rotation, ta.translation),
-                objects[b].geometry, coal.Transform3s(tb.rotation, tb.translation),
-                request, coal.CollisionResult(),
-            ):  # fmt: skip
+                objects[a].geometry,
+                coal.Transform3s(ta.rotation, ta.translation),
+                objects[b].geometry,
+                coal.Transform3s(tb.rotation, tb.translation),
+                request,
+                coal.CollisionResult(),
+            ):
                 out.append(f"self-collision {self.links[a]} / {self.links[b]}")
         return out
 
@@ -341,8 +360,9 @@ def _surface_samples(shape: Any) -> FloatArray:
         return shape.radius * _fibonacci(count)
     if isinstance(shape, coal.Cylinder | coal.Capsule):
         r, half = shape.radius, shape.halfLength
-        angles = np.linspace(0.0, 2 * math.pi, max(8, math.ceil(2 * math.pi * r / _SAMPLE_SPACING_M)),
-                             endpoint=False)  # fmt: skip
+        angles = np.linspace(
+            0.0, 2 * math.pi, max(8, math.ceil(2 * math.pi * r / _SAMPLE_SPACING_M)), endpoint=False
+        )
         ring = np.stack([np.cos(angles), np.sin(angles)], axis=1)
         out = [np.column_stack([r * ring, np.full(len(ring), z)]) for z in _grid(-half, half)]
         for radius in _grid(0.0, r)[:-1]:
@@ -350,7 +370,7 @@ def _surface_samples(shape: Any) -> FloatArray:
                 out.append(np.column_stack([radius * ring, np.full(len(ring), z)]))
         if isinstance(shape, coal.Capsule):
             ball = r * _fibonacci(max(20, math.ceil(4 * math.pi * r * r / _SAMPLE_SPACING_M**2)))
-            out += [ball + [0.0, 0.0, half], ball - [0.0, 0.0, half]]
+            out += [ball + np.array([0.0, 0.0, half]), ball - np.array([0.0, 0.0, half])]
         return np.concatenate(out)
     if isinstance(shape, coal.ConvexBase):
         return np.asarray(shape.points(), dtype=np.float64)
