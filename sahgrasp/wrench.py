@@ -171,11 +171,14 @@ def primitive_wrenches(
     return np.concatenate([forces, np.cross(np.broadcast_to(arms, forces.shape), forces)], axis=2)
 
 
-def epsilon(wrenches: ArrayLike) -> float:
+def epsilon(wrenches: ArrayLike, exact: bool = True) -> float:
     """Distance from the origin to the boundary of ``ConvexHull(wrenches)``; 0 if not inside.
 
     Args:
         wrenches: Points (K, 6) spanning the wrench space.
+        exact: Qhull merges coplanar facets exactly (option ``Qx``); False joggles the input
+            instead (``QJ``: about five times faster on cone edges, whose points are coplanar
+            in groups, and within about 1e-10 of the exact distance), for screening.
 
     Returns:
         The radius of the largest origin-centred ball inside the hull when the origin is strictly
@@ -188,7 +191,7 @@ def epsilon(wrenches: ArrayLike) -> float:
     if singular[-1] <= _RANK_TOL * max(singular[0], 1e-300):
         return 0.0  # flat: a hull of fewer than six dimensions holds no 6-D ball
     try:
-        hull = ConvexHull(w)
+        hull = ConvexHull(w, qhull_options="Qx" if exact else "QJ")
     except QhullError:  # (nearly) flat wrench sets Qhull cannot triangulate: not force closure
         return 0.0
     # Facet i: normal . x + offset <= 0 inside, unit normal: the origin's distance is -offset.

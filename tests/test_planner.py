@@ -150,3 +150,22 @@ def test_plan_mug_example_writes_a_scene_of_the_ranked_grasps(tmp_path: Path, ca
     assert printed.startswith("mug: ") and "#1: thumb+" in printed
     drawn = {c["path"] for c in scene_commands(out.read_text()) if c["type"] == "set_object"}
     assert {"/meshcat/plan/1/object", "/meshcat/labels/1"} <= drawn
+
+
+def test_verifier_self_collision_agrees_with_the_hand_model(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    import pinocchio as pin
+
+    obj = load_mesh(box_file)
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    verifier = GraspVerifier(hand.description, mesh.vertices_m, mesh.faces)
+    rng = np.random.default_rng(3)
+    far = pin.SE3(np.eye(3), np.array([1.0, 1.0, 1.0]))  # away from the object
+    seen = {True: 0, False: 0}
+    for _ in range(200):
+        q = hand.random_configuration(rng, far)
+        wrist = {"xyz": q[:3].tolist(), "quat": q[3:7].tolist()}
+        verdict = verifier.check(wrist, hand.joint_values(q), [])
+        colliding = any(p.startswith("self-collision") for p in verdict.problems)
+        assert colliding == hand.in_collision(q)
+        seen[colliding] += 1
+    assert seen[True] and seen[False]

@@ -442,19 +442,21 @@ def _select(
     chosen.sort(key=lambda e: (e[0], _rank_key(e[2], settings.rank), e[1]))
     out = []
     for _, _, grasp in chosen:
-        if (settings.linf_edges + 1) ** len(grasp.contacts) > LINF_MAX_POINTS:
-            out.append(grasp)  # too costly: left None (docs/planning.md)
-            continue
-        wrench = grasp_quality(
+        # The exact hull for what is returned (the candidates were screened with a joggled
+        # one); the L-infinity epsilon where its Minkowski sum is small enough.
+        linf = (settings.linf_edges + 1) ** len(grasp.contacts) <= LINF_MAX_POINTS
+        exact = grasp_quality(
             np.array([c.point for c in grasp.contacts]),
             np.array([c.normal for c in grasp.contacts]),
             frame.centroid_m,
             frame.radius_m,
             settings.mu,
             settings.cone_edges,
-            linf=True,
+            linf=linf,
             linf_edges=settings.linf_edges,
         )
-        grasp.quality["epsilon_linf"] = wrench.epsilon_linf
+        grasp.quality["force_closure"] = exact.force_closure
+        grasp.quality["epsilon_l1"] = exact.epsilon_l1
+        grasp.quality["epsilon_linf"] = exact.epsilon_linf
         out.append(grasp)
     return out

@@ -112,6 +112,7 @@ class GraspVerifier:
         self.links = [str(self.model.frames[g.parentFrame].name) for g in objects]
         self.pairs = _checked_pairs(self.model, objects, self.links, description)
         self.samples = [_surface_samples(g.geometry) for g in objects]
+        self.pair_array = np.array(self.pairs, dtype=np.intp).reshape(-1, 2)
         for g in objects:
             g.geometry.computeLocalAABB()
         self.link_radii = np.array([g.geometry.aabb_radius for g in objects])
@@ -292,7 +293,14 @@ class GraspVerifier:
         out = []
         request = coal.CollisionRequest()
         objects = self.geometry.geometryObjects
-        for a, b in self.pairs:
+        # Only pairs whose bounding spheres meet can collide: the rest need no coal query.
+        centres = np.array(
+            [oMg.act(c) for oMg, c in zip(self.geometry_data.oMg, self.link_centres, strict=True)]
+        )
+        a_idx, b_idx = self.pair_array[:, 0], self.pair_array[:, 1]
+        gaps = np.linalg.norm(centres[a_idx] - centres[b_idx], axis=1)
+        near = gaps <= self.link_radii[a_idx] + self.link_radii[b_idx]
+        for a, b in self.pair_array[near].tolist():
             ta, tb = self.geometry_data.oMg[a], self.geometry_data.oMg[b]
             if coal.collide(
                 objects[a].geometry,
