@@ -81,9 +81,10 @@ def _object_row(
     from sahgrasp.planner import plan_grasps
     from sahgrasp.planner.verify import GraspVerifier
 
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     obj = load()
     plan = plan_grasps(hand, obj, settings, object_spec=object_spec, started=start)
+    cpu_s = time.process_time() - cpu
     s = plan.summary
     doc = plan.to_dict()
     mesh = obj.mesh().transformed(obj.T_world_object)
@@ -100,6 +101,8 @@ def _object_row(
         "candidates": s.candidates,
         "verified": s.verified,
         "verified_per_s": s.verified / s.time_s,
+        "cpu_s": cpu_s,
+        "force_closure_per_cpu_s": s.verified_force_closure / cpu_s,
         "verified_force_closure": s.verified_force_closure,
         "force_closure_share": s.verified_force_closure / s.verified if s.verified else 0.0,
         "returned": s.grasps,
@@ -151,13 +154,18 @@ def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
 
 
 def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict[str, Any]:
+    import resource
+
     from sahgrasp.parallel import process_pool
     from sahgrasp.planner.folder import plan_jobs
 
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with process_pool(workers) as pool:
         start = time.perf_counter()
         docs = list(plan_jobs(hand.description, jobs, settings, pool, 2 * workers))
         seconds = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the workers, ended and reaped
+    cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     closure = sum(d["summary"]["verified_force_closure"] for d in docs if "summary" in d)
     verified = sum(d["summary"]["verified"] for d in docs if "summary" in d)
     return {
@@ -168,6 +176,8 @@ def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict
         "verified_force_closure": closure,
         "force_closure_per_s": closure / seconds,
         "verified_per_s": verified / seconds,
+        "workers_cpu_s": cpu_s,
+        "force_closure_per_cpu_s": closure / cpu_s if cpu_s > 0 else None,
     }
 
 
@@ -298,6 +308,7 @@ def format_table(doc: dict[str, Any]) -> str:
                 r["faces"],
                 "-" if first is None else round(first, 3),
                 round(r["verified_per_s"], 1),
+                round(r["force_closure_per_cpu_s"], 1),
                 round(100 * r["force_closure_share"]),
                 round(r["median_epsilon"], 4),
                 round(r["best_epsilon"], 4),
@@ -310,6 +321,7 @@ def format_table(doc: dict[str, Any]) -> str:
         "faces",
         "first FC [s]",
         "verified/s",
+        "FC/CPU s",
         "FC [%]",
         "median eps",
         "best eps",
@@ -331,7 +343,9 @@ def format_table(doc: dict[str, Any]) -> str:
         lines.append(
             f"folder, {r['workers']} worker(s): {r['objects']} objects in {r['seconds']:.1f} s, "
             f"{r['force_closure_per_s']:.1f} verified force-closure grasps/s "
-            f"({r['verified_per_s']:.1f} verified grasps/s)"
+            f"({r['verified_per_s']:.1f} verified grasps/s); workers' CPU "
+            f"{r['workers_cpu_s']:.1f} s (start-up included), "
+            f"{r['force_closure_per_cpu_s'] or 0.0:.1f} force-closure grasps per CPU second"
         )
     for c in doc.get("atlas_comparison", []):
         parts = [
