@@ -169,3 +169,22 @@ def test_verifier_self_collision_agrees_with_the_hand_model(hand, box_file: Path
         assert colliding == hand.in_collision(q)
         seen[colliding] += 1
     assert seen[True] and seen[False]
+
+
+def test_cli_json_on_stdout_with_scale_and_placement(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    mm = tmp_path / "box_mm.stl"
+    trimesh.creation.box(extents=(50.0, 60.0, 80.0)).export(mm)
+    argv = ["plan", str(mm), "--scale", "1e-3", "--xyz", "0.5", "0", "0", "--candidates", "4",
+            "--grasps", "1", "--json", "-", "--quiet"]  # fmt: skip
+    assert main(argv) == 0
+    doc = json.loads(capsys.readouterr().out)  # stdout holds the JSON alone
+    assert doc["object"]["scale"] == 1e-3 and doc["object"]["xyz"] == [0.5, 0.0, 0.0]
+    for contact in doc["grasps"][0]["contacts"]:
+        assert 0.5 - 0.026 < contact["point"][0] < 0.5 + 0.026  # world frame, object placed
+
+
+def test_cli_unknown_object_and_bad_fingers_are_usage_errors(capsys) -> None:  # type: ignore[no-untyped-def]
+    assert main(["plan", "no_such_thing"]) == 2
+    assert main(["plan", "can", "--fingers", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "neither a mesh file" in err and "finger counts" in err

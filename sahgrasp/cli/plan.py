@@ -21,6 +21,7 @@ from sahgrasp.cli.common import (
     positive_int,
     printable,
 )
+from sahgrasp.cli.solve import resume_hint
 
 __all__ = ["add_parser", "run"]
 
@@ -135,7 +136,7 @@ def add_parser(sub: Any) -> None:
         help="write the plan as JSON to OUT (a folder: JSON Lines, OUT.jsonl); "
         "'-': JSON alone on stdout",
     )
-    p.set_defaults(run=run)
+    p.set_defaults(run=run, on_interrupt=resume_hint)
 
 
 def _settings(args: argparse.Namespace) -> Any:
@@ -293,7 +294,7 @@ def _run_folder(args: argparse.Namespace) -> int:
                         print(line, file=out)
                 if writer is not None:
                     writer.write([doc])
-                else:
+                elif args.json == "-":
                     import json
 
                     sys.stdout.write(json.dumps(doc) + "\n")
