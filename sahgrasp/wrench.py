@@ -67,7 +67,7 @@ FRICTION = 0.5
 """Default Coulomb friction coefficient ``mu`` between fingertip and object."""
 CONE_EDGES = 8
 """Default number of edges of the linearised friction cone (L1 wrench space)."""
-LINF_CONE_EDGES = 4
+LINF_CONE_EDGES = 3
 """Default number of cone edges of the L-infinity wrench space (module docstring)."""
 MAX_MINKOWSKI_POINTS = 200_000
 """Largest point count of the L-infinity Minkowski sum accepted (``edges ** contacts``)."""

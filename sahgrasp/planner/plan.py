@@ -64,10 +64,10 @@ GraspCheck = Callable[["PlannedGrasp"], "float | None"]
 """An extra check of a planned grasp: None drops it, a number (higher is better) re-ranks."""
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-LINF_MAX_POINTS = 300
+LINF_MAX_POINTS = 125
 """The L-infinity epsilon is computed when its Minkowski sum has at most this many points
-(``(linf_edges + 1) ** contacts``; its hull in six dimensions grows fast): with the default 4
-edges, for grasps of 2 and 3 fingers; None for 4 fingers (use ``linf_edges=3`` for them)."""
+(``(linf_edges + 1) ** contacts``; its hull in six dimensions grows fast): with the default 3
+edges, for grasps of 2 and 3 fingers; None for 4 fingers."""
 
 
 @dataclass(frozen=True)
