@@ -16,8 +16,8 @@ from pathlib import Path
 import sahgrasp
 from sahgrasp.experiments.arguments import add_html_argument, positive_float, positive_int
 from sahgrasp.objects import MeshFileError, load_mesh
-from sahgrasp.planner.scene import draw_plan
 from sahgrasp.viz import present
+from sahgrasp.viz.plan_view import draw_plan
 
 MUG = Path(__file__).resolve().parent / "meshes" / "mug.stl"
 

@@ -231,7 +231,7 @@ def _run_object(args: argparse.Namespace) -> int:
     for line in _lines(plan.to_dict()):
         print(line, file=out)
     if args.html:
-        from sahgrasp.planner.scene import write_plan_html
+        from sahgrasp.viz.plan_view import write_plan_html
 
         write_plan_html(hand, obj, plan, args.html)
         print(f"wrote {args.html}", file=out)
