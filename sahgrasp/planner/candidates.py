@@ -193,6 +193,7 @@ class CandidateDraw:
     ) -> None:
         settings = settings or SamplerSettings()
         self.edges = edges
+        self.single_shell = _shells(surface) == 1
         self.surface = surface
         self.reach = reach
         self.frame = frame
@@ -302,6 +303,8 @@ class CandidateDraw:
         return bool(contacts[0][1] @ mean <= -self.opposition_cos * np.linalg.norm(mean))
 
     def _exposed(self, contacts: list[Contact]) -> bool:
+        if self.single_shell:  # one closed shell: no surface point is inside another
+            return True
         return all(self.surface.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
 
     def _fits(self, contacts: list[Contact]) -> bool:
@@ -318,6 +321,24 @@ class CandidateDraw:
         axis /= length
         # Each contact pushes along -n: the line must lie within both friction cones.
         return bool(-n1 @ axis >= self.friction_cos and n2 @ axis >= self.friction_cos)
+
+
+def _shells(surface: SurfaceMesh) -> int:
+    """Connected components of the surface's triangles (sharing a corner point)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    corners = surface.triangles.reshape(-1, 3)
+    _, vertex = np.unique(np.round(corners, 12), axis=0, return_inverse=True)
+    vertex = vertex.reshape(-1, 3)
+    face = np.repeat(np.arange(len(vertex)), 3)
+    n_faces, n_vertices = len(vertex), int(vertex.max()) + 1
+    # Faces and vertices as one bipartite graph: a face joins its three corners.
+    graph = coo_matrix(
+        (np.ones(face.size), (face, n_faces + vertex.ravel())),
+        shape=(n_faces + n_vertices, n_faces + n_vertices),
+    )
+    return int(connected_components(graph, directed=False)[0])
 
 
 def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:

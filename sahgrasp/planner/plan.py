@@ -292,6 +292,11 @@ def plan_grasps(
     )
     ik = IKSettings(max_inits=settings.ik_max_inits, d_min_m=settings.d_min_m)
     counts = settings.fingers
+    # Two hard-finger contacts are never force closure: with other finger counts asked for too,
+    # two-finger draws come once per cycle and the others twice (3, 4, 3, 4, 2).
+    cycle = (
+        tuple(k for k in counts if k != 2) * 2 + (2,) if 2 in counts and len(counts) > 1 else counts
+    )
     rejected: Counter[str] = Counter()
     failed: Counter[str] = Counter()
     verified: list[PlannedGrasp] = []
@@ -307,7 +312,7 @@ def plan_grasps(
             limited = True
             break
         seed = draw_seed(settings.seed, obj, draws)
-        fingers = sets[counts[draws % len(counts)]]
+        fingers = sets[cycle[draws % len(cycle)]]
         draws += 1
         candidate = draw.draw(fingers, seed)
         if isinstance(candidate, str):
