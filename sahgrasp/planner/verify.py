@@ -50,6 +50,12 @@ SURFACE_TOLERANCE_M = 1e-5
 """Largest distance of a contact point from the mesh surface [m]."""
 _SAMPLE_SPACING_M = 1e-3
 """Largest spacing of the points spread over a link's collision shape [m]."""
+_RAY_DIRECTIONS = tuple(
+    v / np.linalg.norm(v)
+    for v in (np.array([0.2113, 0.5774, 0.7887]), np.array([-0.6532, 0.2706, 0.7071]),
+              np.array([0.3827, -0.9239, 0.0123]))
+)  # fmt: skip
+"""Directions of the inside tests' rays: oblique, so that they rarely meet an edge or vertex."""
 _LIMIT_TOL = 1e-9
 _MIMIC_TOL = 1e-6
 
@@ -226,6 +232,7 @@ class GraspVerifier:
         deepest, clearance, closest = 0.0, math.inf, ""
         problems = []
         request, collide = coal.DistanceRequest(), coal.CollisionRequest()
+        far: list[tuple[float, int]] = []
         for k, (g, oMg) in enumerate(
             zip(self.geometry.geometryObjects, self.geometry_data.oMg, strict=True)
         ):
@@ -234,49 +241,49 @@ class GraspVerifier:
                 continue
             centre = oMg.act(self.link_centres[k])
             reach = self.link_radii[k]
-            if np.any(centre + reach < self.low) or np.any(centre - reach > self.high):
-                gap = (
-                    float(
-                        np.linalg.norm(
-                            np.maximum(self.low - centre, 0.0) + np.maximum(centre - self.high, 0.0)
-                        )
-                    )
-                    - reach
-                )
-                if gap < clearance:  # a lower bound only matters when nothing is nearer
-                    clearance, closest = max(gap, 0.0), link
+            outside = np.maximum(self.low - centre, 0.0) + np.maximum(centre - self.high, 0.0)
+            if np.any(outside > reach):  # the link's ball misses the object's box
+                far.append((float(np.linalg.norm(outside)) - reach, k))
                 continue
             placed = coal.Transform3s(oMg.rotation, oMg.translation)
             hit = coal.collide(
                 g.geometry, placed, self.bvh, self.identity, collide, coal.CollisionResult()
             )
-            if not hit:
-                if self._inside(oMg.translation):
-                    depth = -float(self._signed_distance(np.array([oMg.translation]))[0])
-                    problems.append(f"link {link} inside the object ({1e3 * depth:.2f} mm deep)")
-                    deepest, clearance, closest = max(deepest, depth), -depth, link
-                    continue
+            if hit:
+                distance = -self._depth(k, oMg)
+            elif self._inside(oMg.translation):  # wholly inside: as deep as its origin at least
+                distance = float(self._signed_distance(np.array([oMg.translation]))[0])
+            else:
                 distance = coal.distance(
                     g.geometry, placed, self.bvh, self.identity, request, coal.DistanceResult()
                 )
-                if distance < clearance:
-                    clearance, closest = float(distance), link
-                continue
-            depth = self._depth(k, oMg)
-            if -depth < clearance:
-                clearance, closest = -depth, link
-            deepest = max(deepest, depth)
-            if depth > self.tolerance_m:
-                problems.append(f"link {link} {1e3 * depth:.3f} mm inside the object")
+            if distance < clearance:
+                clearance, closest = float(distance), link
+            deepest = max(deepest, -distance)
+            if -distance > self.tolerance_m:
+                problems.append(f"link {link} {-1e3 * distance:.3f} mm inside the object")
+        # Links away from the object's box: their exact distance only where it could be the least.
+        for gap, k in sorted(far):
+            if gap >= clearance:
+                break
+            oMg = self.geometry_data.oMg[k]
+            distance = coal.distance(
+                self.geometry.geometryObjects[k].geometry,
+                coal.Transform3s(oMg.rotation, oMg.translation),
+                self.bvh, self.identity, request, coal.DistanceResult(),
+            )  # fmt: skip
+            if distance < clearance:
+                clearance, closest = float(distance), self.links[k]
         return deepest, clearance, closest, problems
 
     def _inside(self, point: FloatArray) -> bool:
-        return (
-            self.surface.shells_around(
-                np.asarray(point, dtype=np.float64), np.array([0.0, 0.0, 1.0])
-            )
-            > 0
-        )
+        """Whether ``point`` is inside the mesh: ray parity along three oblique rays, by majority.
+
+        A ray through an edge or a vertex of the mesh can miscount; three at once are unlikely.
+        """
+        p = np.asarray(point, dtype=np.float64)
+        votes = sum(self.surface.shells_around(p, d) > 0 for d in _RAY_DIRECTIONS)
+        return votes >= 2
 
     def _depth(self, k: int, oMg: pin.SE3) -> float:
         """How deep link ``k``'s shape crosses into the object [m] (module docstring, 3)."""
