@@ -188,3 +188,15 @@ def test_cli_unknown_object_and_bad_fingers_are_usage_errors(capsys) -> None:  #
     assert main(["plan", "can", "--fingers", "5"]) == 2
     err = capsys.readouterr().err
     assert "neither a mesh file" in err and "finger counts" in err
+
+
+def test_verifier_finds_links_wholly_inside_the_object(hand) -> None:  # type: ignore[no-untyped-def]
+    big = trimesh.creation.box(extents=(0.6, 0.6, 0.6))  # the hand fits inside: no triangle met
+    verifier = GraspVerifier(hand.description, np.asarray(big.vertices), np.asarray(big.faces))
+    q = hand.configuration()
+    wrist = {"xyz": q[:3].tolist(), "quat": q[3:7].tolist()}
+    verdict = verifier.check(wrist, hand.joint_values(q), [])
+    assert not verdict.ok
+    assert verdict.max_link_depth_m > 0.1 and verdict.clearance_m < -0.1
+    inside = {p.split()[1] for p in verdict.problems if p.endswith("inside the object")}
+    assert inside == set(verifier.links)  # every link (no contact: none exempt)
