@@ -204,6 +204,9 @@ class CandidateDraw:
         # side pinch), which the force-closure test then decides.
         opposition_deg = max(settings.opposition_deg, 2.0 * math.degrees(math.atan(mu)))
         self.opposition_cos = math.cos(math.radians(opposition_deg))
+        self.early_cos = math.cos(
+            math.radians(min(opposition_deg + 0.5 * settings.finger_fan_deg, 90.0))
+        )
         self.fan_cos = math.cos(math.radians(settings.finger_fan_deg))
         self.clearance_m = reach.fingertip_radius_m - settings.surface_tolerance_m
         self.friction_cos = math.cos(math.atan(mu))
@@ -216,6 +219,10 @@ class CandidateDraw:
         if opposite is None:
             return "no_opposite"
         count = len(fingers)
+        # Early: the thumb must roughly oppose the opposite point (exactly for two fingers, within
+        # the fingers' fan for more) before the costlier search of the neighbouring fingers.
+        if float(thumb[1] @ opposite[1]) > -(self.opposition_cos if count == 2 else self.early_cos):
+            return "opposition"
         if count == 2:
             contacts = [thumb, opposite]
         else:
@@ -342,10 +349,18 @@ def _shells(surface: SurfaceMesh) -> int:
 
 
 def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-    u = np.cross(axis, helper)
-    u /= np.linalg.norm(u)
-    return u, np.cross(axis, u)
+    """Two unit vectors orthogonal to the unit ``axis`` and to each other.
+
+    Plain floats: a draw makes many, and ``np.cross`` on three numbers costs more than the
+    arithmetic.
+    """
+    x, y, z = float(axis[0]), float(axis[1]), float(axis[2])
+    # u = axis x helper, helper e_x (or e_y when the axis is near x).
+    u = (0.0, z, -y) if abs(x) < 0.9 else (-z, 0.0, x)
+    scale = 1.0 / math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    ux, uy, uz = u[0] * scale, u[1] * scale, u[2] * scale
+    v = (y * uz - z * uy, z * ux - x * uz, x * uy - y * ux)
+    return np.array((ux, uy, uz)), np.array(v)
 
 
 def _tangent(rng: np.random.Generator, normal: FloatArray) -> FloatArray:

@@ -15,7 +15,7 @@ from the values a results file holds (wrist ``xyz``/``quat``, every joint by nam
    crosses the mesh is measured by points spread over its surface (at most 1 mm apart), their
    depth below the surface, and by the mesh vertices inside the shape, their depth below its
    faces; a link that crosses no triangle is inside the object only if one of its points is
-   (ray parity);
+   (trimesh's ray test of the mesh, ``Trimesh.contains``);
 4. no two links in collision, over the pairs the URDF does not join (links of one joint or of a
    parent and child joint, and the description's excluded pairs, touch by design).
 """
@@ -50,12 +50,6 @@ SURFACE_TOLERANCE_M = 1e-5
 """Largest distance of a contact point from the mesh surface [m]."""
 _SAMPLE_SPACING_M = 1e-3
 """Largest spacing of the points spread over a link's collision shape [m]."""
-_RAY_DIRECTIONS = tuple(
-    v / np.linalg.norm(v)
-    for v in (np.array([0.2113, 0.5774, 0.7887]), np.array([-0.6532, 0.2706, 0.7071]),
-              np.array([0.3827, -0.9239, 0.0123]))
-)  # fmt: skip
-"""Directions of the inside tests' rays: oblique, so that they rarely meet an edge or vertex."""
 _LIMIT_TOL = 1e-9
 _MIMIC_TOL = 1e-6
 
@@ -277,13 +271,8 @@ class GraspVerifier:
         return deepest, clearance, closest, problems
 
     def _inside(self, point: FloatArray) -> bool:
-        """Whether ``point`` is inside the mesh: ray parity along three oblique rays, by majority.
-
-        A ray through an edge or a vertex of the mesh can miscount; three at once are unlikely.
-        """
-        p = np.asarray(point, dtype=np.float64)
-        votes = sum(self.surface.shells_around(p, d) > 0 for d in _RAY_DIRECTIONS)
-        return votes >= 2
+        """Whether ``point`` is inside the mesh (trimesh's ray test, retrying ambiguous rays)."""
+        return bool(self.trimesh.contains(np.asarray(point, dtype=np.float64)[None])[0])
 
     def _depth(self, k: int, oMg: pin.SE3) -> float:
         """How deep link ``k``'s shape crosses into the object [m] (module docstring, 3)."""
