@@ -200,3 +200,32 @@ def test_verifier_finds_links_wholly_inside_the_object(hand) -> None:  # type: i
     assert verdict.max_link_depth_m > 0.1 and verdict.clearance_m < -0.1
     inside = {p.split()[1] for p in verdict.problems if p.endswith("inside the object")}
     assert inside == set(verifier.links)  # every link (no contact: none exempt)
+
+
+def test_allegro_plans_with_its_own_reach(allegro, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    from sahgrasp.planner.candidates import hand_reach
+
+    reach = hand_reach(allegro)
+    assert reach.fingertip_radius_m == allegro.description.fingertip_radius_m
+    plan = plan_grasps(allegro, load_mesh(box_file), PlanSettings(fingers=(3,), candidates=4))
+    assert plan.hand == "allegro" and plan.grasps
+    assert all(g.fingers[0] == "thumb" for g in plan.grasps)
+
+
+def test_time_limit_caps_the_plan(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    plan = plan_grasps(hand, load_mesh(box_file), PlanSettings(candidates=50, time_limit_s=1e-6))
+    assert plan.summary.time_limited and plan.summary.candidates == 0 and not plan.grasps
+
+
+def test_an_extra_check_drops_and_reranks(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    settings = PlanSettings(candidates=8, grasps=4, seed=4)
+    plain = plan_grasps(hand, load_mesh(box_file), settings)
+
+    def prefer_low_epsilon(grasp):  # type: ignore[no-untyped-def]
+        return None if len(grasp.fingers) == 2 else -grasp.quality["epsilon_l1"]
+
+    checked = plan_grasps(hand, load_mesh(box_file), settings, check=prefer_low_epsilon)
+    assert checked.grasps and all(len(g.fingers) > 2 for g in checked.grasps)
+    scores = [g.quality["check"] for g in checked.grasps]
+    assert scores == sorted(scores, reverse=True)
+    assert len(plain.grasps) >= len(checked.grasps)
