@@ -61,7 +61,14 @@ def test_verifier_refuses_a_grasp_moved_into_the_object(hand, box_file: Path) ->
     assert not verdict.ok
     joints = dict(entry["joints"])
     joints["index_j1"] += 5.0
-    assert not verifier.check(entry["wrist"], joints, entry["contacts"]).ok
+    assert any(
+        "outside" in p for p in verifier.check(entry["wrist"], joints, entry["contacts"]).problems
+    )
+    uncoupled = {**entry["joints"], "ring_j4": entry["joints"]["ring_j3"] + 0.05}  # mimic of j3
+    assert any("mimic" in p for p in verifier.check(entry["wrist"], uncoupled, []).problems)
+    off = [{**c, "point": (np.array(c["point"]) + 0.003 * np.array(c["normal"])).tolist()}
+           for c in entry["contacts"]]  # fmt: skip
+    assert not verifier.check(entry["wrist"], entry["joints"], off).ok  # 3 mm off: d_min
 
 
 def test_same_seed_same_plan(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
