@@ -80,7 +80,8 @@ class PlannedGrasp:
         q: The hand configuration (wrist + independent coordinates, :class:`sahgrasp.Hand`).
         joints: Every URDF joint's value [rad], mimic joints included.
         quality: ``force_closure``, ``epsilon_l1``, ``epsilon_linf`` (returned grasps; None
-            before), and the manipulability indices by name; ``check`` when an extra check
+            before), and the manipulability indices by name (every verified grasp when ranked by
+            one, else the grasps considered for the result); ``check`` when an extra check
             scored it.
         object_clearance_m: Smallest signed distance of a non-contact link to the mesh [m].
         closest_link: That link.
@@ -328,7 +329,7 @@ def plan_grasps(
         if first is None and grasp.force_closure:
             first = grasp.time_s
     solved = len(verified) + failed.total()
-    chosen = _select(verified, settings, check, frame)
+    chosen = _select(hand, verified, settings, check, frame)
     summary = PlanSummary(
         grasps=len(chosen),
         force_closure=sum(g.force_closure for g in chosen),
@@ -388,7 +389,8 @@ def _solve(
         "epsilon_l1": candidate.epsilon_l1,
         "epsilon_linf": None,
     }
-    quality.update(manipulability_indices(hand, result.q, candidate.fingers, frame.centroid_m))
+    if settings.rank != "epsilon":  # ranked by an index: every verified grasp needs it
+        quality.update(manipulability_indices(hand, result.q, candidate.fingers, frame.centroid_m))
     return PlannedGrasp(
         fingers=candidate.fingers,
         contacts=contacts,
@@ -423,6 +425,7 @@ def _same(a: PlannedGrasp, b: PlannedGrasp, settings: PlanSettings) -> bool:
 
 
 def _select(
+    hand: Hand,
     verified: list[PlannedGrasp],
     settings: PlanSettings,
     check: GraspCheck | None,
@@ -436,6 +439,10 @@ def _select(
             break
         if any(_same(grasp, c, settings) for _, _, c in chosen):
             continue
+        if INDICES[0] not in grasp.quality:  # ranked by epsilon: the indices of those kept only
+            grasp.quality.update(
+                manipulability_indices(hand, grasp.q, grasp.fingers, frame.centroid_m)
+            )
         score = 0.0
         if check is not None:
             value = check(grasp)
