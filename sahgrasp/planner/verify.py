@@ -3,7 +3,8 @@
 Nothing of the planner is reused but the hand description's file names: the hand is built again
 from its URDF with Pinocchio (a free-flyer wrist, every URDF joint its own coordinate, no virtual
 contact joints) and coal (the URDF's collision shapes); the object is the triangle mesh itself (a
-``coal.BVHModel`` and exact point queries), not the convex pieces the IK avoids. The grasp is set
+``coal.BVHModel``: distances by GJK on its triangles; inside tests per closed shell by trimesh's
+ray test), not the convex pieces the IK avoids. The grasp is set
 from the values a results file holds (wrist ``xyz``/``quat``, every joint by name) and must pass:
 
 1. every joint within its URDF limits (to 1e-9 rad), every mimic joint equal to
@@ -15,7 +16,7 @@ from the values a results file holds (wrist ``xyz``/``quat``, every joint by nam
    crosses the mesh is measured by points spread over its surface (at most 1 mm apart), their
    depth below the surface, and by the mesh vertices inside the shape, their depth below its
    faces; a link that crosses no triangle is inside the object only if one of its points is
-   (trimesh's ray test of the mesh, ``Trimesh.contains``);
+   (inside one of the mesh's shells, ``Trimesh.contains``);
 4. no two links in collision, over the pairs the URDF does not join (links of one joint or of a
    parent and child joint, and the description's excluded pairs, touch by design).
 """
