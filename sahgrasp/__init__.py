@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     )
     from sahgrasp.hand import Hand, HandDescription, load_hand
     from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
+    from sahgrasp.planner import GraspPlan, PlanSettings, plan_grasps
 
 _EXPORTS = {
     "sahgrasp.contacts": ("ContactTarget", "GraspTarget", "load_targets", "save_targets"),
@@ -34,12 +35,14 @@ _EXPORTS = {
     ),
     "sahgrasp.hand": ("Hand", "HandDescription", "load_hand"),
     "sahgrasp.ik": ("IKResult", "IKSettings", "solve_ik", "solve_many"),
+    "sahgrasp.planner": ("GraspPlan", "PlanSettings", "plan_grasps"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "AtlasError",
     "ContactTarget",
+    "GraspPlan",
     "GraspTarget",
     "Hand",
     "HandDescription",
@@ -48,10 +51,12 @@ __all__ = [
     "IKSettings",
     "InvalidConfigurationError",
     "InvalidTargetError",
+    "PlanSettings",
     "SahGraspError",
     "SequenceFileError",
     "load_hand",
     "load_targets",
+    "plan_grasps",
     "save_targets",
     "solve_ik",
     "solve_many",

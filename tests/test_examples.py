@@ -59,7 +59,7 @@ def run_main(name: str, args: list[str], tmp_path: Path) -> set[str]:
 
 def test_every_script_is_tested_and_listed_in_the_readme() -> None:
     scripts = {p.stem for p in EXAMPLES.glob("*.py")}
-    mesh = {"grasp_mesh"}  # run by tests/test_meshes.py
+    mesh = {"grasp_mesh", "plan_mug"}  # run by tests/test_meshes.py and tests/test_planner.py
     assert scripts == {"grasp_paper_object"} | {s for s, _ in SMALL_ATLAS.values()} | mesh
     readme = (EXAMPLES / "README.md").read_text(encoding="utf-8")
     for name in scripts:

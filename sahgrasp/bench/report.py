@@ -154,6 +154,12 @@ def _check_table(doc: Document) -> str:
     return format_table(headers, rows)
 
 
+def _plan_table(doc: Document) -> str:
+    from sahgrasp.bench.plan import format_table as plan_table
+
+    return plan_table(doc)
+
+
 _TABLES: dict[str, Callable[[Document], str]] = {
     "check": _check_table,
     "ik": _ik_table,
@@ -162,6 +168,7 @@ _TABLES: dict[str, Callable[[Document], str]] = {
     "sequence": _sequence_table,
     "grasps": _grasps_table,
     "solve": _solve_table,
+    "plan": _plan_table,
 }
 
 

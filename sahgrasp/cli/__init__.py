@@ -27,7 +27,18 @@ from sahgrasp.errors import SahGraspError
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_INPUT", "EXIT_INTERRUPTED", "main"]
 
-COMMANDS = ("info", "solve", "check", "bench", "atlas", "sequence", "learn", "demo", "screenshot")
+COMMANDS = (
+    "info",
+    "solve",
+    "plan",
+    "check",
+    "bench",
+    "atlas",
+    "sequence",
+    "learn",
+    "demo",
+    "screenshot",
+)
 
 EXIT_INPUT = 2
 """Usage or input error."""

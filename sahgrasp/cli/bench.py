@@ -166,11 +166,43 @@ def _check(benches: Any) -> None:
     add_json_argument(check, "the results")
 
 
+def _plan(benches: Any) -> None:
+    plan = add_command(
+        benches, "plan", "the grasp planner on catalog objects, shipped and test meshes"
+    )
+    plan.add_argument("--hand", default="sah", help=HAND_HELP)
+    plan.add_argument(
+        "--objects", nargs="*", default=None, metavar="NAME", help="catalog objects (all)"
+    )
+    plan.add_argument(
+        "--mesh", dest="meshes", action="append", default=[], metavar="PATH",
+        help="a mesh file (metres) instead of the shipped ones; repeat for more",
+    )  # fmt: skip
+    plan.add_argument("--folder", default=None, help="a folder of mesh files (metres) to add")
+    plan.add_argument(
+        "--no-test-meshes", dest="test_meshes", action="store_false",
+        help="leave out the generated test meshes",
+    )  # fmt: skip
+    plan.add_argument("--candidates", type=positive_int, default=60, help="candidates per object")
+    plan.add_argument("--grasps", type=positive_int, default=10, help="grasps returned per object")
+    plan.add_argument("--seed", type=nonnegative_int, default=0, help="plan seed (>= 0)")
+    plan.add_argument(
+        "--workers", type=positive_int, nargs="*", default=[1, 2],
+        help="worker counts of the folder throughput run (none: skip it)",
+    )  # fmt: skip
+    plan.add_argument(
+        "--no-atlas", dest="atlas", action="store_false",
+        help="no comparison with the atlas optimum on the can and the bottle",
+    )  # fmt: skip
+    _add_quiet(plan)
+    add_json_argument(plan, "the results")
+
+
 def add_parser(sub: Any) -> None:
     """Register the subcommand and its benchmarks."""
     p = add_command(sub, "bench", "run a benchmark, print its summary table, write its JSON")
     benches = p.add_subparsers(dest="bench", required=True, metavar="BENCHMARK", help="benchmark")
-    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve, _check):
+    for add in (_kinematics, _ik, _atlas, _sequence, _grasps, _solve, _check, _plan):
         add(benches)
     p.set_defaults(run=run)
 
@@ -182,7 +214,7 @@ def run(args: argparse.Namespace) -> int:
         options.pop("objects", None)
     check_outputs(
         [args.json, options.get("plot"), options.get("targets_out")],
-        inputs=[options.get("targets"), *options.get("meshes", ())],
+        inputs=[options.get("targets"), *options.get("meshes", ()), options.get("folder")],
     )
     check_json_inputs(options.get("hand"))
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")

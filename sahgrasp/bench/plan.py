@@ -1,0 +1,364 @@
+"""``sahgrasp bench plan``: the planner on the catalog objects, the shipped meshes and test meshes.
+
+Per object: :func:`sahgrasp.plan_grasps` with the given settings, timed from before the object is
+loaded (the mesh read, repaired and its collision pieces built: all included); the seconds to the
+first verified force-closure grasp, verified grasps per second, the share of force-closure grasps,
+the median and best L1 epsilon, and the verified grasps by finger count. Every returned grasp is
+then checked once more by a fresh :class:`~sahgrasp.planner.verify.GraspVerifier` from its JSON
+form (the count of failures must be 0). Then the machine's throughput: the folder of mesh objects
+planned by :func:`sahgrasp.planner.folder.plan_jobs` on 1 and on 2 worker processes (wall time
+from the first object submitted to the last document; the workers' start-up is not counted):
+verified force-closure grasps per second and the speed-up.
+
+The test meshes (:func:`write_test_meshes`) are trimesh primitives of graspable size (4-15 cm):
+boxes, a plate, a cube, cylinders, a sphere, a capsule, a cone, a torus, a tube, and a box written
+in millimetres (planned with ``scale = 1e-3``; left out of the folder run, whose files are in
+metres).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from statistics import median
+from typing import Any
+
+__all__ = ["TEST_MESHES", "format_table", "run", "write_test_meshes"]
+
+SHIPPED_MESHES = ("mug.stl", "bottle.obj")
+"""The meshes of ``examples/meshes``."""
+
+TEST_MESHES = (
+    "box_50x70x90.stl",
+    "plate_120x80x30.stl",
+    "cube_60.stl",
+    "cylinder_r35_h120.stl",
+    "rod_r20_h150.stl",
+    "sphere_r40.ply",
+    "capsule_r25_h80.stl",
+    "cone_r40_h100.obj",
+    "torus_R45_r15.obj",
+    "tube_r20_r35_h60.stl",
+    "box_mm_60x40x80.stl",
+)
+"""The test meshes :func:`write_test_meshes` writes (file names say their sizes in mm)."""
+
+_MM = "box_mm_60x40x80.stl"
+
+
+def write_test_meshes(folder: str | os.PathLike[str]) -> dict[str, float]:
+    """Write :data:`TEST_MESHES` into ``folder``; returns each file's scale to metres."""
+    import trimesh
+
+    root = Path(folder)
+    c = trimesh.creation
+    meshes = {
+        "box_50x70x90.stl": c.box(extents=(0.05, 0.07, 0.09)),
+        "plate_120x80x30.stl": c.box(extents=(0.12, 0.08, 0.03)),
+        "cube_60.stl": c.box(extents=(0.06, 0.06, 0.06)),
+        "cylinder_r35_h120.stl": c.cylinder(radius=0.035, height=0.12, sections=64),
+        "rod_r20_h150.stl": c.cylinder(radius=0.02, height=0.15, sections=48),
+        "sphere_r40.ply": c.icosphere(subdivisions=3, radius=0.04),
+        "capsule_r25_h80.stl": c.capsule(radius=0.025, height=0.08, count=[24, 24]),
+        "cone_r40_h100.obj": c.cone(radius=0.04, height=0.1, sections=64),
+        "torus_R45_r15.obj": c.torus(
+            major_radius=0.045, minor_radius=0.015, major_sections=64, minor_sections=24
+        ),
+        "tube_r20_r35_h60.stl": c.annulus(r_min=0.02, r_max=0.035, height=0.06, sections=64),
+        _MM: c.box(extents=(60.0, 40.0, 80.0)),
+    }
+    for name, mesh in meshes.items():
+        mesh.export(root / name)
+    return {name: (1e-3 if name == _MM else 1.0) for name in meshes}
+
+
+def _object_row(
+    hand: Any, name: str, load: Any, settings: Any, object_spec: dict[str, Any]
+) -> dict[str, Any]:
+    from sahgrasp.planner import plan_grasps
+    from sahgrasp.planner.verify import GraspVerifier
+
+    start, cpu = time.perf_counter(), time.process_time()
+    obj = load()
+    plan = plan_grasps(hand, obj, settings, object_spec=object_spec, started=start)
+    cpu_s = time.process_time() - cpu
+    s = plan.summary
+    doc = plan.to_dict()
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    check = GraspVerifier(
+        hand.description, mesh.vertices_m, mesh.faces, settings.d_min_m, settings.link_tolerance_m
+    )
+    failing = sum(not check.check(g["wrist"], g["joints"], g["contacts"]).ok for g in doc["grasps"])
+    epsilons = [g["quality"]["epsilon_l1"] for g in doc["grasps"] if g["quality"]["force_closure"]]
+    return {
+        "object": name,
+        "faces": len(mesh.faces),
+        "time_to_first_s": s.time_to_first_s,
+        "time_s": s.time_s,
+        "candidates": s.candidates,
+        "verified": s.verified,
+        "verified_per_s": s.verified / s.time_s,
+        "cpu_s": cpu_s,
+        "force_closure_per_cpu_s": s.verified_force_closure / cpu_s,
+        "verified_force_closure": s.verified_force_closure,
+        "force_closure_share": s.verified_force_closure / s.verified if s.verified else 0.0,
+        "returned": s.grasps,
+        "returned_failing_recheck": failing,
+        "median_epsilon": float(median(epsilons)) if epsilons else 0.0,
+        "best_epsilon": max(epsilons, default=0.0),
+        "by_fingers": s.by_fingers,
+        "failed_verification": s.failed_verification,
+    }
+
+
+ATLAS_OBJECTS = ("can", "bottle")
+"""The objects of the atlas paper, whose atlas optimum the planner's best grasp is compared with."""
+
+
+def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
+    """The planner's best three-finger grasp of ``name`` vs the atlas optimum, per index.
+
+    The atlas (``sahgrasp atlas NAME`` at its default radius) optimises over three-finger grasps
+    (thumb, index, middle) with the object's twist taken at the object frame's origin; the
+    planner's verified three-finger grasps are scored the same way (the indices at the object
+    origin, not the centroid the plan reports) and the best of them, per index, is compared.
+    """
+    import dataclasses
+
+    from sahgrasp.experiments.setups import run_experiment
+    from sahgrasp.objects import load_object
+    from sahgrasp.planner import plan_grasps
+    from sahgrasp.planner.plan import manipulability_indices
+    from sahgrasp.quality import INDICES
+
+    obj = load_object(name)
+    three = dataclasses.replace(settings, fingers=(3,), grasps=settings.candidates)
+    plan = plan_grasps(hand, obj, three)
+    origin = obj.T_world_object[:3, 3]
+    scored = [manipulability_indices(hand, g.q, g.fingers, origin) for g in plan.grasps]
+    out: dict[str, Any] = {"object": name, "planner_grasps": len(scored), "indices": {}}
+    for index in INDICES:
+        result = run_experiment(name, index=index)
+        atlas_best = float(result.values[result.best])
+        best = max((s[index] for s in scored), default=None)
+        out["indices"][index] = {
+            "atlas_optimum": atlas_best,
+            "atlas_charts": int(result.atlas.n_charts),
+            "planner_best": best,
+            "ratio": None if best is None else best / atlas_best,
+        }
+    return out
+
+
+def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict[str, Any]:
+    import resource
+
+    from sahgrasp.parallel import process_pool
+    from sahgrasp.planner.folder import plan_jobs
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    with process_pool(workers) as pool:
+        start = time.perf_counter()
+        docs = list(plan_jobs(hand.description, jobs, settings, pool, 2 * workers))
+        seconds = time.perf_counter() - start
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)  # the workers, ended and reaped
+    cpu_s = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    closure = sum(d["summary"]["verified_force_closure"] for d in docs if "summary" in d)
+    verified = sum(d["summary"]["verified"] for d in docs if "summary" in d)
+    return {
+        "workers": workers,
+        "objects": len(docs),
+        "seconds": seconds,
+        "verified": verified,
+        "verified_force_closure": closure,
+        "force_closure_per_s": closure / seconds,
+        "verified_per_s": verified / seconds,
+        "workers_cpu_s": cpu_s,
+        "force_closure_per_cpu_s": closure / cpu_s if cpu_s > 0 else None,
+    }
+
+
+def run(
+    hand: str = "sah",
+    objects: Sequence[str] | None = None,
+    meshes: Sequence[str] = (),
+    folder: str | None = None,
+    test_meshes: bool = True,
+    candidates: int = 60,
+    grasps: int = 10,
+    seed: int = 0,
+    workers: Sequence[int] = (1, 2),
+    atlas: bool = True,
+    quiet: bool = False,
+) -> dict[str, Any]:
+    """Run the benchmark; return its JSON document (module docstring).
+
+    Args:
+        hand: Hand name or description file.
+        objects: Catalog objects (default: all).
+        meshes: More mesh files (default: the shipped ones, from ``examples/meshes``).
+        folder: A folder of mesh files (metres) to add.
+        test_meshes: Add the generated test meshes.
+        candidates: The planner's candidate budget per object.
+        grasps: Grasps returned per object.
+        seed: The plan seed.
+        workers: Worker counts of the folder run (empty: no folder run).
+        atlas: Compare with the atlas optimum on the can and the bottle (when among the objects).
+        quiet: No progress bar.
+    """
+    from tqdm import tqdm
+
+    from sahgrasp.hand import load_hand
+    from sahgrasp.objects import OBJECT_NAMES, load_mesh, load_object
+    from sahgrasp.planner import PlanSettings
+    from sahgrasp.planner.folder import ObjectJob, object_digest
+
+    the_hand = load_hand(hand)
+    settings = PlanSettings(candidates=candidates, grasps=grasps, seed=seed)
+    names = list(OBJECT_NAMES if objects is None else objects)
+    shipped = Path(__file__).resolve().parents[2] / "examples" / "meshes"
+    files: dict[str, float] = {}
+    if not meshes:
+        files.update({str(shipped / m): 1.0 for m in SHIPPED_MESHES if (shipped / m).is_file()})
+    files.update({str(Path(m).resolve()): 1.0 for m in meshes})
+    if folder is not None:
+        from sahgrasp.objects.mesh_file import MESH_SUFFIXES
+
+        files.update(
+            {
+                str(p): 1.0
+                for p in sorted(Path(folder).iterdir())
+                if p.suffix.lower() in MESH_SUFFIXES
+            }
+        )
+    with tempfile.TemporaryDirectory(prefix="sahgrasp-bench-plan-") as tmp:
+        if test_meshes:
+            files.update({str(Path(tmp) / n): s for n, s in write_test_meshes(tmp).items()})
+        rows = []
+        total = len(names) + len(files)
+        with tqdm(total=total, unit="object", disable=True if quiet else None) as bar:
+            for name in names:
+                rows.append(
+                    _object_row(
+                        the_hand, name, lambda n=name: load_object(n), settings, {"name": name}
+                    )
+                )
+                bar.update()
+            for path, scale in files.items():
+                spec = {"mesh": path, **({"scale": scale} if scale != 1.0 else {})}
+                rows.append(
+                    _object_row(
+                        the_hand,
+                        Path(path).name,
+                        lambda p=path, s=scale: load_mesh(p, scale=s),
+                        settings,
+                        spec,
+                    )
+                )
+                bar.update()
+        jobs = [
+            ObjectJob(p, 1.0, object_digest(p, settings, 1.0, the_hand.description.name))
+            for p, s in files.items()
+            if s == 1.0
+        ]
+        runs = [_folder_run(the_hand, jobs, settings, w) for w in workers] if jobs else []
+    comparison = [
+        atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS if atlas and n in names
+    ]
+    firsts = [r["time_to_first_s"] for r in rows]
+    reached = [t for t in firsts if t is not None]
+    speedup = None
+    by_workers = {r["workers"]: r for r in runs}
+    if 1 in by_workers and 2 in by_workers:
+        speedup = by_workers[2]["force_closure_per_s"] / by_workers[1]["force_closure_per_s"]
+    return {
+        "benchmark": "plan",
+        "hand": the_hand.description.name,
+        "settings": settings.to_dict(),
+        "objects": rows,
+        "summary": {
+            "objects": len(rows),
+            "with_force_closure_grasp": len(reached),
+            "share_with_force_closure_grasp": len(reached) / len(rows) if rows else 0.0,
+            "median_time_to_first_s": float(median(reached)) if reached else None,
+            "returned_failing_recheck": sum(r["returned_failing_recheck"] for r in rows),
+            "returned": sum(r["returned"] for r in rows),
+        },
+        "folder_runs": runs,
+        "atlas_comparison": comparison,
+        "speedup_2_workers": speedup,
+        "load_average": list(os.getloadavg()),
+    }
+
+
+def format_table(doc: dict[str, Any]) -> str:
+    """The benchmark's summary table."""
+    from sahgrasp.tables import format_table as table
+
+    rows = []
+    for r in doc["objects"]:
+        f = r["by_fingers"]
+        first = r["time_to_first_s"]
+        rows.append(
+            (
+                r["object"],
+                r["faces"],
+                "-" if first is None else round(first, 3),
+                round(r["verified_per_s"], 1),
+                round(r["force_closure_per_cpu_s"], 1),
+                round(100 * r["force_closure_share"]),
+                round(r["median_epsilon"], 4),
+                round(r["best_epsilon"], 4),
+                f"{f.get('2', 0)}/{f.get('3', 0)}/{f.get('4', 0)}",
+                r["returned_failing_recheck"],
+            )
+        )
+    headers = (
+        "object",
+        "faces",
+        "first FC [s]",
+        "verified/s",
+        "FC/CPU s",
+        "FC [%]",
+        "median eps",
+        "best eps",
+        "2/3/4 fingers",
+        "re-check fails",
+    )
+    s = doc["summary"]
+    first = s["median_time_to_first_s"]
+    lines = [
+        f"bench plan: {doc['hand']}, {s['objects']} objects, {doc['settings']['candidates']} "
+        f"candidates each, seed {doc['settings']['seed']}",
+        table(headers, rows),
+        f"objects with a verified force-closure grasp: {s['with_force_closure_grasp']}/"
+        f"{s['objects']} ({100 * s['share_with_force_closure_grasp']:.0f}%); median time to "
+        f"it: {'-' if first is None else f'{first:.3f} s'}; returned grasps failing the "
+        f"re-check: {s['returned_failing_recheck']}/{s['returned']}",
+    ]
+    for r in doc["folder_runs"]:
+        lines.append(
+            f"folder, {r['workers']} worker(s): {r['objects']} objects in {r['seconds']:.1f} s, "
+            f"{r['force_closure_per_s']:.1f} verified force-closure grasps/s "
+            f"({r['verified_per_s']:.1f} verified grasps/s); workers' CPU "
+            f"{r['workers_cpu_s']:.1f} s (start-up included), "
+            f"{r['force_closure_per_cpu_s'] or 0.0:.1f} force-closure grasps per CPU second"
+        )
+    for c in doc.get("atlas_comparison", []):
+        parts = [
+            f"{i} {v['planner_best']:.4g} vs {v['atlas_optimum']:.4g}"
+            if v["planner_best"] is not None
+            else f"{i} - vs {v['atlas_optimum']:.4g}"
+            for i, v in c["indices"].items()
+        ]
+        lines.append(
+            f"{c['object']}, best 3-finger grasp, planner vs atlas optimum: " + "; ".join(parts)
+        )
+    if doc["speedup_2_workers"] is not None:
+        lines.append(f"1 -> 2 workers: {doc['speedup_2_workers']:.2f}x")
+    load = doc["load_average"]
+    lines.append(f"load average at the end: {load[0]:.2f}, {load[1]:.2f}, {load[2]:.2f}")
+    return "\n".join(lines)

@@ -1,0 +1,352 @@
+"""``sahgrasp plan OBJECT``: ranked, verified grasps of a mesh, a catalog object or a folder."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    check_json_inputs,
+    check_outputs,
+    emit_json,
+    human_stream,
+    nonnegative_int,
+    positive_float,
+    positive_int,
+    printable,
+)
+from sahgrasp.cli.solve import resume_hint
+
+__all__ = ["add_parser", "run"]
+
+_STARTED = time.perf_counter()
+"""The command's start (this module is imported as the parser is built): times count from it."""
+
+OBJECT_HELP = (
+    "a mesh file (STL, OBJ, PLY), a catalog object name (see 'sahgrasp info'), or a folder of "
+    "mesh files (one JSON Lines document per object)"
+)
+
+
+def _fingers(text: str) -> tuple[int, ...]:
+    try:
+        counts = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected finger counts like 2,3,4, got {text!r}"
+        ) from None
+    if not counts or any(c not in (2, 3, 4) for c in counts) or len(set(counts)) != len(counts):
+        raise argparse.ArgumentTypeError(
+            f"finger counts must be distinct values of 2, 3, 4: {text!r}"
+        )
+    return counts
+
+
+def add_parser(sub: Any) -> None:
+    """Register the subcommand."""
+    p = add_command(
+        sub,
+        "plan",
+        "ranked, verified grasps of an object (a mesh file, a catalog object, a folder)",
+    )
+    p.add_argument("object", help=OBJECT_HELP)
+    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument(
+        "--fingers",
+        type=_fingers,
+        default=(3, 4, 2),
+        help="finger counts to plan: 2 thumb+index, 3 +middle, 4 +ring",
+    )
+    p.add_argument("--grasps", type=positive_int, default=10, help="distinct grasps to return")
+    p.add_argument(
+        "--candidates",
+        type=positive_int,
+        default=60,
+        help="contact sets solved per object: the deterministic budget",
+    )
+    p.add_argument(
+        "--time-limit",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="cap on each object's planning time [s] (results then depend on speed)",
+    )
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
+    p.add_argument(
+        "--rank",
+        default="epsilon",
+        choices=("epsilon", "inverse_condition", "volume", "min_semiaxis"),
+        help="rank force-closure grasps by the L1 epsilon or a manipulability index",
+    )
+    p.add_argument("--mu", type=positive_float, default=0.5, help="Coulomb friction coefficient")
+    p.add_argument(
+        "--scale",
+        type=positive_float,
+        default=1.0,
+        help="factor from the mesh file's unit to metres (1e-3 for millimetres)",
+    )
+    p.add_argument(
+        "--xyz",
+        type=float,
+        nargs=3,
+        default=None,
+        metavar=("X", "Y", "Z"),
+        help="object position in the world [m] (default: the origin)",
+    )
+    p.add_argument(
+        "--quat",
+        type=float,
+        nargs=4,
+        default=None,
+        metavar=("X", "Y", "Z", "W"),
+        help="object orientation in the world, unit quaternion (default: identity)",
+    )
+    where = p.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers", type=positive_int, default=1, help="worker processes for a folder (>= 1)"
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="Dask scheduler for a folder, e.g. tcp://host:8786",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="folder: continue the JSON Lines output of a stopped run",
+    )
+    p.add_argument(
+        "--html",
+        default=None,
+        metavar="OUT",
+        help="write the top grasps side by side as one HTML scene (single object)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--json",
+        default=None,
+        metavar="OUT",
+        help="write the plan as JSON to OUT (a folder: JSON Lines, OUT.jsonl); "
+        "'-': JSON alone on stdout",
+    )
+    p.set_defaults(run=run, on_interrupt=resume_hint)
+
+
+def _settings(args: argparse.Namespace) -> Any:
+    from sahgrasp.planner import PlanSettings
+
+    return PlanSettings(
+        fingers=args.fingers,
+        grasps=args.grasps,
+        candidates=args.candidates,
+        seed=args.seed,
+        mu=args.mu,
+        rank=args.rank,
+        time_limit_s=args.time_limit,
+    )
+
+
+def _placement(args: argparse.Namespace) -> Any:
+    from sahgrasp.contacts import object_spec
+
+    data: dict[str, Any] = {"name": "can"}
+    if args.xyz is not None:
+        data["xyz"] = args.xyz
+    if args.quat is not None:
+        data["quat"] = args.quat
+    spec = object_spec(data, ".")
+    assert spec is not None
+    return spec
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``sahgrasp plan``; 0 when every object got a grasp, 1 otherwise."""
+    from sahgrasp.errors import InvalidSettingsError
+
+    folder = Path(args.object).is_dir()
+    check_outputs([args.json, args.html], inputs=[args.object, args.hand])
+    check_json_inputs(args.hand)
+    if folder:
+        from sahgrasp.stream import is_jsonl
+
+        if args.html:
+            raise InvalidSettingsError("--html shows one object's grasps; give a mesh file")
+        if args.json not in (None, "-") and not is_jsonl(args.json):
+            raise InvalidSettingsError("a folder gives JSON Lines: give --json OUT.jsonl or -")
+        return _run_folder(args)
+    if args.resume:
+        raise InvalidSettingsError("--resume continues a folder's JSON Lines output")
+    return _run_object(args)
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
+    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.objects import OBJECT_NAMES, load_mesh, load_object
+
+    spec = _placement(args)
+    path = Path(args.object)
+    if args.object in OBJECT_NAMES and not path.exists():
+        if args.scale != 1.0:
+            raise InvalidTargetError("--scale applies to mesh files, not catalog objects")
+        return load_object(args.object, spec.placement()), {
+            "name": args.object,
+            "xyz": list(spec.xyz),
+            "quat": list(spec.quat),
+        }
+    if not path.exists():
+        raise InvalidTargetError(
+            f"{args.object!r} is neither a mesh file, a folder, nor a catalog object "
+            f"({', '.join(OBJECT_NAMES)})"
+        )
+    obj = load_mesh(path, scale=args.scale, T_world_object=spec.placement())
+    data: dict[str, Any] = {
+        "mesh": str(path.resolve()),
+        "xyz": list(spec.xyz),
+        "quat": list(spec.quat),
+    }
+    if args.scale != 1.0:
+        data["scale"] = args.scale
+    return obj, data
+
+
+def _run_object(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    from sahgrasp.hand import load_hand
+    from sahgrasp.planner import plan_grasps
+
+    out = human_stream(args.json)
+    hand = load_hand(args.hand)
+    obj, spec = _load(args)
+    with _bar(args, settings.candidates, "candidate") as bar:
+        plan = plan_grasps(
+            hand, obj, settings, object_spec=spec, started=_STARTED, on_candidate=bar.update
+        )
+    for line in _lines(plan.to_dict()):
+        print(line, file=out)
+    if args.html:
+        from sahgrasp.viz.plan_view import write_plan_html
+
+        write_plan_html(hand, obj, plan, args.html)
+        print(f"wrote {args.html}", file=out)
+    if args.json:
+        emit_json(plan.to_dict(), args.json)
+    return 0 if plan.grasps else 1
+
+
+def _lines(doc: dict[str, Any]) -> list[str]:
+    s = doc["summary"]
+    name = doc["object"].get("name") or doc["object"].get("mesh")
+    lines = [
+        f"{printable(str(name))}: {s['grasps']} grasps ({s['force_closure']} force closure) "
+        f"of {s['verified']} verified from {s['candidates']} candidates in {s['time_s']:.2f} s; "
+        f"first force-closure grasp at "
+        f"{'-' if s['time_to_first_s'] is None else format(s['time_to_first_s'], '.2f') + ' s'}"
+    ]
+    for g in doc["grasps"]:
+        q = g["quality"]
+        lines.append(
+            f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} epsilon {q['epsilon_l1']:.4f}  "
+            f"force closure {'yes' if q['force_closure'] else 'no ':<3}  "
+            f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']})"
+        )
+    return lines
+
+
+def _run_folder(args: argparse.Namespace) -> int:
+    settings = _settings(args)
+    from sahgrasp.hand import load_hand
+    from sahgrasp.planner.folder import folder_jobs, plan_jobs
+    from sahgrasp.stream import ResultsWriter
+
+    out = human_stream(args.json)
+    hand = load_hand(args.hand)
+    jobs = folder_jobs(args.object, settings, args.scale, hand.description.name)
+    writer = None
+    done: set[str] = set()
+    failed = 0
+    if args.json not in (None, "-"):
+        header = _header(hand, settings, args)
+        writer = ResultsWriter(args.json, header, args.resume)
+        for entry in writer.finished():
+            done.add(str(entry.get("object_digest")))
+            failed += not entry.get("grasps")
+    todo = [j for j in jobs if j.digest not in done]
+    complete = False
+    try:
+        with _executor(args) as pool, _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar:
+            for doc in plan_jobs(hand.description, todo, settings, pool, 2 * max(args.workers, 1)):
+                bar.update()
+                failed += not doc.get("grasps")
+                if "error" in doc:
+                    print(
+                        f"{printable(doc['object']['mesh'])}: refused: {printable(doc['error'])}",
+                        file=sys.stderr,
+                    )
+                else:
+                    for line in _lines(doc)[:1]:
+                        print(line, file=out)
+                if writer is not None:
+                    writer.write([doc])
+                elif args.json == "-":
+                    import json
+
+                    sys.stdout.write(json.dumps(doc) + "\n")
+        complete = True
+    finally:
+        if writer is not None:
+            writer.close(complete)
+    print(f"{len(jobs) - failed}/{len(jobs)} objects with a grasp", file=out)
+    return 0 if failed == 0 else 1
+
+
+def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any]:
+    import hashlib
+    import json
+
+    from sahgrasp.stream import RESULTS_FORMAT
+
+    data = {
+        "hand": hand.description.name,
+        "hand_digest": hand.description.digest(),
+        "settings": {**settings.to_dict(), "scale": args.scale},
+        "sequence_digest": "plan",
+    }
+    digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()
+    return {
+        "format": RESULTS_FORMAT,
+        **data,
+        "targets": Path(args.object).name,
+        "settings_digest": digest,
+    }
+
+
+def _executor(args: argparse.Namespace) -> Any:
+    if args.scheduler is not None:
+        from sahgrasp.sequence.executors import open_executor
+
+        return open_executor(args.scheduler)
+    if args.workers <= 1:
+        return contextlib.nullcontext(None)
+    from sahgrasp.parallel import process_pool
+
+    return process_pool(args.workers)
+
+
+def _bar(args: argparse.Namespace, total: int, unit: str, done: int = 0) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(
+        total=total,
+        initial=done,
+        unit=unit,
+        file=sys.stderr,
+        disable=True if args.quiet else None,
+        dynamic_ncols=True,
+    )

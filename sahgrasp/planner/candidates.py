@@ -1,0 +1,375 @@
+"""Candidate contact sets of 2, 3 and 4 fingers on a mesh, with the cheap tests before the IK.
+
+One draw, from its own seed: a thumb contact uniform over the surface area; a ray into the object
+within a cone about the inward thumb normal leaves it at the opposite point ``o``, within the
+hand's span. Then, by the number of fingers:
+
+* 2 (thumb + index): the index at ``o``;
+* 3 (thumb, index, middle): index and middle at the surface points nearest to ``o +- s/2 d``,
+  ``d`` a random tangent at ``o`` and ``s`` a finger spacing;
+* 4 (thumb, index, middle, ring): the middle at ``o``, index and ring a spacing away on either
+  side (the sampler of ``sahgrasp bench grasps``).
+
+A set is kept when the fingers' normals agree (fan), the fingers are a spacing apart, the thumb
+opposes the fingers (its normal within twice the friction angle, ``2 atan(mu)``, of the opposite
+of the fingers' mean normal, at least 30 degrees), every contact is exposed (not inside another
+shell) and every fingertip sphere fits against the surface at its contact, and -- the test that
+needs no hand at all --
+when its contacts could hold the object: force closure of the contact set (a set without it
+never gives a force-closure grasp), or for two fingers the antipodal condition (the line between
+the contacts inside both friction cones; two hard-finger contacts cannot be in force closure,
+since nothing resists a torque about that line).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from numpy.typing import NDArray
+
+from sahgrasp.hand import Hand
+from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
+from sahgrasp.wrench import CONE_EDGES, epsilon, primitive_wrenches
+
+__all__ = [
+    "Candidate",
+    "CandidateDraw",
+    "ObjectFrame",
+    "derive_reach",
+    "finger_set",
+    "hand_reach",
+]
+
+FloatArray = NDArray[np.float64]
+Contact = tuple[FloatArray, FloatArray]
+
+_SPACING_ITERATIONS = 4
+_OFF_SURFACE_M = 1e-6
+_REACH_SAMPLES = 1000
+"""Random configurations whose fingertip distances bound a hand's span."""
+_FACING_COS = math.cos(math.radians(45.0))
+"""Thumb and finger pads within 45 degrees of facing each other count for the span."""
+
+
+@dataclass(frozen=True)
+class ObjectFrame:
+    """What the quality needs of an object: its centroid and its radius about it.
+
+    Attributes:
+        centroid_m: Centre of the enclosed volume, world frame [m].
+        radius_m: Largest distance from the centroid to the surface [m] (the torque scale).
+    """
+
+    centroid_m: FloatArray
+    radius_m: float
+
+    @classmethod
+    def of(cls, vertices_m: FloatArray, faces: NDArray[np.intp]) -> ObjectFrame:
+        """From a closed outward-wound mesh (world frame): volume centroid, radius about it."""
+        corners = vertices_m[faces]
+        # Tetrahedra from the origin to each face: signed volumes and their centroids.
+        volumes = np.einsum("ij,ij->i", corners[:, 0], np.cross(corners[:, 1], corners[:, 2]))
+        total = float(volumes.sum())
+        centroid = (volumes[:, None] * corners.sum(axis=1)).sum(axis=0) / (4.0 * total)
+        radius = float(np.linalg.norm(vertices_m - centroid, axis=1).max())
+        return cls(centroid, radius)
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A contact set that passed the tests before the IK.
+
+    Attributes:
+        fingers: Finger names, thumb first.
+        points_m: Contact points, world frame [m], (k, 3).
+        normals: Outward unit normals there, (k, 3).
+        seed: The seed of the draw that gave it (:meth:`CandidateDraw.draw` reproduces it).
+        epsilon_l1: The contact set's L1 epsilon (0: not force closure; always 0 for two
+            fingers).
+    """
+
+    fingers: tuple[str, ...]
+    points_m: FloatArray
+    normals: FloatArray
+    seed: int
+    epsilon_l1: float = 0.0
+
+
+def finger_set(hand: Hand, count: int) -> tuple[str, ...]:
+    """The fingers of a ``count``-finger grasp: the thumb, then the others in the hand's order.
+
+    Raises:
+        ValueError: The hand has fewer than ``count`` fingers.
+    """
+    names = list(hand.fingers)
+    if count > len(names) or count < 2:
+        raise ValueError(f"a {count}-finger grasp needs 2..{len(names)} fingers on this hand")
+    thumb = "thumb" if "thumb" in names else names[0]
+    others = [f for f in names if f != thumb]
+    return (thumb, *others[: count - 1])
+
+
+def hand_reach(hand: Hand) -> HandReach:
+    """A hand's reach for the draw (:func:`derive_reach`), computed once per hand model."""
+    digest = hand.description.digest()
+    if digest not in _REACH:
+        _REACH[digest] = derive_reach(hand)
+    return _REACH[digest]
+
+
+_REACH: dict[str, HandReach] = {}
+
+
+def derive_reach(hand: Hand) -> HandReach:
+    """A hand's spacing, span and fingertip radius, derived from its model.
+
+    Finger spacing: from 0.7 to 1.0 times the mean distance between the bases of neighbouring
+    non-thumb fingers (for the SAH, 28-40 mm, as measured with the IK). Span: up to the largest
+    thumb-to-finger contact distance (fingertip centres, less two radii) over random
+    configurations whose thumb and finger pads face each other within 45 degrees (a bound for
+    the draw: the IK decides).
+    """
+    model, data = hand.model, hand.model.createData()
+    pin.forwardKinematics(model, data, hand.configuration())
+    thumb = finger_set(hand, 2)[0]
+    bases = []
+    for finger in hand.fingers:
+        if finger == thumb:
+            continue
+        first = int(hand.finger_coordinates[finger][0])
+        joint = model.getJointId(hand.coordinate_names[first])
+        bases.append(np.array(data.oMi[joint].translation))
+    gaps = [float(np.linalg.norm(a - b)) for a, b in itertools.pairwise(bases)]
+    spacing = float(np.mean(gaps)) if gaps else 0.04
+    rng = np.random.default_rng(0)
+    specs = dict(zip(hand.fingers, hand.description.fingers, strict=True))
+    frames = {f: model.getFrameId(s.tip_link) for f, s in specs.items()}
+    span = 0.0
+    for _ in range(_REACH_SAMPLES):
+        pin.framesForwardKinematics(model, data, hand.random_configuration(rng, pin.SE3.Identity()))
+        tip = data.oMf[frames[thumb]]
+        pad = tip.rotation @ np.array(specs[thumb].pad_axis)
+        for f in hand.fingers:
+            if f == thumb:
+                continue
+            other = data.oMf[frames[f]]
+            gap = other.translation - tip.translation
+            facing = pad @ (other.rotation @ np.array(specs[f].pad_axis))
+            # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
+            if facing < -_FACING_COS and gap @ pad > 0.0:
+                span = max(span, float(np.linalg.norm(gap)))
+    span = span - 2.0 * hand.radius_m if span > 2.0 * hand.radius_m else 0.15
+    return HandReach(
+        finger_spacing_m=(0.7 * spacing, spacing),
+        span_m=(1e-3, span),
+        fingertip_radius_m=hand.radius_m,
+    )
+
+
+class CandidateDraw:
+    """Draws candidate contact sets on one surface (module docstring).
+
+    Args:
+        surface: The object's surface, world frame.
+        reach: The hand's spacing, span and fingertip radius.
+        frame: The object's centroid and radius (for the force-closure test).
+        mu: Coulomb friction coefficient of the force-closure test.
+        settings: Opposition and fit tolerances.
+        edges: Friction cone edges of the force-closure test.
+    """
+
+    def __init__(
+        self,
+        surface: SurfaceMesh,
+        reach: HandReach,
+        frame: ObjectFrame,
+        mu: float,
+        settings: SamplerSettings | None = None,
+        edges: int = CONE_EDGES,
+    ) -> None:
+        settings = settings or SamplerSettings()
+        self.edges = edges
+        self.single_shell = _shells(surface) == 1
+        self.surface = surface
+        self.reach = reach
+        self.frame = frame
+        self.mu = mu
+        self.cone_cos = math.cos(math.radians(settings.approach_cone_deg))
+        # Friction lets a thumb push up to atan(mu) off the line to the fingers, and the fingers
+        # too: opposition within twice the friction angle can still be force closure (a cone's
+        # side pinch), which the force-closure test then decides.
+        opposition_deg = max(settings.opposition_deg, 2.0 * math.degrees(math.atan(mu)))
+        self.opposition_cos = math.cos(math.radians(opposition_deg))
+        self.early_cos = math.cos(
+            math.radians(min(opposition_deg + 0.5 * settings.finger_fan_deg, 90.0))
+        )
+        self.fan_cos = math.cos(math.radians(settings.finger_fan_deg))
+        self.clearance_m = reach.fingertip_radius_m - settings.surface_tolerance_m
+        self.friction_cos = math.cos(math.atan(mu))
+
+    def draw(self, fingers: tuple[str, ...], seed: int) -> Candidate | str:
+        """One draw for ``fingers`` (thumb first) from ``seed``: a candidate or why not."""
+        rng = np.random.default_rng(seed)
+        thumb = self.surface.sample_point(rng)
+        opposite = self._opposite(rng, thumb)
+        if opposite is None:
+            return "no_opposite"
+        count = len(fingers)
+        # Early: the thumb must roughly oppose the opposite point (exactly for two fingers, within
+        # the fingers' fan for more) before the costlier search of the neighbouring fingers.
+        if float(thumb[1] @ opposite[1]) > -(self.opposition_cos if count == 2 else self.early_cos):
+            return "opposition"
+        if count == 2:
+            contacts = [thumb, opposite]
+        else:
+            direction = _tangent(rng, opposite[1])
+            spacing = float(rng.uniform(*self.reach.finger_spacing_m))
+            if count == 3:
+                steps = [(1.0, 0.5 * spacing), (-1.0, 0.5 * spacing)]
+            else:
+                steps = [(1.0, spacing), (-1.0, spacing)]
+            neighbours = []
+            for sign, step in steps:
+                found = self._neighbour(opposite[0], sign * direction, step, count == 3)
+                if found is None:
+                    return "spacing"
+                if found[1] @ opposite[1] < self.fan_cos:
+                    return "fan"
+                neighbours.append(found)
+            if count == 3:
+                if neighbours[0][1] @ neighbours[1][1] < self.fan_cos:
+                    return "fan"
+                contacts = [thumb, neighbours[0], neighbours[1]]
+            else:
+                contacts = [thumb, neighbours[0], opposite, neighbours[1]]
+                if np.linalg.norm(contacts[1][0] - contacts[3][0]) < self.reach.finger_spacing_m[0]:
+                    return "spacing"
+        for reason, check in (
+            ("opposition", self._opposed),
+            ("hidden", self._exposed),
+            ("fingertip_fit", self._fits),
+        ):
+            if not check(contacts):
+                return reason
+        points = np.array([p for p, _ in contacts])
+        normals = np.array([n for _, n in contacts])
+        if count == 2:
+            if not self._antipodal(contacts):
+                return "no_closure"
+            return Candidate(fingers, points, normals, seed, 0.0)
+        wrenches = primitive_wrenches(
+            points, normals, self.frame.centroid_m, self.frame.radius_m, self.mu, self.edges
+        )
+        # Screening: the joggled hull (within about 1e-10 of the exact epsilon, five times
+        # faster); the returned grasps get the exact value.
+        quality = epsilon(wrenches.reshape(-1, 6), exact=False)
+        if quality <= 0.0:
+            return "no_closure"
+        return Candidate(fingers, points, normals, seed, quality)
+
+    def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
+        point, normal = thumb
+        direction = _in_cone(rng, -normal, self.cone_cos)
+        distances, faces = self.surface.ray_hits(point, direction)
+        lo, hi = self.reach.span_m
+        exits = (self.surface.normals[faces] @ direction > 0.0) & (distances >= lo)
+        exits &= distances <= hi
+        if not exits.any():
+            return None
+        k = int(rng.choice(np.flatnonzero(exits)))
+        return point + distances[k] * direction, self.surface.normals[faces[k]]
+
+    def _neighbour(
+        self, start: FloatArray, direction: FloatArray, step_m: float, half: bool
+    ) -> Contact | None:
+        """The surface point nearest to ``start + step * direction``, at a chord of ``step_m``.
+
+        ``step`` is stretched while the surface curves away; the chord must be within the
+        spacing range (halved for ``half``).
+        """
+        lo, hi = self.reach.finger_spacing_m
+        if half:
+            lo, hi = 0.5 * lo, 0.5 * hi
+        step = step_m
+        for _ in range(_SPACING_ITERATIONS):
+            closest, face, _ = self.surface.closest(start + step * direction)
+            chord = float(np.linalg.norm(closest - start))
+            if lo <= chord <= hi:
+                return closest, self.surface.normals[face]
+            if chord < 1e-9:
+                return None
+            step *= step_m / chord
+        return None
+
+    def _opposed(self, contacts: list[Contact]) -> bool:
+        mean = np.sum([n for _, n in contacts[1:]], axis=0)
+        return bool(contacts[0][1] @ mean <= -self.opposition_cos * np.linalg.norm(mean))
+
+    def _exposed(self, contacts: list[Contact]) -> bool:
+        if self.single_shell:  # one closed shell: no surface point is inside another
+            return True
+        return all(self.surface.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
+
+    def _fits(self, contacts: list[Contact]) -> bool:
+        radius = self.reach.fingertip_radius_m
+        return all(self.surface.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
+
+    def _antipodal(self, contacts: list[Contact]) -> bool:
+        """Two contacts: the line between them inside both friction cones."""
+        (p1, n1), (p2, n2) = contacts
+        axis = p2 - p1
+        length = float(np.linalg.norm(axis))
+        if length < 1e-9:
+            return False
+        axis /= length
+        # Each contact pushes along -n: the line must lie within both friction cones.
+        return bool(-n1 @ axis >= self.friction_cos and n2 @ axis >= self.friction_cos)
+
+
+def _shells(surface: SurfaceMesh) -> int:
+    """Connected components of the surface's triangles (sharing a corner point)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    corners = surface.triangles.reshape(-1, 3)
+    _, vertex = np.unique(np.round(corners, 12), axis=0, return_inverse=True)
+    vertex = vertex.reshape(-1, 3)
+    face = np.repeat(np.arange(len(vertex)), 3)
+    n_faces, n_vertices = len(vertex), int(vertex.max()) + 1
+    # Faces and vertices as one bipartite graph: a face joins its three corners.
+    graph = coo_matrix(
+        (np.ones(face.size), (face, n_faces + vertex.ravel())),
+        shape=(n_faces + n_vertices, n_faces + n_vertices),
+    )
+    return int(connected_components(graph, directed=False)[0])
+
+
+def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Two unit vectors orthogonal to the unit ``axis`` and to each other.
+
+    Plain floats: a draw makes many, and ``np.cross`` on three numbers costs more than the
+    arithmetic.
+    """
+    x, y, z = float(axis[0]), float(axis[1]), float(axis[2])
+    # u = axis x helper, helper e_x (or e_y when the axis is near x).
+    u = (0.0, z, -y) if abs(x) < 0.9 else (-z, 0.0, x)
+    scale = 1.0 / math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+    ux, uy, uz = u[0] * scale, u[1] * scale, u[2] * scale
+    v = (y * uz - z * uy, z * ux - x * uz, x * uy - y * ux)
+    return np.array((ux, uy, uz)), np.array(v)
+
+
+def _tangent(rng: np.random.Generator, normal: FloatArray) -> FloatArray:
+    u, v = _basis(normal)
+    angle = rng.uniform(0.0, 2.0 * math.pi)
+    return math.cos(angle) * u + math.sin(angle) * v
+
+
+def _in_cone(rng: np.random.Generator, axis: FloatArray, cos_half_angle: float) -> FloatArray:
+    cos_t = rng.uniform(cos_half_angle, 1.0)
+    sin_t = math.sqrt(max(0.0, 1.0 - cos_t * cos_t))
+    return cos_t * axis + sin_t * _tangent(rng, axis)

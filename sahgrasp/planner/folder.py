@@ -1,0 +1,118 @@
+"""Plans for many objects: a folder of meshes, one JSON Lines document per object, resumable.
+
+Each object is planned by one worker (:func:`plan_file`), from the hand's description and the
+mesh file's path: nothing unpicklable crosses to the workers, and the object's draws depend only
+on the plan's seed and the object's name, so the documents are the same on any number of workers
+(or a Dask cluster) and in any order of completion; they are written in the folder's order as
+they complete. Each document carries ``object_digest``, the SHA-256 of the mesh file's bytes and
+of the settings: ``--resume`` keeps the documents of a stopped run whose digest still matches and
+plans only the other objects.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor, Future
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from sahgrasp.hand import HandDescription
+from sahgrasp.objects.mesh_file import MESH_SUFFIXES, MeshFileError
+from sahgrasp.planner.settings import PlanningError, PlanSettings
+
+__all__ = ["ObjectJob", "folder_jobs", "object_digest", "plan_file", "plan_jobs"]
+
+
+@dataclass(frozen=True)
+class ObjectJob:
+    """One object of a folder run.
+
+    Attributes:
+        path: The mesh file.
+        scale: Factor from the file's unit to metres.
+        digest: :func:`object_digest` of the file and the settings.
+    """
+
+    path: str
+    scale: float
+    digest: str
+
+
+def object_digest(
+    path: str | os.PathLike[str], settings: PlanSettings, scale: float, hand: str
+) -> str:
+    """SHA-256 of a mesh file's bytes, the scale, the hand and the plan settings."""
+    h = hashlib.sha256(Path(path).read_bytes())
+    h.update(json.dumps([settings.to_dict(), scale, hand], sort_keys=True).encode("utf-8"))
+    return h.hexdigest()
+
+
+def folder_jobs(
+    folder: str | os.PathLike[str], settings: PlanSettings, scale: float, hand: str
+) -> list[ObjectJob]:
+    """The mesh files of ``folder`` (STL, OBJ, PLY; sorted by name), as jobs.
+
+    Raises:
+        PlanningError: The folder holds no mesh file.
+    """
+    paths = sorted(
+        p for p in Path(folder).iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES
+    )
+    if not paths:
+        raise PlanningError(f"{folder} holds no mesh file ({', '.join(MESH_SUFFIXES)})")
+    return [ObjectJob(str(p), scale, object_digest(p, settings, scale, hand)) for p in paths]
+
+
+def plan_file(
+    description: HandDescription, job: ObjectJob, settings: PlanSettings
+) -> dict[str, Any]:
+    """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused)."""
+    from sahgrasp.ik import worker_hand
+    from sahgrasp.objects import load_mesh
+    from sahgrasp.planner.plan import plan_grasps
+
+    start = time.perf_counter()
+    hand = worker_hand(description, description.digest())
+    try:
+        obj = load_mesh(job.path, scale=job.scale)
+    except MeshFileError as exc:
+        return {"object": {"mesh": job.path}, "object_digest": job.digest, "error": str(exc)}
+    spec: dict[str, Any] = {"mesh": job.path, "xyz": [0.0, 0.0, 0.0], "quat": [0.0, 0.0, 0.0, 1.0]}
+    if job.scale != 1.0:
+        spec["scale"] = job.scale
+    plan = plan_grasps(hand, obj, settings, object_spec=spec, started=start)
+    return {**plan.to_dict(), "object_digest": job.digest}
+
+
+def plan_jobs(
+    description: HandDescription,
+    jobs: Iterable[ObjectJob],
+    settings: PlanSettings,
+    executor: Executor | None,
+    in_flight: int = 4,
+) -> Iterator[dict[str, Any]]:
+    """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers."""
+    if executor is None:
+        for job in jobs:
+            yield plan_file(description, job, settings)
+        return
+    pending: list[Future[dict[str, Any]]] = []
+    submit: Callable[[ObjectJob], Future[dict[str, Any]]] = lambda job: executor.submit(  # noqa: E731
+        plan_file, description, job, settings
+    )
+    iterator = iter(jobs)
+    for job in iterator:
+        pending.append(submit(job))
+        if len(pending) >= in_flight:
+            break
+    while pending:
+        done = pending.pop(0)
+        nxt = next(iterator, None)
+        if nxt is not None:
+            pending.append(submit(nxt))
+        yield done.result()

@@ -1,0 +1,48 @@
+"""``sahgrasp bench plan``: its document, its table and its command."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import trimesh
+
+from sahgrasp.bench import plan as bench_plan
+from sahgrasp.bench.report import summary_table
+from sahgrasp.cli import main
+
+
+def test_bench_plan_document_and_table(tmp_path: Path) -> None:
+    box = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(box)
+    doc = bench_plan.run(objects=["can"], meshes=[str(box)], test_meshes=False, candidates=4,
+                         grasps=2, workers=(), atlas=False, quiet=True)  # fmt: skip
+    assert doc["benchmark"] == "plan"
+    assert [r["object"] for r in doc["objects"]] == ["can", "box.stl"]
+    assert doc["summary"]["returned_failing_recheck"] == 0
+    for row in doc["objects"]:
+        assert row["candidates"] == 4 and row["verified"] <= 4
+        assert 0.0 <= row["force_closure_share"] <= 1.0
+    table = summary_table(doc)
+    assert "bench plan: sah, 2 objects" in table and "re-check fails" in table
+
+
+def test_test_meshes_are_graspable_sizes(tmp_path: Path) -> None:
+    scales = bench_plan.write_test_meshes(tmp_path)
+    assert sorted(scales) == sorted(bench_plan.TEST_MESHES)
+    for name, scale in scales.items():
+        mesh = trimesh.load(tmp_path / name, force="mesh")
+        extent = float(max(mesh.extents)) * scale
+        assert 0.04 <= extent <= 0.15 + 1e-6, (name, extent)  # float32 STL coordinates
+        assert mesh.is_watertight, name
+
+
+def test_bench_plan_command_writes_json(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "bench.json"
+    argv = ["bench", "plan", "--objects", "bottle", "--no-test-meshes", "--mesh",
+            str(Path(__file__).resolve().parent.parent / "examples" / "meshes" / "bottle.obj"),
+            "--candidates", "3", "--grasps", "1", "--workers", "--no-atlas", "--quiet",
+            "--json", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    assert json.loads(out.read_text())["summary"]["objects"] == 2
+    assert "objects with a verified force-closure grasp" in capsys.readouterr().out
