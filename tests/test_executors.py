@@ -74,7 +74,8 @@ def _results(path: Path) -> list[dict[str, object]]:
     """The results of a JSON Lines output without their times (which differ run to run)."""
     lines = path.read_text(encoding="utf-8").splitlines()[1:]
     return [
-        {k: v for k, v in json.loads(line).items() if not k.startswith("time")} for line in lines
+        {k: v for k, v in json.loads(line).items() if k not in {"time_ms", "setup_ms"}}
+        for line in lines
     ]
 
 
