@@ -7,7 +7,14 @@ import time
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.cli.common import HAND_HELP, add_command, check_outputs, nonnegative_int, positive_int
+from sahgrasp.cli.common import (
+    HAND_HELP,
+    add_command,
+    check_outputs,
+    nonnegative_int,
+    positive_int,
+    scheduler_address,
+)
 
 __all__ = ["LEARN_DEFAULTS", "add_parser", "run"]
 
@@ -44,8 +51,8 @@ def add_parser(sub: Any) -> None:
         help="local worker processes (default: one per core)",
     )  # fmt: skip
     where.add_argument(
-        "--scheduler", default=None, metavar="ADDR",
-        help="Dask scheduler address, e.g. tcp://host:8786",
+        "--scheduler", type=scheduler_address, default=None, metavar="ADDR",
+        help="Dask scheduler address, tcp://HOST:PORT or HOST:PORT",
     )  # fmt: skip
     p.set_defaults(run=run)
 
