@@ -198,7 +198,10 @@ def test_cli_defaults_are_the_library_defaults() -> None:
             r"--scheduler: .*'tls://h:1' is not supp",
         ),
         (["sequence", "--out", "d", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask"),
-        (["learn", "--out", "d.npz", "--scheduler", "bogus"], r"--scheduler: 'bogus' is not a Dask"),
+        (
+            ["learn", "--out", "d.npz", "--scheduler", "bogus"],
+            r"--scheduler: 'bogus' is not a Dask",
+        ),
         (
             ["bench", "ik", "--plot", "fig"],
             r"--plot: 'fig' is not an image file name \(no suffix\)",
