@@ -120,8 +120,11 @@ def _lines(path: Path) -> Iterator[tuple[int, Any]]:
 def _plan_grasps(
     hand: Hand, document: dict[str, Any], folder: Path, where: str
 ) -> list[GraspToCheck]:
+    described = document.get("object")
+    if isinstance(described, dict):  # what loading the mesh repaired is a note, not a key
+        described = {k: v for k, v in described.items() if k != "repairs"}
     try:
-        spec = object_spec(document.get("object"), folder)
+        spec = object_spec(described, folder)
     except SahGraspError as exc:
         raise ResultsFileError(f"{where}: invalid 'object': {exc}") from None
     grasps = document.get("grasps")
