@@ -118,13 +118,13 @@ def _lines(path: Path) -> Iterator[tuple[int, Any]]:
 
 
 def _plan_grasps(
-    hand: Hand, document: dict[str, Any], folder: Path, where: str
+    hand: Hand, document: dict[str, Any], folder: Path, where: str, allow_outside_paths: bool
 ) -> list[GraspToCheck]:
     described = document.get("object")
     if isinstance(described, dict):  # what loading the mesh repaired is a note, not a key
         described = {k: v for k, v in described.items() if k != "repairs"}
     try:
-        spec = object_spec(described, folder)
+        spec = object_spec(described, folder, allow_outside_paths=allow_outside_paths)
     except SahGraspError as exc:
         raise ResultsFileError(f"{where}: invalid 'object': {exc}") from None
     grasps = document.get("grasps")
@@ -154,7 +154,11 @@ def read_documents(path: str | Path) -> list[Any]:
 
 
 def read_grasps(
-    hand: Hand, results: str | Path, targets: str | Path | None = None
+    hand: Hand,
+    results: str | Path,
+    targets: str | Path | None = None,
+    *,
+    allow_outside_paths: bool = False,
 ) -> list[GraspToCheck]:
     """The grasps of a results file, in order.
 
@@ -163,6 +167,8 @@ def read_grasps(
         results: ``sahgrasp solve`` results (JSON document or ``.jsonl``), or a planner's
             document(s) carrying their object (then ``targets`` may be None).
         targets: The targets file the results were solved from (names each grasp's object).
+        allow_outside_paths: Accept object meshes named outside the folder of the file that
+            names them (see :func:`sahgrasp.contacts.object_spec`).
 
     Raises:
         ResultsFileError: A file cannot be read, the results are not of the targets' problems
@@ -174,7 +180,9 @@ def read_grasps(
         return [
             grasp
             for i, value in enumerate(values)
-            for grasp in _plan_grasps(hand, value, path.parent, f"{path}, document {i + 1}")
+            for grasp in _plan_grasps(
+                hand, value, path.parent, f"{path}, document {i + 1}", allow_outside_paths
+            )
         ]
     if len(values) == 1 and isinstance(values[0], dict) and "results" in values[0]:
         entries = values[0]["results"]
@@ -186,7 +194,7 @@ def read_grasps(
         raise ResultsFileError(
             f"results file {path} holds no objects: give the targets file it was solved from"
         )
-    _, problems = read_problems(targets)
+    _, problems = read_problems(targets, allow_outside_paths=allow_outside_paths)
     if len(problems) != len(entries):
         raise ResultsFileError(
             f"results file {path} has {len(entries)} results but targets file {targets} has "

@@ -18,7 +18,7 @@ from sahgrasp.objects import GraspObject
 from sahgrasp.sim.hold import HoldResult, HoldTester
 from sahgrasp.sim.settings import HoldSettings
 
-__all__ = ["PhysicsCheck", "hold_margin", "hold_verdict"]
+__all__ = ["PhysicsCheck", "hold_margin", "hold_rates", "hold_verdict"]
 
 
 def hold_margin(result: HoldResult, settings: HoldSettings) -> float:
@@ -101,3 +101,33 @@ class PhysicsCheck:
         document.setdefault("summary", {})["hold_checked"] = len(held)
         document["summary"]["hold_passed"] = sum(v["holds"] for v in held)
         return document
+
+
+def hold_rates(
+    hand: Hand, obj: GraspObject, qs: list[Any], settings: dict[str, HoldSettings]
+) -> dict[str, dict[str, Any]]:
+    """Hold-test configurations ``qs`` of ``obj`` under each named settings.
+
+    Returns, per name: ``checked``, ``holds``, ``hold_rate`` (None without grasps),
+    ``holds_bodex``, the ``reasons`` of the failures counted, and ``checks_per_cpu_s`` (hold tests
+    per CPU second of this process, the models' compilation excluded).
+    """
+    import time
+    from collections import Counter
+
+    out: dict[str, dict[str, Any]] = {}
+    for label, s in settings.items():
+        tester = HoldTester(hand, obj, s)
+        cpu = time.process_time()
+        results = [tester.test(q) for q in qs]
+        cpu_s = time.process_time() - cpu
+        holds = sum(r.holds for r in results)
+        out[label] = {
+            "checked": len(results),
+            "holds": holds,
+            "hold_rate": holds / len(results) if results else None,
+            "holds_bodex": sum(r.holds_bodex for r in results),
+            "reasons": dict(sorted(Counter(r.reason for r in results if not r.holds).items())),
+            "checks_per_cpu_s": len(results) / cpu_s if results and cpu_s > 0 else None,
+        }
+    return out
