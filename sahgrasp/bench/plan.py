@@ -123,9 +123,7 @@ def _hold_rates(hand: Any, obj: Any, qs: list[Any]) -> dict[str, Any] | None:
     except ImportError:
         return None
     settings = {"default": HoldSettings(), "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N)}
-    rates = hold_rates(hand, obj, qs, settings)
-    rates["mass_kg"] = _mass_kg(hand, obj)
-    return rates
+    return {**hold_rates(hand, obj, qs, settings), "mass_kg": _mass_kg(hand, obj)}
 
 
 def _mass_kg(hand: Any, obj: Any) -> float:

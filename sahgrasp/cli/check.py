@@ -161,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
     files = [args.targets] if args.results is None else [args.targets, args.results]
     targets, results_path = (None, args.targets) if args.results is None else files
     hand_name = _hand_name(args, targets)
-    check_outputs([args.json], inputs=[*files, hand_name, *_named_inputs(targets, results_path, args.allow_any_mesh_path)])
+    named = _named_inputs(targets, results_path, args.allow_any_mesh_path)
+    check_outputs([args.json], inputs=[*files, hand_name, *named])
     check_json_inputs(hand_name)
 
     from sahgrasp.hand import load_hand
@@ -171,9 +172,7 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     started = time.perf_counter()
     hand = load_hand(hand_name)
-    grasps = read_grasps(
-        hand, results_path, targets, allow_outside_paths=args.allow_any_mesh_path
-    )
+    grasps = read_grasps(hand, results_path, targets, allow_outside_paths=args.allow_any_mesh_path)
     checkable = sum(g.q is not None and not g.skipped for g in grasps)
     bar = None
     if not args.quiet and sys.stderr.isatty() and checkable:

@@ -146,12 +146,12 @@ def _add_verify_arguments(p: Any) -> None:
         "--verify",
         choices=("physics",),
         default=None,
-        help='physics: keep only grasps that hold in the MuJoCo hold test (pip install '
+        help="physics: keep only grasps that hold in the MuJoCo hold test (pip install "
         '"sahgrasp[sim]"), ranked by their hold margin',
     )
     squeeze = p.add_mutually_exclusive_group()
     squeeze.add_argument("--squeeze", type=positive_float, default=None, metavar="N",
-                         help="--verify: mean normal force per contact finger [N] (10)")  # fmt: skip
+                         help="--verify: mean normal force per finger [N] (10)")  # fmt: skip
     squeeze.add_argument("--light", action="store_true",
                          help="--verify: the light squeeze, 1 N per contact finger")  # fmt: skip
     mass = p.add_mutually_exclusive_group()
@@ -176,10 +176,11 @@ def _hold_settings(args: argparse.Namespace) -> Any:
         from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
     except ImportError as exc:
         raise InvalidSettingsError(str(exc)) from None
+    default = HoldSettings()
     squeeze = LIGHT_SQUEEZE_N if args.light else args.squeeze
     return HoldSettings(
-        **({"squeeze_n": squeeze} if squeeze is not None else {}),
-        **({"density_kg_m3": args.density} if args.density is not None else {}),
+        squeeze_n=default.squeeze_n if squeeze is None else squeeze,
+        density_kg_m3=default.density_kg_m3 if args.density is None else args.density,
         mass_kg=args.mass_kg,
     )
 
