@@ -111,11 +111,13 @@ def _object_row(
         "best_epsilon": max(epsilons, default=0.0),
         "by_fingers": s.by_fingers,
         "failed_verification": s.failed_verification,
-        "hold": _hold_rates(hand, obj, [g.q for g in plan.grasps]),
+        "hold": _hold_rates(
+            hand, obj, [g.q for g in plan.grasps], [g.fingers for g in plan.grasps]
+        ),
     }
 
 
-def _hold_rates(hand: Any, obj: Any, qs: list[Any]) -> dict[str, Any] | None:
+def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[str, Any] | None:
     """Hold rates of the returned grasps, default and light squeeze (None without MuJoCo)."""
     try:
         from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
@@ -123,7 +125,8 @@ def _hold_rates(hand: Any, obj: Any, qs: list[Any]) -> dict[str, Any] | None:
     except ImportError:
         return None
     settings = {"default": HoldSettings(), "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N)}
-    return {**hold_rates(hand, obj, qs, settings), "mass_kg": _mass_kg(hand, obj)}
+    rates = hold_rates(hand, obj, qs, settings, fingers)
+    return {**rates, "mass_kg": _mass_kg(hand, obj)}
 
 
 def _mass_kg(hand: Any, obj: Any) -> float:

@@ -57,12 +57,15 @@ class GraspToCheck:
         q: The hand's configuration (wrist pose, joints), or None when there is nothing to
             check.
         skipped: Why it is not checked (empty when it is).
+        fingers: The contact fingers a planner's grasp names (its other fingers are free and
+            do not squeeze); None: every fingertip near the object squeezes.
     """
 
     name: str
     object_spec: ObjectSpec | None
     q: NDArray[np.float64] | None
     skipped: str = ""
+    fingers: tuple[str, ...] | None = None
 
 
 def grasp_configuration(hand: Hand, entry: dict[str, Any], where: str) -> NDArray[np.float64]:
@@ -137,7 +140,15 @@ def _plan_grasps(
             raise ResultsFileError(f"{where}, grasp {k}: must be an object")
         name = f"{label} #{entry.get('rank', k + 1)}"
         q = grasp_configuration(hand, entry, f"{where}, grasp {name}")
-        out.append(GraspToCheck(name, spec, q, "" if spec else "no object"))
+        fingers = entry.get("fingers")
+        if fingers is not None and (
+            not isinstance(fingers, list) or any(f not in hand.fingers for f in fingers)
+        ):
+            raise ResultsFileError(
+                f"{where}, grasp {name}: 'fingers' must list fingers of {list(hand.fingers)}"
+            )
+        named = None if fingers is None else tuple(fingers)
+        out.append(GraspToCheck(name, spec, q, "" if spec else "no object", named))
     return out
 
 
@@ -241,14 +252,19 @@ def _tester(hand_name: str, spec: ObjectSpec, settings: HoldSettings) -> HoldTes
 
 
 def _check_chunk(
-    task: tuple[str, ObjectSpec, HoldSettings, list[tuple[str, NDArray[np.float64]]]],
+    task: tuple[
+        str,
+        ObjectSpec,
+        HoldSettings,
+        list[tuple[str, NDArray[np.float64], tuple[str, ...] | None]],
+    ],
 ) -> list[HoldResult | str]:
     """Hold-test grasps of one object (a worker's task); a string says why one was not."""
     hand_name, spec, settings, grasps = task
     tester = _tester(hand_name, spec, settings)
     if isinstance(tester, str):
         return [tester] * len(grasps)
-    return [tester.test(q, name=name) for name, q in grasps]
+    return [tester.test(q, name=name, fingers=fingers) for name, q, fingers in grasps]
 
 
 def check_grasps(
@@ -279,7 +295,7 @@ def check_grasps(
             chunk = indices[start : start + CHUNK_GRASPS]
             spec = grasps[chunk[0]].object_spec
             assert spec is not None
-            items = [(grasps[i].name, grasps[i].q) for i in chunk]
+            items = [(grasps[i].name, grasps[i].q, grasps[i].fingers) for i in chunk]
             tasks.append((hand_name, spec, settings, items))
             where.append(chunk)
     done = 0

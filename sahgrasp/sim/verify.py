@@ -81,7 +81,7 @@ class PhysicsCheck:
 
     def __call__(self, grasp: Any) -> float | None:
         """Hold-test a :class:`~sahgrasp.planner.PlannedGrasp`: None or its margin."""
-        result = self.tester.test(grasp.q, name=str(grasp.seed))
+        result = self.tester.test(grasp.q, name=str(grasp.seed), fingers=tuple(grasp.fingers))
         self.results[grasp.seed] = result
         self.verdicts[grasp.seed] = hold_verdict(result, self.settings)
         return hold_margin(result, self.settings) if result.holds else None
@@ -104,9 +104,16 @@ class PhysicsCheck:
 
 
 def hold_rates(
-    hand: Hand, obj: GraspObject, qs: list[Any], settings: dict[str, HoldSettings]
+    hand: Hand,
+    obj: GraspObject,
+    qs: list[Any],
+    settings: dict[str, HoldSettings],
+    fingers: list[tuple[str, ...] | None] | None = None,
 ) -> dict[str, dict[str, Any]]:
     """Hold-test configurations ``qs`` of ``obj`` under each named settings.
+
+    ``fingers``: per configuration its contact fingers (a planned grasp's), or None for all
+    fingertips near the object (:meth:`HoldTester.test`).
 
     Returns, per name: ``checked``, ``holds``, ``hold_rate`` (None without grasps),
     ``holds_bodex``, the ``reasons`` of the failures counted, and ``checks_per_cpu_s`` (hold tests
@@ -119,7 +126,8 @@ def hold_rates(
     for label, s in settings.items():
         tester = HoldTester(hand, obj, s)
         cpu = time.process_time()
-        results = [tester.test(q) for q in qs]
+        named = fingers if fingers is not None else [None] * len(qs)
+        results = [tester.test(q, fingers=f) for q, f in zip(qs, named, strict=True)]
         cpu_s = time.process_time() - cpu
         holds = sum(r.holds for r in results)
         out[label] = {
