@@ -90,5 +90,21 @@ def test_plan_verify_physics_json_and_option_errors(
     capsys.readouterr()
     assert main(["plan", "can", "--light", "--quiet"]) == 2
     assert "need --verify physics" in capsys.readouterr().err
-    assert main(["plan", str(tmp_path), "--verify", "physics", "--quiet"]) == 2
-    assert "--verify physics checks one object" in capsys.readouterr().err
+
+
+def test_plan_verify_physics_on_a_folder(tmp_path: Path) -> None:
+    import trimesh
+
+    from sahgrasp.cli import main
+
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(folder / "box.stl")
+    out = tmp_path / "plans.jsonl"
+    main(["plan", str(folder), "--candidates", "6", "--grasps", "1", "--verify", "physics",
+          "--quiet", "--json", str(out)])  # fmt: skip
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert lines[0]["settings"]["verify"]["physics"]["squeeze_n"] == HoldSettings().squeeze_n
+    document = lines[1]
+    assert "hold_checked" in document["summary"]
+    assert all(g["hold"]["holds"] for g in document["grasps"])

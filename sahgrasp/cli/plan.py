@@ -225,11 +225,6 @@ def run(args: argparse.Namespace) -> int:
 
         if args.html:
             raise InvalidSettingsError("--html shows one object's grasps; give a mesh file")
-        if args.verify is not None:
-            raise InvalidSettingsError(
-                "--verify physics checks one object's grasps; give a mesh file or run "
-                "'sahgrasp check OUT.jsonl' on the folder's results"
-            )
         if args.json not in (None, "-") and not is_jsonl(args.json):
             raise InvalidSettingsError("a folder gives JSON Lines: give --json OUT.jsonl or -")
         return _run_folder(args)
@@ -339,6 +334,7 @@ def _run_folder(args: argparse.Namespace) -> int:
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     jobs = folder_jobs(args.object, settings, args.scale, hand.description.name)
+    hold = _hold_settings(args)
     writer = None
     done: set[str] = set()
     failed = 0
@@ -352,7 +348,9 @@ def _run_folder(args: argparse.Namespace) -> int:
     complete = False
     try:
         with _executor(args) as pool, _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar:
-            for doc in plan_jobs(hand.description, todo, settings, pool, 2 * max(args.workers, 1)):
+            for doc in plan_jobs(
+                hand.description, todo, settings, pool, 2 * max(args.workers, 1), hold
+            ):
                 bar.update()
                 failed += not doc.get("grasps")
                 if "error" in doc:
@@ -386,7 +384,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     data = {
         "hand": hand.description.name,
         "hand_digest": hand.description.digest(),
-        "settings": {**settings.to_dict(), "scale": args.scale},
+        "settings": {**settings.to_dict(), "scale": args.scale, **_verify_header(args)},
         "sequence_digest": "plan",
     }
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()
@@ -396,6 +394,14 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
         "targets": Path(args.object).name,
         "settings_digest": digest,
     }
+
+
+def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
+    """The hold test's settings in a folder run's header (a resume must use the same)."""
+    import dataclasses
+
+    hold = _hold_settings(args)
+    return {} if hold is None else {"verify": {"physics": dataclasses.asdict(hold)}}
 
 
 def _executor(args: argparse.Namespace) -> Any:
