@@ -49,6 +49,16 @@ def test_can_grasp_holds() -> None:
     assert result.mass_kg == pytest.approx(0.379, rel=0.01)
 
 
+def test_only_the_named_contact_fingers_squeeze() -> None:
+    # A planned grasp names its contact fingers: the others are free and do not squeeze, even
+    # with their fingertips on the object.
+    squeeze, *_ = _tester("can").squeeze(_solved("can").q, ("thumb", "index", "middle"))
+    assert squeeze.fingers == ("thumb", "index", "middle")
+    assert np.mean(squeeze.normal_forces_n) == pytest.approx(HoldSettings().squeeze_n, rel=0.05)
+    result = _tester("can").test(_solved("can"), fingers=("thumb", "index", "middle"))
+    assert result.contact_fingers == ("thumb", "index", "middle")
+
+
 def test_can_moved_away_does_not_hold() -> None:
     obj = load_object("can")
     T = obj.T_world_object.copy()

@@ -92,6 +92,25 @@ def test_check_of_a_planners_results(
     assert "1/1 grasps hold" in done.stdout
 
 
+def test_planners_results_name_their_fingers_repairs_and_meshes(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, files: Path
+) -> None:
+    plan = json.loads((files / "plan.json").read_text())
+    plan["object"]["repairs"] = ["merged 3 duplicate vertices"]  # a note, not a key
+    plan["grasps"][0]["fingers"] = ["thumb", "index", "middle"]
+    (files / "plan3.json").write_text(json.dumps(plan))
+    done = in_process(capsys, monkeypatch, files, "check", "plan3.json", "--json", "-")
+    entry = json.loads(done.stdout)["results"][0]
+    assert entry["contact_fingers"] == ["thumb", "index", "middle"]
+    # A planner names its mesh by an absolute path: outside the folder only when allowed.
+    mug = {"mesh": str(ROOT / "examples" / "meshes" / "mug.stl")}
+    (files / "mug.json").write_text(json.dumps({**plan, "object": mug}))
+    one_line_error(in_process(capsys, monkeypatch, files, "check", "mug.json"), "outside")
+    done = in_process(capsys, monkeypatch, files, "check", "mug.json", "--allow-any-mesh-path")
+    assert done.returncode in (0, 1), done.stderr
+    assert "grasps hold" in done.stdout
+
+
 @pytest.mark.parametrize(
     ("args", "pattern"),
     [

@@ -304,7 +304,23 @@ def _bench_object(
             key = f"{stat}_time_ms"
             row[f"time_ratio_{stat}"] = runs[RUNS[1]][key] / runs[RUNS[0]][key]
         row["same_starts"] = _same_starts(results[0], results[1])
+        solved_qs = [t.result.q for t in results[1] if t.result.success]
+        row["hold"] = _hold_rates(hand, obj, solved_qs)
     return row, targets
+
+
+def _hold_rates(hand: Hand, obj: GraspObject, qs: list[NDArray[np.float64]]) -> Any:
+    """Hold rates of the grasps solved with the object, default and light squeeze.
+
+    None without MuJoCo (the optional extra ``sahgrasp[sim]``).
+    """
+    try:
+        from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+        from sahgrasp.sim.verify import hold_rates
+    except ImportError:
+        return None
+    settings = {"default": HoldSettings(), "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N)}
+    return hold_rates(hand, obj, qs, settings)
 
 
 def _same_starts(without: Sequence[Timed], with_object: Sequence[Timed]) -> dict[str, Any]:
@@ -404,13 +420,21 @@ def format_table(document: dict[str, Any]) -> str:
         "| object | IK | solved | 1st start | mean starts | median / mean / p95 ms "
         "| time with / without object (median, mean) "
         "| CPU with / without, same starts (total, median; sets) | claimed penetrating "
-        "| depth median / max mm | solved, not penetrating |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| depth median / max mm | solved, not penetrating | holds (default, light) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for row in document["objects"]:
         for label, stats in row["runs"].items():
             pen = stats["penetration"]
-            ratio, same = "", ""
+            ratio, same, held = "", "", ""
+            if label == RUNS[1] and row.get("hold"):
+                held = ", ".join(
+                    "-"
+                    if not row["hold"][k]["checked"]
+                    else f"{100 * row['hold'][k]['hold_rate']:.0f}% "
+                    f"({row['hold'][k]['holds']}/{row['hold'][k]['checked']})"
+                    for k in ("default", "light")
+                )
             if label == RUNS[1]:
                 ratio = f"{row['time_ratio_median']:.2f}x, {row['time_ratio_mean']:.2f}x"
                 alike = row["same_starts"]
@@ -429,6 +453,6 @@ def format_table(document: dict[str, Any]) -> str:
                 f"{100 * pen['penetrating_rate']:.1f}% "
                 f"({pen['penetrating']}/{pen['claimed']}) | "
                 f"{pen['median_penetrating_depth_mm']:.1f} / {pen['max_link_depth_mm']:.1f} | "
-                f"{100 * pen['usable_rate']:.1f}% |"
+                f"{100 * pen['usable_rate']:.1f}% | {held} |"
             )
     return "\n".join(lines)

@@ -111,7 +111,28 @@ def _object_row(
         "best_epsilon": max(epsilons, default=0.0),
         "by_fingers": s.by_fingers,
         "failed_verification": s.failed_verification,
+        "hold": _hold_rates(
+            hand, obj, [g.q for g in plan.grasps], [g.fingers for g in plan.grasps]
+        ),
     }
+
+
+def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[str, Any] | None:
+    """Hold rates of the returned grasps, default and light squeeze (None without MuJoCo)."""
+    try:
+        from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+        from sahgrasp.sim.verify import hold_rates
+    except ImportError:
+        return None
+    settings = {"default": HoldSettings(), "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N)}
+    rates = hold_rates(hand, obj, qs, settings, fingers)
+    return {**rates, "mass_kg": _mass_kg(hand, obj)}
+
+
+def _mass_kg(hand: Any, obj: Any) -> float:
+    from sahgrasp.sim import HoldSettings, build_model
+
+    return build_model(hand, obj, HoldSettings()).mass_kg
 
 
 ATLAS_OBJECTS = ("can", "bottle")
@@ -294,6 +315,24 @@ def run(
     }
 
 
+def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
+    if hold is None:
+        return ("-", "-", "-", "-")
+
+    def rate(row: dict[str, Any]) -> str:
+        if not row["checked"]:
+            return "-"
+        return f"{round(100 * row['hold_rate'])}% ({row['holds']}/{row['checked']})"
+
+    speed = hold["default"]["checks_per_cpu_s"]
+    return (
+        round(hold["mass_kg"], 3),
+        rate(hold["default"]),
+        rate(hold["light"]),
+        "-" if speed is None else round(speed),
+    )
+
+
 def format_table(doc: dict[str, Any]) -> str:
     """The benchmark's summary table."""
     from sahgrasp.tables import format_table as table
@@ -314,6 +353,7 @@ def format_table(doc: dict[str, Any]) -> str:
                 round(r["best_epsilon"], 4),
                 f"{f.get('2', 0)}/{f.get('3', 0)}/{f.get('4', 0)}",
                 r["returned_failing_recheck"],
+                *_hold_cells(r.get("hold")),
             )
         )
     headers = (
@@ -327,6 +367,10 @@ def format_table(doc: dict[str, Any]) -> str:
         "best eps",
         "2/3/4 fingers",
         "re-check fails",
+        "mass [kg]",
+        "holds (default)",
+        "holds (light)",
+        "checks/CPU s",
     )
     s = doc["summary"]
     first = s["median_time_to_first_s"]

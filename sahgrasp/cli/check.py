@@ -13,6 +13,7 @@ from sahgrasp.cli.common import (
     HAND_OVERRIDE_HELP,
     add_command,
     add_json_argument,
+    add_mesh_path_argument,
     check_json_inputs,
     check_outputs,
     emit_json,
@@ -68,6 +69,7 @@ def add_parser(sub: Any) -> None:
                       help="object mass [kg] (default: from --density)")  # fmt: skip
     mass.add_argument("--density", type=positive_float, default=1000.0,
                       help="object density [kg/m^3]")  # fmt: skip
+    add_mesh_path_argument(p)
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
     add_json_argument(p, "every grasp's verdicts, per-direction motion and the summary")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -118,7 +120,7 @@ def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> st
     return "\n".join(lines)
 
 
-def _named_inputs(targets: Path | None, results: Path) -> list[str]:
+def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]:
     """The mesh files the targets file or a planner's results name: inputs too."""
     from sahgrasp.contacts import object_spec, read_problems
     from sahgrasp.errors import SahGraspError
@@ -127,10 +129,19 @@ def _named_inputs(targets: Path | None, results: Path) -> list[str]:
     specs = []
     try:
         if targets is not None:
-            specs = [getattr(p, "object_spec", None) for p in read_problems(targets)[1]]
+            specs = [
+                getattr(p, "object_spec", None)
+                for p in read_problems(targets, allow_outside_paths=allow)[1]
+            ]
         else:
             specs = [
-                object_spec(document.get("object"), results.parent)
+                object_spec(
+                    {k: v for k, v in document["object"].items() if k != "repairs"}
+                    if isinstance(document.get("object"), dict)
+                    else document.get("object"),
+                    results.parent,
+                    allow_outside_paths=allow,
+                )
                 for document in read_documents(results)
                 if isinstance(document, dict) and "grasps" in document
             ]
@@ -150,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
     files = [args.targets] if args.results is None else [args.targets, args.results]
     targets, results_path = (None, args.targets) if args.results is None else files
     hand_name = _hand_name(args, targets)
-    check_outputs([args.json], inputs=[*files, hand_name, *_named_inputs(targets, results_path)])
+    named = _named_inputs(targets, results_path, args.allow_any_mesh_path)
+    check_outputs([args.json], inputs=[*files, hand_name, *named])
     check_json_inputs(hand_name)
 
     from sahgrasp.hand import load_hand
@@ -160,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
     settings = _settings(args)
     started = time.perf_counter()
     hand = load_hand(hand_name)
-    grasps = read_grasps(hand, results_path, targets)
+    grasps = read_grasps(hand, results_path, targets, allow_outside_paths=args.allow_any_mesh_path)
     checkable = sum(g.q is not None and not g.skipped for g in grasps)
     bar = None
     if not args.quiet and sys.stderr.isatty() and checkable:

@@ -129,6 +129,7 @@ def add_parser(sub: Any) -> None:
         help="write the top grasps side by side as one HTML scene (single object)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_verify_arguments(p)
     p.add_argument(
         "--json",
         default=None,
@@ -137,6 +138,51 @@ def add_parser(sub: Any) -> None:
         "'-': JSON alone on stdout",
     )
     p.set_defaults(run=run, on_interrupt=resume_hint)
+
+
+def _add_verify_arguments(p: Any) -> None:
+    """``--verify physics`` and the hold test's settings (docs/physics.md)."""
+    p.add_argument(
+        "--verify",
+        choices=("physics",),
+        default=None,
+        help="physics: keep only grasps that hold in the MuJoCo hold test (pip install "
+        '"sahgrasp[sim]"), ranked by their hold margin',
+    )
+    squeeze = p.add_mutually_exclusive_group()
+    squeeze.add_argument("--squeeze", type=positive_float, default=None, metavar="N",
+                         help="--verify: mean normal force per finger [N] (10)")  # fmt: skip
+    squeeze.add_argument("--light", action="store_true",
+                         help="--verify: the light squeeze, 1 N per contact finger")  # fmt: skip
+    mass = p.add_mutually_exclusive_group()
+    mass.add_argument("--mass-kg", type=positive_float, default=None,
+                      help="--verify: object mass [kg] (default: from --density)")  # fmt: skip
+    mass.add_argument("--density", type=positive_float, default=None,
+                      help="--verify: object density [kg/m^3] (1000)")  # fmt: skip
+
+
+def _hold_settings(args: argparse.Namespace) -> Any:
+    """The hold test's settings of ``--verify physics`` (None without it)."""
+    from sahgrasp.errors import InvalidSettingsError
+
+    given = args.light or args.squeeze is not None or args.mass_kg or args.density
+    if args.verify is None:
+        if given:
+            raise InvalidSettingsError(
+                "--squeeze, --light, --mass-kg and --density need --verify physics"
+            )
+        return None
+    try:
+        from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+    except ImportError as exc:
+        raise InvalidSettingsError(str(exc)) from None
+    default = HoldSettings()
+    squeeze = LIGHT_SQUEEZE_N if args.light else args.squeeze
+    return HoldSettings(
+        squeeze_n=default.squeeze_n if squeeze is None else squeeze,
+        density_kg_m3=default.density_kg_m3 if args.density is None else args.density,
+        mass_kg=args.mass_kg,
+    )
 
 
 def _settings(args: argparse.Namespace) -> Any:
@@ -171,6 +217,7 @@ def run(args: argparse.Namespace) -> int:
     from sahgrasp.errors import InvalidSettingsError
 
     folder = Path(args.object).is_dir()
+    _hold_settings(args)  # the verify options checked before any work
     check_outputs([args.json, args.html], inputs=[args.object, args.hand])
     check_json_inputs(args.hand)
     if folder:
@@ -224,11 +271,24 @@ def _run_object(args: argparse.Namespace) -> int:
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     obj, spec = _load(args)
+    hold = _hold_settings(args)
+    check = None
+    if hold is not None:
+        from sahgrasp.sim.verify import PhysicsCheck
+
+        check = PhysicsCheck(hand, obj, hold)
     with _bar(args, settings.candidates, "candidate") as bar:
         plan = plan_grasps(
-            hand, obj, settings, object_spec=spec, started=_STARTED, on_candidate=bar.update
+            hand,
+            obj,
+            settings,
+            object_spec=spec,
+            check=check,
+            started=_STARTED,
+            on_candidate=bar.update,
         )
-    for line in _lines(plan.to_dict()):
+    document = plan.to_dict() if check is None else check.annotate(plan.to_dict())
+    for line in _lines(document):
         print(line, file=out)
     if args.html:
         from sahgrasp.viz.plan_view import write_plan_html
@@ -236,7 +296,7 @@ def _run_object(args: argparse.Namespace) -> int:
         write_plan_html(hand, obj, plan, args.html)
         print(f"wrote {args.html}", file=out)
     if args.json:
-        emit_json(plan.to_dict(), args.json)
+        emit_json(document, args.json)
     return 0 if plan.grasps else 1
 
 
@@ -249,12 +309,18 @@ def _lines(doc: dict[str, Any]) -> list[str]:
         f"first force-closure grasp at "
         f"{'-' if s['time_to_first_s'] is None else format(s['time_to_first_s'], '.2f') + ' s'}"
     ]
+    if "hold_checked" in s:
+        lines.append(
+            f"  physics: {s['hold_passed']} of {s['hold_checked']} grasps checked hold "
+            "(those that do not are dropped)"
+        )
     for g in doc["grasps"]:
         q = g["quality"]
+        held = f"  holds, margin {g['hold']['margin']:.2f}" if "hold" in g else ""
         lines.append(
             f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} epsilon {q['epsilon_l1']:.4f}  "
             f"force closure {'yes' if q['force_closure'] else 'no ':<3}  "
-            f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']})"
+            f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']}){held}"
         )
     return lines
 
@@ -268,6 +334,7 @@ def _run_folder(args: argparse.Namespace) -> int:
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     jobs = folder_jobs(args.object, settings, args.scale, hand.description.name)
+    hold = _hold_settings(args)
     writer = None
     done: set[str] = set()
     failed = 0
@@ -281,7 +348,9 @@ def _run_folder(args: argparse.Namespace) -> int:
     complete = False
     try:
         with _executor(args) as pool, _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar:
-            for doc in plan_jobs(hand.description, todo, settings, pool, 2 * max(args.workers, 1)):
+            for doc in plan_jobs(
+                hand.description, todo, settings, pool, 2 * max(args.workers, 1), hold
+            ):
                 bar.update()
                 failed += not doc.get("grasps")
                 if "error" in doc:
@@ -315,7 +384,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     data = {
         "hand": hand.description.name,
         "hand_digest": hand.description.digest(),
-        "settings": {**settings.to_dict(), "scale": args.scale},
+        "settings": {**settings.to_dict(), "scale": args.scale, **_verify_header(args)},
         "sequence_digest": "plan",
     }
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()
@@ -325,6 +394,14 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
         "targets": Path(args.object).name,
         "settings_digest": digest,
     }
+
+
+def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
+    """The hold test's settings in a folder run's header (a resume must use the same)."""
+    import dataclasses
+
+    hold = _hold_settings(args)
+    return {} if hold is None else {"verify": {"physics": dataclasses.asdict(hold)}}
 
 
 def _executor(args: argparse.Namespace) -> Any:

@@ -69,9 +69,13 @@ def folder_jobs(
 
 
 def plan_file(
-    description: HandDescription, job: ObjectJob, settings: PlanSettings
+    description: HandDescription, job: ObjectJob, settings: PlanSettings, hold: Any = None
 ) -> dict[str, Any]:
-    """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused)."""
+    """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused).
+
+    ``hold``: the physics hold test's settings (:class:`sahgrasp.sim.HoldSettings`) to keep only
+    grasps that hold (``plan --verify physics``), or None.
+    """
     from sahgrasp.ik import worker_hand
     from sahgrasp.objects import load_mesh
     from sahgrasp.planner.plan import plan_grasps
@@ -85,8 +89,14 @@ def plan_file(
     spec: dict[str, Any] = {"mesh": job.path, "xyz": [0.0, 0.0, 0.0], "quat": [0.0, 0.0, 0.0, 1.0]}
     if job.scale != 1.0:
         spec["scale"] = job.scale
-    plan = plan_grasps(hand, obj, settings, object_spec=spec, started=start)
-    return {**plan.to_dict(), "object_digest": job.digest}
+    check = None
+    if hold is not None:
+        from sahgrasp.sim.verify import PhysicsCheck
+
+        check = PhysicsCheck(hand, obj, hold)
+    plan = plan_grasps(hand, obj, settings, object_spec=spec, check=check, started=start)
+    document = plan.to_dict() if check is None else check.annotate(plan.to_dict())
+    return {**document, "object_digest": job.digest}
 
 
 def plan_jobs(
@@ -95,15 +105,16 @@ def plan_jobs(
     settings: PlanSettings,
     executor: Executor | None,
     in_flight: int = 4,
+    hold: Any = None,
 ) -> Iterator[dict[str, Any]]:
     """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers."""
     if executor is None:
         for job in jobs:
-            yield plan_file(description, job, settings)
+            yield plan_file(description, job, settings, hold)
         return
     pending: list[Future[dict[str, Any]]] = []
     submit: Callable[[ObjectJob], Future[dict[str, Any]]] = lambda job: executor.submit(  # noqa: E731
-        plan_file, description, job, settings
+        plan_file, description, job, settings, hold
     )
     iterator = iter(jobs)
     for job in iterator:

@@ -57,12 +57,15 @@ class GraspToCheck:
         q: The hand's configuration (wrist pose, joints), or None when there is nothing to
             check.
         skipped: Why it is not checked (empty when it is).
+        fingers: The contact fingers a planner's grasp names (its other fingers are free and
+            do not squeeze); None: every fingertip near the object squeezes.
     """
 
     name: str
     object_spec: ObjectSpec | None
     q: NDArray[np.float64] | None
     skipped: str = ""
+    fingers: tuple[str, ...] | None = None
 
 
 def grasp_configuration(hand: Hand, entry: dict[str, Any], where: str) -> NDArray[np.float64]:
@@ -118,10 +121,13 @@ def _lines(path: Path) -> Iterator[tuple[int, Any]]:
 
 
 def _plan_grasps(
-    hand: Hand, document: dict[str, Any], folder: Path, where: str
+    hand: Hand, document: dict[str, Any], folder: Path, where: str, allow_outside_paths: bool
 ) -> list[GraspToCheck]:
+    described = document.get("object")
+    if isinstance(described, dict):  # what loading the mesh repaired is a note, not a key
+        described = {k: v for k, v in described.items() if k != "repairs"}
     try:
-        spec = object_spec(document.get("object"), folder)
+        spec = object_spec(described, folder, allow_outside_paths=allow_outside_paths)
     except SahGraspError as exc:
         raise ResultsFileError(f"{where}: invalid 'object': {exc}") from None
     grasps = document.get("grasps")
@@ -134,7 +140,15 @@ def _plan_grasps(
             raise ResultsFileError(f"{where}, grasp {k}: must be an object")
         name = f"{label} #{entry.get('rank', k + 1)}"
         q = grasp_configuration(hand, entry, f"{where}, grasp {name}")
-        out.append(GraspToCheck(name, spec, q, "" if spec else "no object"))
+        fingers = entry.get("fingers")
+        if fingers is not None and (
+            not isinstance(fingers, list) or any(f not in hand.fingers for f in fingers)
+        ):
+            raise ResultsFileError(
+                f"{where}, grasp {name}: 'fingers' must list fingers of {list(hand.fingers)}"
+            )
+        named = None if fingers is None else tuple(fingers)
+        out.append(GraspToCheck(name, spec, q, "" if spec else "no object", named))
     return out
 
 
@@ -151,7 +165,11 @@ def read_documents(path: str | Path) -> list[Any]:
 
 
 def read_grasps(
-    hand: Hand, results: str | Path, targets: str | Path | None = None
+    hand: Hand,
+    results: str | Path,
+    targets: str | Path | None = None,
+    *,
+    allow_outside_paths: bool = False,
 ) -> list[GraspToCheck]:
     """The grasps of a results file, in order.
 
@@ -160,6 +178,8 @@ def read_grasps(
         results: ``sahgrasp solve`` results (JSON document or ``.jsonl``), or a planner's
             document(s) carrying their object (then ``targets`` may be None).
         targets: The targets file the results were solved from (names each grasp's object).
+        allow_outside_paths: Accept object meshes named outside the folder of the file that
+            names them (see :func:`sahgrasp.contacts.object_spec`).
 
     Raises:
         ResultsFileError: A file cannot be read, the results are not of the targets' problems
@@ -171,7 +191,9 @@ def read_grasps(
         return [
             grasp
             for i, value in enumerate(values)
-            for grasp in _plan_grasps(hand, value, path.parent, f"{path}, document {i + 1}")
+            for grasp in _plan_grasps(
+                hand, value, path.parent, f"{path}, document {i + 1}", allow_outside_paths
+            )
         ]
     if len(values) == 1 and isinstance(values[0], dict) and "results" in values[0]:
         entries = values[0]["results"]
@@ -183,7 +205,7 @@ def read_grasps(
         raise ResultsFileError(
             f"results file {path} holds no objects: give the targets file it was solved from"
         )
-    _, problems = read_problems(targets)
+    _, problems = read_problems(targets, allow_outside_paths=allow_outside_paths)
     if len(problems) != len(entries):
         raise ResultsFileError(
             f"results file {path} has {len(entries)} results but targets file {targets} has "
@@ -230,14 +252,19 @@ def _tester(hand_name: str, spec: ObjectSpec, settings: HoldSettings) -> HoldTes
 
 
 def _check_chunk(
-    task: tuple[str, ObjectSpec, HoldSettings, list[tuple[str, NDArray[np.float64]]]],
+    task: tuple[
+        str,
+        ObjectSpec,
+        HoldSettings,
+        list[tuple[str, NDArray[np.float64], tuple[str, ...] | None]],
+    ],
 ) -> list[HoldResult | str]:
     """Hold-test grasps of one object (a worker's task); a string says why one was not."""
     hand_name, spec, settings, grasps = task
     tester = _tester(hand_name, spec, settings)
     if isinstance(tester, str):
         return [tester] * len(grasps)
-    return [tester.test(q, name=name) for name, q in grasps]
+    return [tester.test(q, name=name, fingers=fingers) for name, q, fingers in grasps]
 
 
 def check_grasps(
@@ -268,7 +295,7 @@ def check_grasps(
             chunk = indices[start : start + CHUNK_GRASPS]
             spec = grasps[chunk[0]].object_spec
             assert spec is not None
-            items = [(grasps[i].name, grasps[i].q) for i in chunk]
+            items = [(grasps[i].name, grasps[i].q, grasps[i].fingers) for i in chunk]
             tasks.append((hand_name, spec, settings, items))
             where.append(chunk)
     done = 0

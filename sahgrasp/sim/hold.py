@@ -331,8 +331,14 @@ class HoldTester:
             J[3 * i : 3 * i + 3] = block
         return J
 
-    def squeeze(self, q: ArrayLike) -> tuple[Squeeze, NDArray[np.float64], float, str | None]:
+    def squeeze(
+        self, q: ArrayLike, fingers: tuple[str, ...] | None = None
+    ) -> tuple[Squeeze, NDArray[np.float64], float, str | None]:
         """The balanced squeeze of grasp ``q`` and the servo targets that apply it.
+
+        ``fingers``: the grasp's contact fingers when it says which (a planned grasp); a finger
+        it leaves free does not squeeze even when its fingertip is near the object. None: every
+        finger within ``contact_distance_m``.
 
         The targets are the contact configuration (each fingertip moved along its normal by its
         gap, least squares over its joints) plus ``K^-1 J^T f``: at the contact configuration
@@ -346,9 +352,11 @@ class HoldTester:
         self._place(q)
         sim, m, d = self.sim, self.sim.model, self.sim.data
         nearest, depth, deepest = self._contacts()
-        fingers = tuple(f for f in self.hand.fingers if f in nearest)
+        chosen = tuple(
+            f for f in self.hand.fingers if f in nearest and (fingers is None or f in fingers)
+        )
         targets = np.array(d.ctrl, dtype=np.float64)
-        if not fingers:
+        if not chosen:
             empty = np.zeros((0, 3))
             self._offsets = np.zeros(m.nu)
             return (
@@ -357,16 +365,16 @@ class HoldTester:
                 depth,
                 deepest,
             )
-        gaps = np.array([nearest[f][0] for f in fingers])
-        points = np.array([nearest[f][1] for f in fingers])
-        normals = np.array([nearest[f][2] for f in fingers])
+        gaps = np.array([nearest[f][0] for f in chosen])
+        points = np.array([nearest[f][1] for f in chosen])
+        normals = np.array([nearest[f][2] for f in chosen])
         centre = np.array(d.xipos[sim.object_body])
         s = self.settings
         forces = balanced_forces(points, normals, centre, sim.size_m, s.squeeze_n,
                                  s.balance_friction * s.friction)  # fmt: skip
         net = forces.sum(axis=0)
         moment = np.cross(points - centre, forces).sum(axis=0)
-        J = self.contact_jacobian(fingers, points)
+        J = self.contact_jacobian(chosen, points)
         moves = (gaps[:, None] * normals).ravel()
         close = np.linalg.lstsq(J, moves, rcond=1e-6)[0]
         torques = J.T @ forces.ravel()
@@ -374,7 +382,7 @@ class HoldTester:
         self._offsets = torques / s.stiffness_nm_rad
         targets = targets + close + self._offsets
         squeeze = Squeeze(
-            fingers, points, normals, gaps, forces, float(np.linalg.norm(net)),
+            chosen, points, normals, gaps, forces, float(np.linalg.norm(net)),
             float(np.linalg.norm(moment)), bool(np.any(np.abs(torques) > limits)),
         )  # fmt: skip
         return squeeze, targets, depth, deepest
@@ -424,10 +432,17 @@ class HoldTester:
                 break
         return moved, turned, done * m.opt.timestep, True
 
-    def test(self, grasp: IKResult | ArrayLike, name: str = "") -> HoldResult:
+    def test(
+        self,
+        grasp: IKResult | ArrayLike,
+        name: str = "",
+        fingers: tuple[str, ...] | None = None,
+    ) -> HoldResult:
         """Hold-test one grasp: an IK result or a configuration ``q`` of the hand.
 
         The object is at its placement (``obj.T_world_object``), the wrist at the grasp's pose.
+        ``fingers``: the grasp's contact fingers when it names them (a planned grasp: its free
+        fingers do not squeeze); None: every fingertip within ``contact_distance_m``.
         """
         started = time.perf_counter()
         if isinstance(grasp, IKResult):
@@ -436,7 +451,7 @@ class HoldTester:
         else:
             q = np.asarray(grasp, dtype=np.float64)
         s, sim, m, d = self.settings, self.sim, self.sim.model, self.sim.data
-        squeeze, targets, depth, deepest = self.squeeze(q)
+        squeeze, targets, depth, deepest = self.squeeze(q, fingers)
         squeeze_offsets = self._offsets
         base = dict(
             name=name, initial_penetration_m=depth, penetrating_geom=deepest,
