@@ -16,10 +16,10 @@ import argparse
 from tqdm import tqdm
 
 from sahgrasp.cli.learn import LEARN_DEFAULTS
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik.learned import primitive_chunks, primitive_grasp_sets, primitive_object
 from sahgrasp.ik.solver import ContactProblem
+from sahgrasp.model.hand import load_hand
 
 
 def main() -> None:

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp.contacts import save_targets
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.parallel import SchedulerError
 from sahgrasp.ik import random_problems
-from sahgrasp.parallel import SchedulerError
+from sahgrasp.model.contacts import save_targets
+from sahgrasp.model.hand import load_hand
 from sahgrasp.sequence.executors import open_executor
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -139,9 +139,9 @@ def broken_rules(path: Path, found: Iterable[Edge]) -> Iterator[str]:
 def test_the_table_is_complete_and_ordered() -> None:
     table = layers()
     assert sorted({layer.rank for layer in table.values()}) == list(range(7))
-    for must in ("errors", "atlas", "hand", "ik", "viz", "experiments", "cli", "bench"):
+    for must in ("core", "atlas", "model", "ik", "viz", "experiments", "cli", "bench"):
         assert must in table
-    assert table["errors"].rank < table["atlas"].rank < table["hand"].rank < table["ik"].rank
+    assert table["core"].rank < table["atlas"].rank < table["model"].rank < table["ik"].rank
     assert table["ik"].rank < table["viz"].rank < table["experiments"].rank < table["cli"].rank
 
 
@@ -164,7 +164,7 @@ def test_imports_point_down_the_layers() -> None:
 def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
     source = (
         "import argparse\n"
-        "from sahgrasp import load_hand, hand\n"
+        "from sahgrasp import load_hand, model\n"
         "def f():\n"
         "    from ..viz import show\n"
         "    import sahgrasp.experiments.paper\n"
@@ -176,7 +176,7 @@ def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
     assert [_target(*pair) for pair in pairs] == [
         "argparse",
         "__init__",
-        "hand",
+        "model",
         "viz",
         "experiments",
         "ik",
@@ -188,7 +188,7 @@ def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
     [
         (
             "atlas/builder.py",
-            "from sahgrasp.hand import Hand\n",
+            "from sahgrasp.model.hand import Hand\n",
             ["engine (rank 1) may not use model"],
         ),
         (
@@ -196,10 +196,10 @@ def test_the_reader_sees_function_level_relative_and_package_imports() -> None:
             "def f():\n    from sahgrasp.experiments import t\n",
             ["may not use experiments"],
         ),
-        ("hand.py", "import argparse\n", ["the model layer may not parse arguments"]),
+        ("model/hand.py", "import argparse\n", ["the model layer may not parse arguments"]),
         ("ik/x.py", "from ..cli import main\n", ["solvers (rank 3) may not use entry points"]),
         ("cli/x.py", "import argparse\nfrom sahgrasp.experiments import t\n", []),
-        ("objects/x.py", "from sahgrasp.errors import SahGraspError\nimport numpy\n", []),
+        ("objects/x.py", "from sahgrasp.core.errors import SahGraspError\nimport numpy\n", []),
     ],
 )
 def test_the_rules_catch_upward_imports_and_argparse(

@@ -11,8 +11,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand
 from sahgrasp.ik import learned, random_problems, solve_ik
 from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.ik.learned import (
@@ -26,6 +24,8 @@ from sahgrasp.ik.learned import (
     target_key,
 )
 from sahgrasp.ik.solver import ContactProblem
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand
 
 ROOT = Path(__file__).resolve().parents[1]
 

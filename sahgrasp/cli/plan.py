@@ -154,7 +154,7 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def _placement(args: argparse.Namespace) -> Any:
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     data: dict[str, Any] = {"name": "can"}
     if args.xyz is not None:
@@ -168,13 +168,13 @@ def _placement(args: argparse.Namespace) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp plan``; 0 when every object got a grasp, 1 otherwise."""
-    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.core.errors import InvalidSettingsError
 
     folder = Path(args.object).is_dir()
     check_outputs([args.json, args.html], inputs=[args.object, args.hand])
     check_json_inputs(args.hand)
     if folder:
-        from sahgrasp.stream import is_jsonl
+        from sahgrasp.ik.stream import is_jsonl
 
         if args.html:
             raise InvalidSettingsError("--html shows one object's grasps; give a mesh file")
@@ -187,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
-    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.core.errors import InvalidTargetError
     from sahgrasp.objects import OBJECT_NAMES, load_mesh, load_object
 
     spec = _placement(args)
@@ -218,7 +218,7 @@ def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
 
 def _run_object(args: argparse.Namespace) -> int:
     settings = _settings(args)
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.planner import plan_grasps
 
     out = human_stream(args.json)
@@ -261,9 +261,9 @@ def _lines(doc: dict[str, Any]) -> list[str]:
 
 def _run_folder(args: argparse.Namespace) -> int:
     settings = _settings(args)
-    from sahgrasp.hand import load_hand
+    from sahgrasp.ik.stream import ResultsWriter
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.planner.folder import folder_jobs, plan_jobs
-    from sahgrasp.stream import ResultsWriter
 
     out = human_stream(args.json)
     hand = load_hand(args.hand)
@@ -310,7 +310,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     import hashlib
     import json
 
-    from sahgrasp.stream import RESULTS_FORMAT
+    from sahgrasp.ik.stream import RESULTS_FORMAT
 
     data = {
         "hand": hand.description.name,
@@ -334,7 +334,7 @@ def _executor(args: argparse.Namespace) -> Any:
         return open_executor(args.scheduler)
     if args.workers <= 1:
         return contextlib.nullcontext(None)
-    from sahgrasp.parallel import process_pool
+    from sahgrasp.core.parallel import process_pool
 
     return process_pool(args.workers)
 

@@ -24,15 +24,15 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Literal
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.fileio import write_bytes_atomic
+from sahgrasp.core.tables import format_table
 from sahgrasp.experiments.ik_examples import EXAMPLE_NAMES, solve_example
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.fileio import write_bytes_atomic
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import PAPER_IK_REPORT
-from sahgrasp.tables import format_table
 
 __all__ = ["DOCUMENTS", "TABLES", "DocTablesError", "main", "refresh", "stale_tables"]
 

@@ -33,19 +33,19 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
-from sahgrasp.errors import (
+from sahgrasp.core.errors import (
     InvalidSettingsError,
     InvalidTargetError,
     SahGraspError,
     SequenceFileError,
 )
-from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
+from sahgrasp.core.parallel import check_workers
 from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.learned import GraspDatabase
 from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
-from sahgrasp.parallel import check_workers
+from sahgrasp.model.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
+from sahgrasp.model.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject

@@ -38,12 +38,12 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import lock_output, write_bytes_atomic
-from sahgrasp.hand import Hand, HandDescription, check_made_for
+from sahgrasp.core.errors import SequenceFileError
+from sahgrasp.core.fileio import lock_output, write_bytes_atomic
 from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, HandDescription, check_made_for
 
 if TYPE_CHECKING:
     from sahgrasp.objects.body import GraspObject
@@ -427,8 +427,8 @@ def build_database(
     :data:`PRIMITIVES_PER_CHUNK` primitive solids); each finished chunk is saved in
     ``<out>.parts/`` and a rerun with the same arguments skips it, so an interrupted build
     resumes where it stopped. The result does not depend on the executor or on interruptions.
-    ``out`` is locked while it is built (:func:`sahgrasp.fileio.lock_output`): a second build of
-    the same file is refused, so that one build never removes the parts of another.
+    ``out`` is locked while it is built (:func:`sahgrasp.core.fileio.lock_output`): a second build
+    of the same file is refused, so that one build never removes the parts of another.
 
     Args:
         hand: The hand.

@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.collision import Penetration
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import Hand
+from sahgrasp.collision.hand_self import Penetration
+from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.ik._lm import Pieces
 from sahgrasp.ik.compiled import CONVEX, TIE_M, compiled_tree, describe_shape
+from sahgrasp.model.hand import Hand
 
 # The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
 # solves with an obstacle need it.
@@ -62,8 +62,8 @@ def pieces_of(checker: HandObjectClearance) -> Pieces | None:
     """The checker's object pieces for the compiled verdicts, None if they cannot be compiled.
 
     The compiled verdicts (``Tree.object_clearance``, ``Tree.shapes_near``: GJK in
-    ``sahgrasp/_gjk.h``) know the kinds of :func:`~sahgrasp.ik.compiled.describe_shape`; a piece
-    of another kind, or a hand whose own shapes are not compiled, leaves every query to coal.
+    ``sahgrasp/collision/_gjk.h``) know the kinds of :func:`~sahgrasp.ik.compiled.describe_shape`; a
+    piece of another kind, or a hand whose own shapes are not compiled, leaves every query to coal.
     """
     if not compiled_tree(checker.hand).shape_count:
         return None

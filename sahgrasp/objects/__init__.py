@@ -9,6 +9,8 @@ collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh fil
 Lengths in metres, angles in radians.
 """
 
+from sahgrasp.collision.shapes import CollisionShape, convex_hull, signed_distances
+from sahgrasp.core.frames import as_placement, placement, rotation_about, transform_points
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.catalog import (
     CATALOG,
@@ -24,8 +26,6 @@ from sahgrasp.objects.catalog import (
     register_object,
 )
 from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
-from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
-from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
 from sahgrasp.objects.mesh_file import MeshFileError, MeshSolid, load_mesh
 from sahgrasp.objects.meshing import Mesh, tessellate
 from sahgrasp.objects.patches import ContactRegion, CurvePatch, FixedContact, GraspPatches, Patch

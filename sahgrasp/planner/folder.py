@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.hand import HandDescription
+from sahgrasp.model.hand import HandDescription
 from sahgrasp.objects.mesh_file import MESH_SUFFIXES, MeshFileError
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 

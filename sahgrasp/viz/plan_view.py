@@ -17,8 +17,8 @@ import meshcat.geometry as mg
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.planner.plan import GraspPlan, PlannedGrasp
 from sahgrasp.viz.viewer import Viewer
