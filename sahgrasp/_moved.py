@@ -38,6 +38,7 @@ MOVED: dict[str, str] = {
     "sahgrasp.progress": "sahgrasp.core.progress",
     "sahgrasp.quality_indices": "sahgrasp.quality.indices",
     "sahgrasp.registry": "sahgrasp.core.registry",
+    "sahgrasp.sequence.executors": "sahgrasp.core.executors",
     "sahgrasp.stream": "sahgrasp.ik.stream",
     "sahgrasp.tables": "sahgrasp.core.tables",
     "sahgrasp.wrench": "sahgrasp.quality.wrench",

@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from sahgrasp.core.progress import StderrProgress
     from sahgrasp.ik.learned import build_database, primitive_chunks
     from sahgrasp.model.hand import load_hand
-    from sahgrasp.sequence.executors import open_executor
+    from sahgrasp.core.executors import open_executor
 
     # Every file the run reads is an input: the hand description and its URDF. The database's
     # side files (FILE.parts, FILE.lock) are outputs too.

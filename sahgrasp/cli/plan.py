@@ -329,7 +329,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
 
 def _executor(args: argparse.Namespace) -> Any:
     if args.scheduler is not None:
-        from sahgrasp.sequence.executors import open_executor
+        from sahgrasp.core.executors import open_executor
 
         return open_executor(args.scheduler)
     if args.workers <= 1:

@@ -231,7 +231,7 @@ def _skip_finished(
 def _executor(args: argparse.Namespace) -> Any:
     """Where the chunks run: None (this process), local workers, or a Dask cluster."""
     if args.scheduler is not None:
-        from sahgrasp.sequence.executors import open_executor
+        from sahgrasp.core.executors import open_executor
 
         return open_executor(args.scheduler)
     if args.workers <= 1:

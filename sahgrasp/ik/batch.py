@@ -39,6 +39,7 @@ from sahgrasp.core.errors import (
     SahGraspError,
     SequenceFileError,
 )
+from sahgrasp.core.executors import open_executor
 from sahgrasp.core.parallel import check_workers
 from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.learned import GraspDatabase
@@ -413,8 +414,6 @@ def solve_many(
     items = list(_keyed(targets, obstacle))
     if not items or (executor is None and workers <= 1):
         return list(solve_stream(hand, items, settings, sequence, output="result"))  # type: ignore[arg-type]
-    from sahgrasp.sequence.executors import open_executor
-
     count = 1 if executor is not None else workers
     largest = CHUNK_SIZE if executor is None else CLUSTER_CHUNK_SIZE
     size = max(1, min(largest, math.ceil(len(items) / (CHUNKS_IN_FLIGHT * count))))
