@@ -33,6 +33,7 @@ from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.ik import IKSettings
 from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import PAPER_IK_REPORT
+from sahgrasp.objects.smooth_surface import fit_mesh_patch
 
 __all__ = ["DOCUMENTS", "TABLES", "DocTablesError", "main", "refresh", "stale_tables"]
 
@@ -146,8 +147,6 @@ def _analytic_errors(kind: str, radius: float, subdivisions: int) -> tuple[objec
     """One row of :func:`mesh_model_table`: the mesh, the model's errors to it and to the shape."""
     import numpy as np
     import trimesh
-
-    from sahgrasp.objects.smooth_surface import fit_mesh_patch
 
     if kind == "sphere":
         mesh = trimesh.creation.icosphere(subdivisions, radius)

@@ -34,6 +34,7 @@ from sahgrasp.core.fileio import (
     file_digest,
     json_safe,
     lock_output,
+    read_json,
     side_files,
     write_error,
 )
@@ -145,8 +146,6 @@ def _mesh_of(problem: GraspTarget | InvalidProblem) -> str | None:
 
 def _document_default(path: Path, allow_outside_paths: bool = False) -> ObjectSpec | None:
     """The default object of a JSON targets document (already read and checked whole)."""
-    from sahgrasp.core.fileio import read_json
-
     data = read_json(path, "targets file", InvalidTargetError)
     return object_spec(data.get("object"), path.parent, allow_outside_paths=allow_outside_paths)
 

@@ -21,8 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from sahgrasp.ik import worker_hand
 from sahgrasp.model.hand import HandDescription
+from sahgrasp.objects import load_mesh
 from sahgrasp.objects.mesh_file import MESH_SUFFIXES, MeshFileError
+from sahgrasp.planner.plan import plan_grasps
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 
 __all__ = ["ObjectJob", "folder_jobs", "object_digest", "plan_file", "plan_jobs"]
@@ -72,10 +75,6 @@ def plan_file(
     description: HandDescription, job: ObjectJob, settings: PlanSettings
 ) -> dict[str, Any]:
     """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused)."""
-    from sahgrasp.ik import worker_hand
-    from sahgrasp.objects import load_mesh
-    from sahgrasp.planner.plan import plan_grasps
-
     start = time.perf_counter()
     hand = worker_hand(description, description.digest())
     try:

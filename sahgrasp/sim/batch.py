@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.core.errors import SahGraspError
 from sahgrasp.core.fileio import read_json
+from sahgrasp.core.parallel import process_pool
 from sahgrasp.model.contacts import InvalidProblem, ObjectSpec, object_spec, read_problems
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.sim.hold import HoldResult, HoldTester
@@ -285,8 +286,6 @@ def check_grasps(
         for task, chunk in zip(tasks, where, strict=True):
             record(chunk, _check_chunk(task))  # type: ignore[arg-type]
         return out
-    from sahgrasp.core.parallel import process_pool
-
     with process_pool(min(workers, len(tasks))) as pool:
         for chunk, results in zip(where, pool.map(_check_chunk, tasks), strict=True):
             record(chunk, results)
