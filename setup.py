@@ -15,7 +15,7 @@ setup(
         Extension(
             "sahgrasp." + module.replace("/", "."),
             sources=[f"sahgrasp/{module}.c"],
-            depends=["sahgrasp/_arrays.h", "sahgrasp/_gjk.h"],
+            depends=["sahgrasp/_arrays.h", "sahgrasp/collision/_gjk.h"],
             extra_compile_args=FLAGS,
         )
         for module in MODULES

@@ -21,8 +21,8 @@ import coal
 import numpy as np
 import pinocchio as pin
 
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GRASP_NAMES, load_object, paper_grasp
 from sahgrasp.objects.clearance import HandObjectClearance
 

@@ -1,7 +1,7 @@
 """How many grasp entries would pass through their own solid if solved without it (docs/ik.md).
 
 Draws the contact sets of the shipped SAH database's grasp entries (``sahgrasp learn``'s default
-seed and size: the same solids and sets, :func:`sahgrasp.ik.learned.primitive_grasp_sets`),
+seed and size: the same solids and sets, :func:`sahgrasp.ik.learning.primitive_grasp_sets`),
 solves each from the searched sequence twice, without and with its solid as the obstacle, and
 prints how many are solved each way and how many of the solutions found without the solid are
 inside it (the IK's own acceptance test with the solid).
@@ -16,10 +16,10 @@ import argparse
 from tqdm import tqdm
 
 from sahgrasp.cli.learn import LEARN_DEFAULTS
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, solve_ik
-from sahgrasp.ik.learned import primitive_chunks, primitive_grasp_sets, primitive_object
+from sahgrasp.ik.learning import primitive_chunks, primitive_grasp_sets, primitive_object
 from sahgrasp.ik.solver import ContactProblem
+from sahgrasp.model.hand import load_hand
 
 
 def main() -> None:

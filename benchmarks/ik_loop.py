@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems
 from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.ik.solver import ContactProblem
+from sahgrasp.model.hand import load_hand
 
 
 def main() -> None:

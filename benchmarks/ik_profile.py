@@ -15,8 +15,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, random_problems, solve_ik, solver
+from sahgrasp.model.hand import load_hand
 
 PARTS: tuple[tuple[object, str], ...] = (
     (solver, "_lm_loop"),

@@ -19,11 +19,11 @@ import argparse
 import numpy as np
 from tqdm import tqdm
 
-from sahgrasp.contacts import load_targets
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKResult, IKSettings, random_problems, solve_ik
 from sahgrasp.ik.initial import default_sequence
 from sahgrasp.ik.learned import GraspDatabase
+from sahgrasp.model.contacts import load_targets
+from sahgrasp.model.hand import load_hand
 
 
 def cut(db: GraspDatabase, random_entries: int, grasp_entries: int) -> GraspDatabase:

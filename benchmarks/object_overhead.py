@@ -14,9 +14,9 @@ import argparse
 import time
 from collections.abc import Callable
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, solve_ik
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GRASP_NAMES, GraspObject, load_object, paper_grasp
 
 

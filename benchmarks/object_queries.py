@@ -79,14 +79,14 @@ from sahgrasp.bench.grasps import (
     _object_seed,
     _prepare,
 )
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.collision.shapes import CollisionShape, convex_hull
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik import obstacle as obstacle_module
 from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GraspObject, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.objects.collision import CollisionShape, convex_hull
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
 from sahgrasp.objects.mesh_file import MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count

@@ -14,9 +14,9 @@ import dataclasses
 
 from tqdm import tqdm
 
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, Sequence, random_problems, solve_ik
 from sahgrasp.ik.initial import PAPER_TABLE1_LAMBDAS, default_sequence
+from sahgrasp.model.hand import Hand, load_hand
 
 COLUMNS = (1, 2, 3, 4, 6, 8, 12)
 

@@ -24,8 +24,8 @@ from sahgrasp.experiments.atlas_examples import planar_drawing
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.report import result_lines
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.planar import PlanarGraspProblem
-from sahgrasp.quality import SINGULAR_THRESHOLDS
+from sahgrasp.optimization.planar import PlanarGraspProblem
+from sahgrasp.quality.ellipsoids import SINGULAR_THRESHOLDS
 from sahgrasp.viz import Viewer, present, show_atlas_scene, translation
 from sahgrasp.viz.planar_view import show_planar_grasp, upright
 

@@ -16,13 +16,13 @@ import sys
 from collections.abc import Sequence
 from typing import cast
 
+from sahgrasp.core.progress import StderrProgress
 from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument, atlas_geometry
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.report import result_lines
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.grasp import SahGraspManifold
-from sahgrasp.progress import StderrProgress
-from sahgrasp.quality import SINGULAR_THRESHOLDS
+from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.quality.ellipsoids import SINGULAR_THRESHOLDS
 from sahgrasp.viz import ChartGrasp, Viewer, present, show_atlas_grasps
 
 EXPERIMENTS = ("can", "bottle")

@@ -9,9 +9,10 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
+from sahgrasp import _moved
+
 if TYPE_CHECKING:
-    from sahgrasp.contacts import ContactTarget, GraspTarget, load_targets, save_targets
-    from sahgrasp.errors import (
+    from sahgrasp.core.errors import (
         AtlasError,
         HandModelError,
         InvalidConfigurationError,
@@ -19,13 +20,14 @@ if TYPE_CHECKING:
         SahGraspError,
         SequenceFileError,
     )
-    from sahgrasp.hand import Hand, HandDescription, load_hand
     from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
+    from sahgrasp.model.contacts import ContactTarget, GraspTarget, load_targets, save_targets
+    from sahgrasp.model.hand import Hand, HandDescription, load_hand
     from sahgrasp.planner import GraspPlan, PlanSettings, plan_grasps
 
 _EXPORTS = {
-    "sahgrasp.contacts": ("ContactTarget", "GraspTarget", "load_targets", "save_targets"),
-    "sahgrasp.errors": (
+    "sahgrasp.model.contacts": ("ContactTarget", "GraspTarget", "load_targets", "save_targets"),
+    "sahgrasp.core.errors": (
         "AtlasError",
         "HandModelError",
         "InvalidConfigurationError",
@@ -33,10 +35,12 @@ _EXPORTS = {
         "SahGraspError",
         "SequenceFileError",
     ),
-    "sahgrasp.hand": ("Hand", "HandDescription", "load_hand"),
+    "sahgrasp.model.hand": ("Hand", "HandDescription", "load_hand"),
     "sahgrasp.ik": ("IKResult", "IKSettings", "solve_ik", "solve_many"),
     "sahgrasp.planner": ("GraspPlan", "PlanSettings", "plan_grasps"),
 }
+_moved.install()  # old module paths import for one release, with a DeprecationWarning
+
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [

@@ -1,6 +1,6 @@
 import pytest
 
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.model.hand import Hand, load_hand
 
 
 @pytest.fixture(scope="session")

@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas, project
 from sahgrasp.atlas._polytope import det_signs, min_singular_values
 from sahgrasp.atlas.polytope import Polytope
-from sahgrasp.errors import AtlasError
+from sahgrasp.core.errors import AtlasError
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 

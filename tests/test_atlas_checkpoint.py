@@ -11,7 +11,7 @@ import pytest
 
 from sahgrasp.atlas import Atlas, AtlasCheckpoint, AtlasSettings, build_atlas
 from sahgrasp.atlas.polytope import Polytope
-from sahgrasp.errors import AtlasError
+from sahgrasp.core.errors import AtlasError
 
 
 def sphere_f(x: np.ndarray) -> np.ndarray:

@@ -11,8 +11,8 @@ from scipy.spatial import cKDTree
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.atlas.polytope import Polytope, compatible
-from sahgrasp.errors import AtlasError
-from sahgrasp.planar import make_planar_problem
+from sahgrasp.core.errors import AtlasError
+from sahgrasp.optimization.planar import make_planar_problem
 
 
 def sphere_f(x: np.ndarray) -> np.ndarray:

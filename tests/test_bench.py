@@ -17,13 +17,13 @@ from sahgrasp.bench import ik as bench_ik
 from sahgrasp.bench import kinematics as bench_kinematics
 from sahgrasp.bench.peers import available_peers
 from sahgrasp.bench.report import summary_table
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.progress import StderrProgress
+from sahgrasp.core.tables import format_table
 from sahgrasp.ik import IKSettings
 from sahgrasp.ik.learned import default_database
-from sahgrasp.progress import StderrProgress
-from sahgrasp.tables import format_table
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 
 ROOT = Path(__file__).resolve().parent.parent
 CLI = "import sys; from sahgrasp.cli import main; sys.exit(main(sys.argv[1:]))"

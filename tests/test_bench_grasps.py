@@ -11,10 +11,10 @@ from sahgrasp.bench.grasps import (
     format_table,
     run,
 )
-from sahgrasp.contacts import load_targets
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.contacts import load_targets
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import load_object, paper_grasp, placement
 
 ROW_FIELDS = {

@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from PIL import Image
 
 from sahgrasp.experiments.ik_examples import show_examples, solve_example
-from sahgrasp.hand import Hand
+from sahgrasp.model.hand import Hand
 from sahgrasp.viz import Viewer
 from sahgrasp.viz.screenshot import find_chromium, screenshot
 

@@ -18,10 +18,10 @@ import pytest
 
 from sahgrasp.atlas import _planar, _polytope, _quality
 from sahgrasp.atlas._polytope import Polytope
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import _lm, compiled
 from sahgrasp.ik.compiled import _export, _shapes, _tree_arguments, compiled_tree, tree_joint
-from sahgrasp.planar import make_planar_problem
+from sahgrasp.model.hand import Hand, load_hand
+from sahgrasp.optimization.planar import make_planar_problem
 
 
 @dataclass(frozen=True)

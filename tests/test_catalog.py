@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sahgrasp.contacts import object_spec
-from sahgrasp.errors import InvalidTargetError
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.model.contacts import object_spec
 from sahgrasp.objects import (
     CATALOG,
     GRASP_NAMES,

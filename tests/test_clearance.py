@@ -7,12 +7,12 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.collision import CollisionPair
-from sahgrasp.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
+from sahgrasp.collision.hand_self import CollisionPair
+from sahgrasp.core.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
 from sahgrasp.experiments.ik_examples import solve_example
 from sahgrasp.experiments.setups import SAH_EXPERIMENTS, run_experiment
-from sahgrasp.hand import Hand
 from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import (
     GRASP_NAMES,
     BoxSolid,

@@ -19,9 +19,9 @@ import numpy as np
 import psutil
 import pytest
 
-from sahgrasp.contacts import save_targets
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings, random_problems
+from sahgrasp.model.contacts import save_targets
+from sahgrasp.model.hand import load_hand
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("numpy", "pinocchio", "coal", "scipy", "matplotlib", "meshcat", "dask", "trimesh", "tqdm")
@@ -127,7 +127,7 @@ def test_cli_defaults_are_the_library_defaults() -> None:
     from sahgrasp.bench import sequence as bench_sequence
     from sahgrasp.cli import sequence as sequence_cli
     from sahgrasp.experiments.arguments import INDEX_CHOICES
-    from sahgrasp.quality import INDICES
+    from sahgrasp.quality.ellipsoids import INDICES
     from sahgrasp.sequence import SearchSettings
 
     assert INDEX_CHOICES == INDICES
@@ -706,8 +706,8 @@ def test_resume_matches_results_by_problem_not_by_name(files: Path, tmp_path: Pa
     done = sahgrasp(*solve, "--resume", cwd=tmp_path)
     assert done.returncode in (0, 1) and _resumed(done) == 1, done.stdout + done.stderr
     assert "differs from the one" in done.stdout
-    from sahgrasp.contacts import problem_from_json
-    from sahgrasp.stream import problem_digest
+    from sahgrasp.ik.stream import problem_digest
+    from sahgrasp.model.contacts import problem_from_json
 
     lines = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()[1:]]
     assert [e["problem_digest"] for e in lines] == [
@@ -741,7 +741,7 @@ def test_a_jsonl_output_in_a_missing_folder_is_made_before_the_work(
 
 
 def test_learn_refuses_its_inputs_and_a_locked_output(tmp_path: Path) -> None:
-    from sahgrasp.fileio import lock_output
+    from sahgrasp.core.fileio import lock_output
 
     description, _ = _my_hand(tmp_path)
     before = description.read_bytes()
@@ -822,8 +822,8 @@ def test_time_ms_is_the_solve_and_setup_ms_the_object(
 ) -> None:
     """Building an object's collision pieces is set-up, reported apart from the solve."""
     from sahgrasp.cli.solve import results_document
-    from sahgrasp.contacts import GraspTarget, ObjectSpec
     from sahgrasp.ik.batch import solve_chunks
+    from sahgrasp.model.contacts import GraspTarget, ObjectSpec
     from sahgrasp.objects import paper_grasp
     from sahgrasp.objects.clearance import HandObjectClearance
 

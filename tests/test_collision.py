@@ -1,4 +1,4 @@
-"""Process-wide state of coal that :mod:`sahgrasp.collision` settles on import.
+"""Process-wide state of coal that :mod:`sahgrasp.collision.hand_self` settles on import.
 
 Each check runs in a fresh interpreter: the state under test is set once per process.
 """
@@ -31,7 +31,7 @@ coal.distance(box, coal.Transform3s(), box, beside, coal.DistanceRequest(), coal
 # cup reads box witnesses, and before the fix took 332 iterations in a fresh process and 338 after
 # any earlier box query.
 _CUP_SOLVE = """
-from sahgrasp.hand import load_hand
+from sahgrasp.model.hand import load_hand
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.objects import load_object
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
@@ -56,14 +56,16 @@ def _run(code: str) -> str:
 
 def test_import_settles_the_box_rule_before_any_query() -> None:
     out = _run(
-        "import sahgrasp.collision as c\n" + _TURNED_BOX_QUERY + "print(c.settle_box_support())"
+        "import sahgrasp.collision.hand_self as c\n"
+        + _TURNED_BOX_QUERY
+        + "print(c.settle_box_support())"
     )
     assert out.strip() == "True"
 
 
 def test_a_box_query_before_the_import_is_reported() -> None:
-    out = _run(_TURNED_BOX_QUERY + "import sahgrasp.collision")
-    assert "RuntimeWarning: coal answered a box query before sahgrasp.collision" in out
+    out = _run(_TURNED_BOX_QUERY + "import sahgrasp.collision.hand_self")
+    assert "RuntimeWarning: coal answered a box query before sahgrasp.collision.hand_self" in out
 
 
 def _solve_after(prelude: str) -> list[object]:
@@ -74,4 +76,4 @@ def _solve_after(prelude: str) -> list[object]:
 @pytest.mark.slow
 @pytest.mark.parametrize("query", [_AXIS_BOX_QUERY, _TURNED_BOX_QUERY], ids=["axis", "turned"])
 def test_object_solve_is_the_same_after_an_earlier_box_query(query: str) -> None:
-    assert _solve_after("import sahgrasp.collision\n" + query) == _solve_after("")
+    assert _solve_after("import sahgrasp.collision.hand_self\n" + query) == _solve_after("")

@@ -11,8 +11,6 @@ import pinocchio as pin
 import pytest
 from scipy.linalg import solve
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand, load_hand, sah_description
 from sahgrasp.ik import IKSettings, hang_from_thumb, random_problems, solve_ik
 from sahgrasp.ik._lm import Tree
 from sahgrasp.ik.compiled import (
@@ -26,6 +24,8 @@ from sahgrasp.ik.compiled import (
     self_collides,
 )
 from sahgrasp.ik.solver import ContactProblem, _lm_loop
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, load_hand, sah_description
 
 FINGER_SETS = (None, [0, 2, 3], [1])
 

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sahgrasp.contacts import (
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.model.contacts import (
     ContactTarget,
     GraspTarget,
     InvalidProblem,
@@ -13,8 +14,7 @@ from sahgrasp.contacts import (
     read_problems,
     save_targets,
 )
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import Hand
+from sahgrasp.model.hand import Hand
 
 FINGERS = ("thumb", "index", "middle", "ring")
 
@@ -171,7 +171,7 @@ MUG = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
 
 
 def test_an_object_spec_names_a_catalog_object_or_a_mesh_placed_in_the_world() -> None:
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     can = object_spec({"name": "can", "xyz": [0.1, 0, 0], "quat": [0, 0, 1, 0]}, ".")
     assert can is not None and can.load().name == "can"
@@ -199,7 +199,7 @@ def test_an_object_spec_names_a_catalog_object_or_a_mesh_placed_in_the_world() -
     ],
 )
 def test_a_bad_object_spec_is_refused_with_the_reason(spec: object, message: str) -> None:
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     with pytest.raises(InvalidTargetError, match=message):
         object_spec(spec, MUG.parent)
@@ -361,8 +361,8 @@ def test_unreachable_mesh_paths_make_only_their_problem_invalid(tmp_path: Path) 
 
 
 def test_a_byte_order_mark_is_skipped_in_json_and_json_lines(tmp_path: Path) -> None:
-    from sahgrasp.contacts import problem_from_line
-    from sahgrasp.stream import open_targets
+    from sahgrasp.ik.stream import open_targets
+    from sahgrasp.model.contacts import problem_from_line
 
     line = json.dumps({"name": "bom", "contacts": CONTACTS}).encode()
     found = problem_from_line(b"\xef\xbb\xbf" + line, 0)
@@ -376,7 +376,7 @@ def test_a_byte_order_mark_is_skipped_in_json_and_json_lines(tmp_path: Path) -> 
 
 
 def test_json_lines_targets_confine_mesh_paths_too(tmp_path: Path) -> None:
-    from sahgrasp.stream import open_targets
+    from sahgrasp.ik.stream import open_targets
 
     lines = [{"hand": "sah"}, {"contacts": CONTACTS, "object": {"mesh": str(MUG)}}]
     path = tmp_path / "t.jsonl"
@@ -393,7 +393,7 @@ def test_json_lines_targets_confine_mesh_paths_too(tmp_path: Path) -> None:
 def test_a_mesh_object_takes_its_unit_as_scale(tmp_path: Path) -> None:
     import trimesh
 
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     trimesh.creation.box((50.0, 40.0, 30.0)).export(tmp_path / "box_mm.stl")
     spec = object_spec({"mesh": "box_mm.stl", "scale": 0.001}, tmp_path)
@@ -414,8 +414,8 @@ def test_placements_of_one_mesh_share_one_build(
     import shutil
 
     import sahgrasp.objects as objects
-    from sahgrasp.contacts import ObjectCache, object_spec
     from sahgrasp.ik.batch import worker_obstacle
+    from sahgrasp.model.contacts import ObjectCache, object_spec
 
     shutil.copy(MUG, tmp_path / "mug.stl")
     loads = []
@@ -445,7 +445,7 @@ def test_placements_of_one_mesh_share_one_build(
 def test_saved_targets_name_meshes_relative_to_their_folder(tmp_path: Path) -> None:
     import shutil
 
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     shutil.copy(MUG, tmp_path / "mug.stl")
     spec = object_spec({"mesh": "mug.stl", "scale": 1.0}, tmp_path)

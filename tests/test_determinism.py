@@ -8,8 +8,6 @@ from collections.abc import Sequence
 
 import pytest
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import (
     IKResult,
     IKSettings,
@@ -19,6 +17,8 @@ from sahgrasp.ik import (
     solve_many,
 )
 from sahgrasp.ik.starts import initial_lambdas, problem_seed
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import BoxSolid, GraspObject
 
 PROBLEMS = 40

@@ -13,12 +13,12 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp.contacts import save_targets
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.executors import open_executor
+from sahgrasp.core.parallel import SchedulerError
 from sahgrasp.ik import random_problems
-from sahgrasp.parallel import SchedulerError
-from sahgrasp.sequence.executors import open_executor
+from sahgrasp.model.contacts import save_targets
+from sahgrasp.model.hand import load_hand
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

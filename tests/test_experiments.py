@@ -17,7 +17,7 @@ from sahgrasp.experiments.arguments import (
     atlas_geometry,
 )
 from sahgrasp.experiments.setups import EXPERIMENTS, experiment_settings
-from sahgrasp.quality import INDICES
+from sahgrasp.quality.ellipsoids import INDICES
 
 ROOT = Path(__file__).resolve().parent.parent
 

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.fileio import (
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.core.fileio import (
     OutputLockedError,
     OutputPathError,
     OutputWriteError,

@@ -1,10 +1,11 @@
 """Fuzzing the public API's arguments: hostile values give a typed error or a valid answer.
 
 Every argument of the public functions (``solve_ik``, ``solve_many``, ``IKSettings``,
-``random_problems`` and the public methods of :class:`~sahgrasp.hand.Hand`) is replaced by values a
-careless or hostile caller passes: None, integers far out of range, NaN and infinities, wrong
-types. Each call must return or raise a :class:`SahGraspError` subclass: never ``AttributeError``,
-``OverflowError`` from the C loop, an ``IndexError``, or a silently wrapped index.
+``random_problems`` and the public methods of :class:`~sahgrasp.model.hand.Hand`) is replaced by
+values a careless or hostile caller passes: None, integers far out of range, NaN and infinities,
+wrong types. Each call must return or raise a :class:`SahGraspError` subclass: never
+``AttributeError``, ``OverflowError`` from the C loop, an ``IndexError``, or a silently wrapped
+index.
 """
 
 from __future__ import annotations
@@ -21,14 +22,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sahgrasp import IKSettings, solve_ik, solve_many
-from sahgrasp.errors import (
+from sahgrasp.core.errors import (
     InvalidConfigurationError,
     InvalidSettingsError,
     InvalidTargetError,
     SahGraspError,
 )
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import random_problems
+from sahgrasp.model.hand import Hand, load_hand
 
 EXAMPLES = 60
 

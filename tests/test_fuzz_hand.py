@@ -23,8 +23,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sahgrasp.errors import HandModelError
-from sahgrasp.hand import load_hand, sah_description
+from sahgrasp.core.errors import HandModelError
+from sahgrasp.model.hand import load_hand, sah_description
 
 pytestmark = pytest.mark.slow  # random hands built and solved: several seconds
 

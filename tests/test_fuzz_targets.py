@@ -19,10 +19,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sahgrasp.contacts import GraspTarget, InvalidProblem, load_targets, read_problems, save_targets
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.ik import random_problems
+from sahgrasp.model.contacts import (
+    GraspTarget,
+    InvalidProblem,
+    load_targets,
+    read_problems,
+    save_targets,
+)
+from sahgrasp.model.hand import load_hand
 
 ROOT = Path(__file__).resolve().parent.parent
 KEYS = ("hand", "problems", "name", "contacts", "finger", "point", "normal", "thumb", "index",

@@ -8,14 +8,17 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp import optimization
-from sahgrasp.errors import (
+from sahgrasp.core.errors import (
     GraspSystemError,
     InvalidSettingsError,
     OptimizationError,
     PrincipalMotionsError,
 )
-from sahgrasp.grasp import (
+from sahgrasp.ik import IKSettings
+from sahgrasp.model.hand import Hand
+from sahgrasp.objects import bottle_patches, can_patches, load_object
+from sahgrasp.optimization import optimizer as optimization_module
+from sahgrasp.optimization.grasp import (
     GraspSystem,
     coordinate_scales,
     first_grasp_system,
@@ -23,11 +26,8 @@ from sahgrasp.grasp import (
     make_sah_manifold,
     reduced_system,
 )
-from sahgrasp.hand import Hand
-from sahgrasp.ik import IKSettings
-from sahgrasp.motions import principal_motions
-from sahgrasp.objects import bottle_patches, can_patches, load_object
-from sahgrasp.optimization import OptimizationSettings, optimize
+from sahgrasp.optimization.motions import principal_motions
+from sahgrasp.optimization.optimizer import OptimizationSettings, optimize
 
 EXPECTED_T = {"can": 11, "bottle": 12, "bottle-spinless": 11}  # 16 + params + pose - 15
 PATCHES = {"can": can_patches, "bottle": bottle_patches, "bottle-spinless": bottle_patches}
@@ -247,7 +247,7 @@ def test_chart_checks_on_worker_processes_are_those_of_this_process(
     sah: Hand, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The can leaves the ring free: workers place it and check both collisions as here."""
-    monkeypatch.setattr(optimization, "_CHECK_BATCH", 8)  # several batches during the build
+    monkeypatch.setattr(optimization_module, "_CHECK_BATCH", 8)  # several batches during the build
     problem = make_sah_manifold(sah, can_patches(), k=2, obj=load_object("can"))
     here = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5))
     spread = optimize(problem, OptimizationSettings(radius=0.15, epsilon=0.5, workers=2))

@@ -5,10 +5,10 @@ import pytest
 import trimesh.creation
 import trimesh.triangles
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import SahGraspError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import SahGraspError
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import load_object
 from sahgrasp.objects.grasp_sampler import (
     FINGERS,

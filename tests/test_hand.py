@@ -9,9 +9,9 @@ import pinocchio as pin
 import pytest
 import yourdfpy
 
-from sahgrasp import hand as hand_module
-from sahgrasp.errors import HandModelError, InvalidConfigurationError, InvalidSettingsError
-from sahgrasp.hand import Hand, HandDescription, load_hand, sah_description
+from sahgrasp.core.errors import HandModelError, InvalidConfigurationError, InvalidSettingsError
+from sahgrasp.model import hand as hand_module
+from sahgrasp.model.hand import Hand, HandDescription, load_hand, sah_description
 
 DEG = math.pi / 180
 

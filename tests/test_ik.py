@@ -6,10 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.collision import SelfCollision
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError, SequenceFileError
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.collision.hand_self import SelfCollision
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError, SequenceFileError
 from sahgrasp.ik import (
     IKSettings,
     Sequence,
@@ -27,6 +25,8 @@ from sahgrasp.ik.solver import (
     _separate,
     run_algorithm1,
 )
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import BoxSolid, GraspObject, can_patches, load_object
 
 

@@ -11,21 +11,21 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand
-from sahgrasp.ik import learned, random_problems, solve_ik
+from sahgrasp.ik import learned, learning, random_problems, solve_ik
 from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.ik.learned import (
     LEARN_SEED,
     GraspDatabase,
     GraspDatabaseError,
-    build_database,
     contact_key,
     default_database,
     rigid_features,
     target_key,
 )
+from sahgrasp.ik.learning import build_database
 from sahgrasp.ik.solver import ContactProblem
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -205,8 +205,8 @@ def test_grasp_entries_do_not_pass_through_their_solids(sah: Hand, tmp_path: Pat
     db = build_database(sah, 1, tmp_path / "db.npz", seed=9, grasp_sets=10)
     entries = db.configurations[1:].astype(np.float64)
     matched = np.zeros(len(entries), dtype=bool)
-    for mesh, targets in learned.primitive_grasp_sets(sah, 9, 0, 2):
-        solid = learned.primitive_object(mesh)
+    for mesh, targets in learning.primitive_grasp_sets(sah, 9, 0, 2):
+        solid = learning.primitive_object(mesh)
         for target in targets:
             problem = ContactProblem(sah, target, obstacle=solid)
             for i, q in enumerate(entries):

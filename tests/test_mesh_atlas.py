@@ -11,19 +11,19 @@ import numpy as np
 import pytest
 import trimesh
 
-from sahgrasp.contacts import GraspTarget
 from sahgrasp.experiments.mesh_atlas import (
     MeshStart,
     optimize_mesh_grasps,
     read_starts,
     verify_grasp,
 )
-from sahgrasp.grasp import GraspSystem, mesh_patches
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GraspObject, load_mesh
 from sahgrasp.objects.grasp_sampler import sample_object_grasps
-from sahgrasp.optimization import OptimizationSettings
+from sahgrasp.optimization.grasp import GraspSystem, mesh_patches
+from sahgrasp.optimization.optimizer import OptimizationSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 FINGERS = ("thumb", "index", "middle")
@@ -132,7 +132,7 @@ def test_starts_are_read_from_a_plan_or_a_targets_file(
     (tmp_path / "bad.json").write_text(
         json.dumps({"grasps": [{"contacts": grasp["contacts"][:1]}]})
     )
-    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.core.errors import InvalidTargetError
 
     with pytest.raises(InvalidTargetError, match="two or more contacts"):
         read_starts(tmp_path / "bad.json", hand)

@@ -16,9 +16,9 @@ import trimesh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sahgrasp.errors import SahGraspError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import SahGraspError
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import MeshFileError, load_mesh
 
 MESHES = Path(__file__).resolve().parents[1] / "examples" / "meshes"

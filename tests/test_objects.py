@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import InvalidTargetError
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.objects import (
     GRASP_NAMES,
     OBJECT_NAMES,

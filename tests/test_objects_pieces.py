@@ -15,8 +15,8 @@ import pytest
 import trimesh
 from numpy.typing import NDArray
 
+from sahgrasp.collision.shapes import CollisionShape, signed_distances
 from sahgrasp.objects import load_object, mesh_file
-from sahgrasp.objects.collision import CollisionShape, signed_distances
 from sahgrasp.objects.mesh_file import MERGE_TOLERANCE_M, MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count
 from sahgrasp.objects.solids import COLLISION_SAGITTA_M, RevolvedSolid, _bands, _slabs

@@ -10,11 +10,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from sahgrasp.hand import Hand
 from sahgrasp.ik import solve_ik
 from sahgrasp.ik._lm import Pieces
 from sahgrasp.ik.compiled import describe_shape
 from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle, checker_of, pieces_of
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, load_mesh, load_object
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
 

@@ -7,22 +7,27 @@ import json
 import numpy as np
 import pytest
 
-from sahgrasp.errors import GraspSystemError, OptimizationError, QualityError
+from sahgrasp.core.errors import GraspSystemError, OptimizationError, QualityError
 from sahgrasp.experiments.atlas_examples import show_optimization
 from sahgrasp.experiments.report import collision_notes, summary
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.grasp import SahGraspManifold, coordinate_scales, ik_seeds, make_sah_manifold
-from sahgrasp.hand import Hand
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.optimization import (
+from sahgrasp.optimization.grasp import (
+    SahGraspManifold,
+    coordinate_scales,
+    ik_seeds,
+    make_sah_manifold,
+)
+from sahgrasp.optimization.optimizer import (
     ChartChecks,
     OptimizationResult,
     OptimizationSettings,
     optimize,
     optimize_components,
 )
-from sahgrasp.quality import Manipulability
+from sahgrasp.quality.ellipsoids import Manipulability
 from sahgrasp.viz import Viewer
 from sahgrasp.viz.atlas_view import COLLIDING_RGB
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.parallel import (
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.parallel import (
     SINGLE_THREADED_BLAS,
     SchedulerError,
     check_scheduler_address,
@@ -31,7 +31,7 @@ CLI = "import sys; from sahgrasp.cli import main; sys.exit(main())"
 WATCH_ONLY = """
 import multiprocessing, os, time
 from concurrent.futures import ProcessPoolExecutor
-from sahgrasp.parallel import watch_parent
+from sahgrasp.core.parallel import watch_parent
 
 if __name__ == "__main__":
     spawn = multiprocessing.get_context("spawn")

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from sahgrasp.atlas._planar import features, jacobian
-from sahgrasp.errors import AtlasError, GraspSystemError, OptimizationError
+from sahgrasp.core.errors import AtlasError, GraspSystemError, OptimizationError
 from sahgrasp.experiments.plotting import plot_planar
 from sahgrasp.experiments.report import summary
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
-from sahgrasp.planar import DEFAULT_HAND, PlanarGraspProblem, make_planar_problem
-from sahgrasp.quality import INDICES
+from sahgrasp.optimization.optimizer import OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.optimization.planar import DEFAULT_HAND, PlanarGraspProblem, make_planar_problem
+from sahgrasp.quality.ellipsoids import INDICES
 
 PAPER = OptimizationSettings(radius=0.125, epsilon=0.4)
 

@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from sahgrasp.cli import main
-from sahgrasp.hand import load_hand
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import load_mesh
 from sahgrasp.planner import PlanningError, PlanSettings, plan_grasps
 from sahgrasp.planner.verify import GraspVerifier

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 
-from sahgrasp.progress import StderrProgress
+from sahgrasp.core.progress import StderrProgress
 
 
 class _Terminal(io.StringIO):

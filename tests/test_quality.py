@@ -8,8 +8,8 @@ import pytest
 from sahgrasp.atlas import AtlasSettings, build_atlas
 from sahgrasp.atlas._quality import orthogonal_tail
 from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
-from sahgrasp.errors import QualityError
-from sahgrasp.quality import (
+from sahgrasp.core.errors import QualityError
+from sahgrasp.quality.ellipsoids import (
     INDICES,
     SINGULAR_THRESHOLDS,
     ellipsoid_indices,

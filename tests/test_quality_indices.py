@@ -12,12 +12,12 @@ import pytest
 from numpy.typing import NDArray
 
 from sahgrasp.cli import atlas as atlas_command
-from sahgrasp.errors import QualityError
+from sahgrasp.core.errors import QualityError
 from sahgrasp.experiments.arguments import INDEX_CHOICES
 from sahgrasp.experiments.report import summary
-from sahgrasp.optimization import OptimizationSettings, optimize
-from sahgrasp.planar import make_planar_problem
-from sahgrasp.quality import (
+from sahgrasp.optimization.optimizer import OptimizationSettings, optimize
+from sahgrasp.optimization.planar import make_planar_problem
+from sahgrasp.quality.ellipsoids import (
     INDICES,
     QUALITY_INDICES,
     SINGULAR_THRESHOLDS,
@@ -25,7 +25,7 @@ from sahgrasp.quality import (
     ellipsoid_indices,
     register_index,
 )
-from sahgrasp.quality_indices import Ellipsoids
+from sahgrasp.quality.indices import Ellipsoids
 
 
 def _largest_semiaxis(ellipsoids: Ellipsoids) -> NDArray[np.float64]:

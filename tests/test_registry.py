@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.registry import Registry
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.registry import Registry
 
 
 def test_entries_keep_their_order_and_views_stay_live() -> None:

@@ -20,10 +20,10 @@ import numpy as np
 import pytest
 
 from sahgrasp.cli import sequence as sequence_cli
-from sahgrasp.errors import InvalidSettingsError, SequenceFileError
-from sahgrasp.fileio import write_bytes_atomic
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.core.errors import InvalidSettingsError, SequenceFileError
+from sahgrasp.core.fileio import write_bytes_atomic
 from sahgrasp.ik import IKSettings, Sequence, pose_basis
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.sequence import (
     Chunk,
     Progress,
@@ -411,7 +411,7 @@ def test_a_failed_write_leaves_the_old_file_and_no_temporary(
         raise OSError("disk full")
 
     monkeypatch.setattr(os, "replace", fail)
-    from sahgrasp.fileio import OutputWriteError
+    from sahgrasp.core.fileio import OutputWriteError
 
     with pytest.raises(OutputWriteError, match=r"cannot write .*round-001\.json: disk full"):
         write_bytes_atomic(path, b"new")

@@ -11,9 +11,9 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.ik import IKResult, solve_ik
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import BoxSolid, GraspObject, load_object, paper_grasp
 from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings, HoldTester, hold_test
 

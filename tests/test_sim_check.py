@@ -14,8 +14,8 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import solve_ik
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import paper_grasp
 from sahgrasp.sim import HoldSettings
 from sahgrasp.sim.batch import check_grasps, read_grasps

@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from sahgrasp.hand import load_hand
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import load_object
 from sahgrasp.planner import PlanSettings, plan_grasps
 from sahgrasp.sim import DirectionResult, HoldResult, HoldSettings

@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKResult, IKSettings, random_problems, solve_many
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 
 psutil = pytest.importorskip("psutil")
 
@@ -223,7 +223,7 @@ def test_a_bad_default_object_is_a_one_line_error(tmp_path: Path) -> None:
 
 
 def test_solve_many_takes_one_object_per_target(hand: Hand) -> None:
-    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.core.errors import InvalidTargetError
     from sahgrasp.objects import load_object, paper_grasp
 
     can, grasp = load_object("can"), paper_grasp("can")

@@ -1,4 +1,4 @@
-"""JSON Lines targets and results files (sahgrasp.stream), without solving."""
+"""JSON Lines targets and results files (sahgrasp.ik.stream), without solving."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp.contacts import GraspTarget, InvalidProblem
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.ik import IKSettings, default_sequence, random_problem
-from sahgrasp.stream import MAX_LINE_BYTES, ResultsWriter, open_targets, settings_header
+from sahgrasp.ik.stream import MAX_LINE_BYTES, ResultsWriter, open_targets, settings_header
+from sahgrasp.model.contacts import GraspTarget, InvalidProblem
+from sahgrasp.model.hand import load_hand
 
 GOOD = random_problem(load_hand("sah"), 5151, 0).to_dict()
 
@@ -118,7 +118,7 @@ def test_a_byte_order_mark_before_the_first_line_is_accepted(tmp_path: Path) -> 
 
 
 def test_a_second_writer_of_the_same_output_is_refused(tmp_path: Path) -> None:
-    from sahgrasp.fileio import OutputLockedError
+    from sahgrasp.core.fileio import OutputLockedError
 
     out = tmp_path / "r.jsonl"
     first = ResultsWriter(out, _header(), resume=False)
@@ -150,7 +150,7 @@ def test_a_refused_resume_leaves_the_finished_output_in_place(tmp_path: Path) ->
 
 
 def test_resume_keeps_the_results_of_unchanged_problems_only(tmp_path: Path) -> None:
-    from sahgrasp.stream import problem_digest
+    from sahgrasp.ik.stream import problem_digest
 
     problems = [GraspTarget.from_dict({**GOOD, "name": n}) for n in "abc"]
     digests = [problem_digest(p) for p in problems]

@@ -16,16 +16,16 @@ import pytest
 from polling import gone, until
 
 from sahgrasp.cli import main
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import VizError
+from sahgrasp.core.errors import VizError
 from sahgrasp.experiments.ik_examples import (
     EXAMPLE_NAMES,
     format_report,
     show_examples,
     solve_example,
 )
-from sahgrasp.hand import Hand
 from sahgrasp.ik import random_problem, solve_ik
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import load_object, paper_grasp, transform_points
 from sahgrasp.viz import (
     CAMERA_FOV_DEG,

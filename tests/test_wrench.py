@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from sahgrasp.wrench import (
+from sahgrasp.quality.wrench import (
     WrenchError,
     cone_edges,
     epsilon,

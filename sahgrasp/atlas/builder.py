@@ -31,8 +31,8 @@ from sahgrasp.atlas.projection import (
     regular_point,
     tangent_many,
 )
-from sahgrasp.errors import AtlasError
-from sahgrasp.progress import ProgressCallback, StderrProgress
+from sahgrasp.core.errors import AtlasError
+from sahgrasp.core.progress import ProgressCallback, StderrProgress
 
 __all__ = ["build_atlas"]
 

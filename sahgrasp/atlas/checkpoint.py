@@ -9,11 +9,11 @@ neighbours, pending planes, polytope with its blocked vertices, flags), the queu
 points and the counters; the neighbour index is rebuilt from the centres it had indexed.
 
 The file is a NumPy ``.npz`` archive read with ``allow_pickle=False`` (no code runs on reading),
-written atomically (:func:`sahgrasp.fileio.write_bytes_atomic`) while a lock file
+written atomically (:func:`sahgrasp.core.fileio.write_bytes_atomic`) while a lock file
 (``FILE.lock``, ``flock``) keeps a second build from writing the same checkpoint. A checkpoint
 names the problem it belongs to (``key``, chosen by the caller, and the start point, ``k``,
 ``n``, the radius, epsilon and the other settings that shape the atlas); resuming another
-problem's checkpoint is an :class:`~sahgrasp.errors.AtlasError`.
+problem's checkpoint is an :class:`~sahgrasp.core.errors.AtlasError`.
 """
 
 from __future__ import annotations
@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from sahgrasp.errors import AtlasError
-from sahgrasp.fileio import write_bytes_atomic
+from sahgrasp.core.errors import AtlasError
+from sahgrasp.core.fileio import write_bytes_atomic
 
 __all__ = ["FORMAT", "AtlasCheckpoint", "checkpoint_lock", "deferred_interrupts"]
 

@@ -7,7 +7,7 @@ from numpy.typing import ArrayLike
 
 from sahgrasp.atlas.model import AtlasSettings, FloatArray, Function
 from sahgrasp.atlas.projection import Point, project, regular_point
-from sahgrasp.errors import AtlasError
+from sahgrasp.core.errors import AtlasError
 
 __all__ = ["check_bounds", "start_point"]
 

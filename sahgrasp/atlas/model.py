@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.errors import AtlasError
+from sahgrasp.core.errors import AtlasError
 
 __all__ = [
     "MIN_RADIUS_OVER_NEWTON_TOL",

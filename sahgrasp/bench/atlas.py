@@ -34,12 +34,12 @@ import numpy as np
 
 from sahgrasp.atlas import Atlas, AtlasSettings, build_atlas
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError, SahGraspError
+from sahgrasp.core.errors import InvalidSettingsError, SahGraspError
+from sahgrasp.core.fileio import write_json_atomic
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
 from sahgrasp.experiments.setups import PAPER_SETTINGS, run_experiment
-from sahgrasp.fileio import write_json_atomic
-from sahgrasp.planar import make_planar_problem
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.optimization.planar import make_planar_problem
 
 __all__ = [
     "BASELINES",
@@ -442,10 +442,10 @@ def _mesh_objects_row() -> dict[str, Any]:
     The start: the first of the sampled contact sets the IK solves with the object as obstacle.
     Reported: whether the best verified grasp beats the start on the volume.
     """
-    from sahgrasp.contacts import GraspTarget
     from sahgrasp.experiments.mesh_atlas import MeshStart, optimize_mesh_grasps
-    from sahgrasp.hand import load_hand
     from sahgrasp.ik import solve_ik
+    from sahgrasp.model.contacts import GraspTarget
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.objects.grasp_sampler import sample_object_grasps
 
     hand = load_hand("sah")

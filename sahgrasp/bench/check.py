@@ -17,13 +17,13 @@ from typing import Any
 
 from sahgrasp.bench.grasps import BENCH_SEED, _object_seed
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.fileio import write_json_atomic
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.fileio import write_json_atomic
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import default_sequence, solve_ik
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import GRASP_NAMES, OBJECT_NAMES, load_object, paper_grasp
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
-from sahgrasp.progress import ProgressCallback
 from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldResult, HoldSettings, HoldTester
 
 __all__ = ["format_table", "run"]

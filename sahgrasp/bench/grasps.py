@@ -28,13 +28,13 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from tqdm import tqdm
 
-from sahgrasp.contacts import GraspTarget, save_targets
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.fileio import write_json_atomic
-from sahgrasp.hand import Hand, HandDescription, load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.fileio import write_json_atomic
+from sahgrasp.core.frames import transform_points
 from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_ik, worker_hand
+from sahgrasp.model.contacts import GraspTarget, save_targets
+from sahgrasp.model.hand import Hand, HandDescription, load_hand
 from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
-from sahgrasp.objects.frames import transform_points
 from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
 from sahgrasp.objects.mesh_file import load_mesh
 

@@ -27,9 +27,8 @@ from numpy.typing import NDArray
 
 from sahgrasp.bench.peers import PEERS, available_peers
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.contacts import load_targets
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import (
     PAPER_TABLE1_LAMBDAS,
     IKResult,
@@ -39,7 +38,8 @@ from sahgrasp.ik import (
 )
 from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, target_key
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.model.contacts import load_targets
+from sahgrasp.model.hand import Hand, load_hand
 
 __all__ = ["run", "summarize"]
 

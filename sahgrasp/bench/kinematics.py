@@ -19,9 +19,9 @@ import numpy as np
 import pinocchio as pin
 
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand, load_hand
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.progress import ProgressCallback
+from sahgrasp.model.hand import Hand, load_hand
 
 __all__ = ["run"]
 

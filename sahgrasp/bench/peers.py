@@ -21,10 +21,10 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from sahgrasp.bench.extras import install_command
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.ik.initial import hang_from_thumb
 from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings, InnerSolver
+from sahgrasp.model.hand import Hand
 
 __all__ = ["BENCH_EXTRA", "PEERS", "PEER_MODULES", "available_peers", "pink_attempt",
            "scipy_attempt"]  # fmt: skip

@@ -153,7 +153,7 @@ def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
     from sahgrasp.objects import load_object
     from sahgrasp.planner import plan_grasps
     from sahgrasp.planner.plan import manipulability_indices
-    from sahgrasp.quality import INDICES
+    from sahgrasp.quality.ellipsoids import INDICES
 
     obj = load_object(name)
     three = dataclasses.replace(settings, fingers=(3,), grasps=settings.candidates)
@@ -177,7 +177,7 @@ def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
 def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict[str, Any]:
     import resource
 
-    from sahgrasp.parallel import process_pool
+    from sahgrasp.core.parallel import process_pool
     from sahgrasp.planner.folder import plan_jobs
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -232,7 +232,7 @@ def run(
     """
     from tqdm import tqdm
 
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.objects import OBJECT_NAMES, load_mesh, load_object
     from sahgrasp.planner import PlanSettings
     from sahgrasp.planner.folder import ObjectJob, object_digest
@@ -335,7 +335,7 @@ def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
 
 def format_table(doc: dict[str, Any]) -> str:
     """The benchmark's summary table."""
-    from sahgrasp.tables import format_table as table
+    from sahgrasp.core.tables import format_table as table
 
     rows = []
     for r in doc["objects"]:

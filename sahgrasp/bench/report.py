@@ -13,9 +13,9 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.progress import ProgressCallback, StderrProgress
-from sahgrasp.tables import format_table
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.progress import ProgressCallback, StderrProgress
+from sahgrasp.core.tables import format_table
 
 __all__ = ["progress_reporter", "summary_table"]
 

@@ -18,9 +18,9 @@ from collections.abc import Sequence
 from concurrent.futures import Executor, wait
 from typing import Any
 
-from sahgrasp.hand import HandDescription, load_hand
 from sahgrasp.ik import IKSettings, worker_hand
 from sahgrasp.ik.solver import Method
+from sahgrasp.model.hand import HandDescription, load_hand
 from sahgrasp.sequence import SearchSettings, open_executor, search_sequence
 
 __all__ = ["extrapolate", "run"]

@@ -28,10 +28,10 @@ from typing import Any
 
 from sahgrasp.bench.extras import install_command
 from sahgrasp.bench.report import progress_reporter
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import random_problems
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.model.hand import load_hand
 
 __all__ = ["run"]
 

@@ -23,7 +23,7 @@ from collections.abc import Iterator, Sequence
 from types import FrameType
 
 from sahgrasp.cli.common import Parser, printable
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
 
 __all__ = ["EXIT_BROKEN_PIPE", "EXIT_INPUT", "EXIT_INTERRUPTED", "main"]
 
@@ -132,7 +132,7 @@ def _run(argv: Sequence[str] | None) -> int:
         print(f"sahgrasp: {hint(args) if hint else 'interrupted'}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except SahGraspError as exc:
-        from sahgrasp.parallel import SchedulerLostError
+        from sahgrasp.core.parallel import SchedulerLostError
 
         if not isinstance(exc, SchedulerLostError) or hint is None:
             raise

@@ -114,10 +114,10 @@ def _summary(
         The summary and the report lines on colliding charts.
     """
     from sahgrasp.atlas import AtlasCheckpoint
+    from sahgrasp.core.progress import StderrProgress
     from sahgrasp.experiments.plotting import plot_index_map, plot_planar
     from sahgrasp.experiments.report import collision_notes, summary
     from sahgrasp.experiments.setups import run_experiment
-    from sahgrasp.progress import StderrProgress
 
     radius, epsilon = geometry
     length, unit = (None, None) if paper is None else (paper.length_scale_m, paper.unit_m)
@@ -202,13 +202,13 @@ def _mesh_run(args: argparse.Namespace) -> int:
 
 
 def _mesh_report(args: argparse.Namespace) -> int:
+    from sahgrasp.core.progress import StderrProgress
     from sahgrasp.experiments.arguments import MESH_DEFAULTS
     from sahgrasp.experiments.mesh_atlas import optimize_mesh_grasps, read_starts
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.objects import load_mesh
     from sahgrasp.objects.smooth_surface import MeshPatch
-    from sahgrasp.optimization import OptimizationSettings
-    from sahgrasp.progress import StderrProgress
+    from sahgrasp.optimization.optimizer import OptimizationSettings
 
     hand = load_hand("sah")
     obj = load_mesh(args.mesh)

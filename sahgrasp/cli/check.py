@@ -92,13 +92,13 @@ def _hand_name(args: argparse.Namespace, targets: Path | None) -> str:
         return str(args.hand)
     if targets is None:
         return "sah"
-    from sahgrasp.contacts import read_problems
+    from sahgrasp.model.contacts import read_problems
 
     return read_problems(targets)[0]
 
 
 def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> str:
-    from sahgrasp.tables import format_table
+    from sahgrasp.core.tables import format_table
 
     rows = [
         (
@@ -122,8 +122,8 @@ def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> st
 
 def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]:
     """The mesh files the targets file or a planner's results name: inputs too."""
-    from sahgrasp.contacts import object_spec, read_problems
-    from sahgrasp.errors import SahGraspError
+    from sahgrasp.core.errors import SahGraspError
+    from sahgrasp.model.contacts import object_spec, read_problems
     from sahgrasp.sim.batch import ResultsFileError, read_documents
 
     specs = []
@@ -152,7 +152,7 @@ def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp check``; 0 if every grasp holds, 1 otherwise."""
-    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.core.errors import InvalidSettingsError
 
     try:
         import sahgrasp.sim  # noqa: F401
@@ -165,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
     check_outputs([args.json], inputs=[*files, hand_name, *named])
     check_json_inputs(hand_name)
 
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.sim import HoldResult
     from sahgrasp.sim.batch import check_grasps, read_grasps, summarize
 

@@ -16,7 +16,15 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any, NoReturn, TextIO
 
-from sahgrasp.errors import HandModelError, SequenceFileError
+from sahgrasp.core.errors import HandModelError, SequenceFileError
+from sahgrasp.core.fileio import (
+    OutputPathError,
+    atomic_path,
+    check_output_path,
+    json_safe,
+    read_json,
+    write_bytes_atomic,
+)
 from sahgrasp.experiments.arguments import (
     HAND_HELP,
     INITS_HELP,
@@ -28,14 +36,6 @@ from sahgrasp.experiments.arguments import (
     nonnegative_int,
     positive_float,
     positive_int,
-)
-from sahgrasp.fileio import (
-    OutputPathError,
-    atomic_path,
-    check_output_path,
-    json_safe,
-    read_json,
-    write_bytes_atomic,
 )
 
 __all__ = [
@@ -126,9 +126,10 @@ def add_mesh_path_argument(parser: argparse.ArgumentParser) -> None:
 def scheduler_address(text: str) -> str:
     """Option type of ``--scheduler``: a Dask scheduler address, checked before any work.
 
-    The check is :func:`sahgrasp.parallel.check_scheduler_address` (no connection is made here).
+    The check is :func:`sahgrasp.core.parallel.check_scheduler_address` (no connection is made
+    here).
     """
-    from sahgrasp.parallel import SchedulerError, check_scheduler_address
+    from sahgrasp.core.parallel import SchedulerError, check_scheduler_address
 
     try:
         return check_scheduler_address(text)

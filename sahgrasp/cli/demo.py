@@ -27,8 +27,8 @@ from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings, nonneg
 
 if TYPE_CHECKING:
     from sahgrasp.experiments.ik_examples import SolvedGrasp
-    from sahgrasp.hand import Hand
     from sahgrasp.ik import IKSettings
+    from sahgrasp.model.hand import Hand
 
 __all__ = ["DEFAULT_HTML", "add_parser", "run"]
 
@@ -78,12 +78,12 @@ def _solve_targets(args: argparse.Namespace) -> tuple[Hand, list[SolvedGrasp], l
     from tqdm import tqdm
 
     from sahgrasp.cli.solve import hand_inputs, solve_items
-    from sahgrasp.contacts import GraspTarget
     from sahgrasp.experiments.ik_examples import SolvedGrasp
-    from sahgrasp.hand import load_hand
     from sahgrasp.ik.batch import solve_stream, worker_obstacle
     from sahgrasp.ik.solver import IKResult
-    from sahgrasp.stream import open_targets
+    from sahgrasp.ik.stream import open_targets
+    from sahgrasp.model.contacts import GraspTarget
+    from sahgrasp.model.hand import load_hand
 
     targets = open_targets(args.targets, allow_outside_paths=args.allow_any_mesh_path)
     hand_name = args.hand or targets.hand
@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         show_examples,
         solve_example,
     )
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.viz import Viewer
 
     invalid: list[str] = []

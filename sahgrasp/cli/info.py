@@ -16,7 +16,7 @@ from sahgrasp.cli.common import (
 )
 
 if TYPE_CHECKING:
-    from sahgrasp.hand import Hand
+    from sahgrasp.model.hand import Hand
 
 __all__ = ["add_parser", "describe", "run"]
 
@@ -96,7 +96,7 @@ def _print_text(info: dict[str, Any]) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp info``."""
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
 
     check_outputs([args.json], inputs=[args.hand])
     check_json_inputs(args.hand)

@@ -60,12 +60,12 @@ def add_parser(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Build (or resume building) the database."""
     from sahgrasp.cli.solve import hand_inputs
-    from sahgrasp.fileio import check_output_path, side_files
-    from sahgrasp.hand import load_hand
-    from sahgrasp.ik.learned import build_database, primitive_chunks
-    from sahgrasp.parallel import check_workers
-    from sahgrasp.progress import StderrProgress
-    from sahgrasp.sequence.executors import open_executor
+    from sahgrasp.core.executors import open_executor
+    from sahgrasp.core.fileio import check_output_path, side_files
+    from sahgrasp.core.parallel import check_workers
+    from sahgrasp.core.progress import StderrProgress
+    from sahgrasp.ik.learning import build_database, primitive_chunks
+    from sahgrasp.model.hand import load_hand
 
     # Every file the run reads is an input: the hand description and its URDF. The database's
     # side files (FILE.parts, FILE.lock) are outputs too.

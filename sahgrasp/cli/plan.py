@@ -163,7 +163,7 @@ def _add_verify_arguments(p: Any) -> None:
 
 def _hold_settings(args: argparse.Namespace) -> Any:
     """The hold test's settings of ``--verify physics`` (None without it)."""
-    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.core.errors import InvalidSettingsError
 
     given = args.light or args.squeeze is not None or args.mass_kg or args.density
     if args.verify is None:
@@ -200,7 +200,7 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def _placement(args: argparse.Namespace) -> Any:
-    from sahgrasp.contacts import object_spec
+    from sahgrasp.model.contacts import object_spec
 
     data: dict[str, Any] = {"name": "can"}
     if args.xyz is not None:
@@ -214,14 +214,14 @@ def _placement(args: argparse.Namespace) -> Any:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp plan``; 0 when every object got a grasp, 1 otherwise."""
-    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.core.errors import InvalidSettingsError
 
     folder = Path(args.object).is_dir()
     _hold_settings(args)  # the verify options checked before any work
     check_outputs([args.json, args.html], inputs=[args.object, args.hand])
     check_json_inputs(args.hand)
     if folder:
-        from sahgrasp.stream import is_jsonl
+        from sahgrasp.ik.stream import is_jsonl
 
         if args.html:
             raise InvalidSettingsError("--html shows one object's grasps; give a mesh file")
@@ -234,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
-    from sahgrasp.errors import InvalidTargetError
+    from sahgrasp.core.errors import InvalidTargetError
     from sahgrasp.objects import OBJECT_NAMES, load_mesh, load_object
 
     spec = _placement(args)
@@ -265,7 +265,7 @@ def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
 
 def _run_object(args: argparse.Namespace) -> int:
     settings = _settings(args)
-    from sahgrasp.hand import load_hand
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.planner import plan_grasps
 
     out = human_stream(args.json)
@@ -327,14 +327,19 @@ def _lines(doc: dict[str, Any]) -> list[str]:
 
 def _run_folder(args: argparse.Namespace) -> int:
     settings = _settings(args)
-    from sahgrasp.hand import load_hand
+    from sahgrasp.ik.stream import ResultsWriter
+    from sahgrasp.model.hand import load_hand
     from sahgrasp.planner.folder import folder_jobs, plan_jobs
-    from sahgrasp.stream import ResultsWriter
 
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     jobs = folder_jobs(args.object, settings, args.scale, hand.description.name)
     hold = _hold_settings(args)
+    make_check = None
+    if hold is not None:
+        from sahgrasp.sim.verify import PhysicsCheckFactory
+
+        make_check = PhysicsCheckFactory(hold)
     writer = None
     done: set[str] = set()
     failed = 0
@@ -349,7 +354,7 @@ def _run_folder(args: argparse.Namespace) -> int:
     try:
         with _executor(args) as pool, _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar:
             for doc in plan_jobs(
-                hand.description, todo, settings, pool, 2 * max(args.workers, 1), hold
+                hand.description, todo, settings, pool, 2 * max(args.workers, 1), make_check
             ):
                 bar.update()
                 failed += not doc.get("grasps")
@@ -379,7 +384,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     import hashlib
     import json
 
-    from sahgrasp.stream import RESULTS_FORMAT
+    from sahgrasp.ik.stream import RESULTS_FORMAT
 
     data = {
         "hand": hand.description.name,
@@ -406,12 +411,12 @@ def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
 
 def _executor(args: argparse.Namespace) -> Any:
     if args.scheduler is not None:
-        from sahgrasp.sequence.executors import open_executor
+        from sahgrasp.core.executors import open_executor
 
         return open_executor(args.scheduler)
     if args.workers <= 1:
         return contextlib.nullcontext(None)
-    from sahgrasp.parallel import process_pool
+    from sahgrasp.core.parallel import process_pool
 
     return process_pool(args.workers)
 

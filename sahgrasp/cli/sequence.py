@@ -15,7 +15,7 @@ from sahgrasp.cli.common import (
     positive_int,
     scheduler_address,
 )
-from sahgrasp.fileio import check_output_path
+from sahgrasp.core.fileio import check_output_path
 
 if TYPE_CHECKING:
     from sahgrasp.sequence import Progress, SearchResult
@@ -130,7 +130,7 @@ def summary_rows(result: SearchResult) -> list[tuple[object, ...]]:
 
 
 def _print_summary(result: SearchResult, out: str) -> None:
-    from sahgrasp.tables import format_table
+    from sahgrasp.core.tables import format_table
 
     print(format_table(SUMMARY_HEADERS, summary_rows(result)))
     print(f"{result.cells_computed} cells and {result.ik_runs_computed} IK runs computed in "

@@ -33,10 +33,10 @@ from sahgrasp.cli.common import (
 if TYPE_CHECKING:
     from collections.abc import Iterable, Iterator
 
-    from sahgrasp.contacts import GraspTarget, InvalidProblem
-    from sahgrasp.hand import Hand
     from sahgrasp.ik.learned import GraspDatabase
-    from sahgrasp.stream import ResultsWriter
+    from sahgrasp.ik.stream import ResultsWriter
+    from sahgrasp.model.contacts import GraspTarget, InvalidProblem
+    from sahgrasp.model.hand import Hand
 
 __all__ = [
     "Summary",
@@ -110,7 +110,7 @@ def add_parser(sub: Any) -> None:
 
 def resume_hint(args: argparse.Namespace) -> str:
     """What to say when a run is interrupted: how to continue a JSON Lines output."""
-    from sahgrasp.stream import is_jsonl
+    from sahgrasp.ik.stream import is_jsonl
 
     if not is_jsonl(args.json):
         return "interrupted"
@@ -203,7 +203,7 @@ def _skip_finished(
     """
     import itertools
 
-    from sahgrasp.stream import problem_digest
+    from sahgrasp.ik.stream import problem_digest
 
     changed: GraspTarget | InvalidProblem | None = None
     finished = writer.finished()  # a generator: closing it keeps the entry it stopped at out
@@ -231,12 +231,12 @@ def _skip_finished(
 def _executor(args: argparse.Namespace) -> Any:
     """Where the chunks run: None (this process), local workers, or a Dask cluster."""
     if args.scheduler is not None:
-        from sahgrasp.sequence.executors import open_executor
+        from sahgrasp.core.executors import open_executor
 
         return open_executor(args.scheduler)
     if args.workers <= 1:
         return contextlib.nullcontext(None)
-    from sahgrasp.parallel import process_pool
+    from sahgrasp.core.parallel import process_pool
 
     return process_pool(args.workers)
 
@@ -270,8 +270,8 @@ def check_run_outputs(out: str | None, inputs: Iterable[str | Path | None]) -> N
         OutputPathError: The output, ``OUT.part`` or ``OUT.lock`` is an input, or the output
             cannot be written.
     """
-    from sahgrasp.fileio import check_output_path, side_files
-    from sahgrasp.stream import is_jsonl
+    from sahgrasp.core.fileio import check_output_path, side_files
+    from sahgrasp.ik.stream import is_jsonl
 
     if out is None or out == "-":
         return
@@ -285,7 +285,7 @@ def load_database(path: Path | None, hand: Hand, init: str) -> GraspDatabase | N
         InvalidSettingsError: A database with an ``init`` other than ``learned``.
         GraspDatabaseError: Not a database file, or one made for another hand.
     """
-    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.core.errors import InvalidSettingsError
     from sahgrasp.ik.learned import GraspDatabase
 
     if path is None:
@@ -314,13 +314,13 @@ def solve_items(
         problems: The problems, in file order.
         outputs: The files the run writes (side files included).
         named: Receives the names of the problems that name an output.
-        digests: A deque that receives each problem's :func:`~sahgrasp.stream.problem_digest`
+        digests: A deque that receives each problem's :func:`~sahgrasp.ik.stream.problem_digest`
             (None: not computed).
     """
     import os
 
-    from sahgrasp.contacts import InvalidProblem
-    from sahgrasp.stream import problem_digest
+    from sahgrasp.ik.stream import problem_digest
+    from sahgrasp.model.contacts import InvalidProblem
 
     written = {os.path.realpath(p) for p in outputs}
     for problem in problems:
@@ -337,8 +337,8 @@ def solve_items(
 
 
 def _check_run(args: argparse.Namespace, hand_name: str, inputs: list[Any]) -> None:
-    from sahgrasp.errors import InvalidSettingsError
-    from sahgrasp.stream import is_jsonl
+    from sahgrasp.core.errors import InvalidSettingsError
+    from sahgrasp.ik.stream import is_jsonl
 
     check_run_outputs(args.json, inputs)
     check_json_inputs(hand_name, args.sequence)
@@ -348,7 +348,7 @@ def _check_run(args: argparse.Namespace, hand_name: str, inputs: list[Any]) -> N
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp solve``; 0 if every problem was solved, 1 otherwise."""
-    from sahgrasp.stream import open_targets
+    from sahgrasp.ik.stream import open_targets
 
     targets = open_targets(args.targets, allow_outside_paths=args.allow_any_mesh_path)
     hand_name = args.hand or targets.hand
@@ -357,11 +357,11 @@ def run(args: argparse.Namespace) -> int:
 
     from collections import deque
 
-    from sahgrasp.fileio import OutputPathError, file_digest, side_files
-    from sahgrasp.hand import load_hand
+    from sahgrasp.core.fileio import OutputPathError, file_digest, side_files
     from sahgrasp.ik import IKSettings, Sequence, default_sequence
     from sahgrasp.ik.batch import solve_chunks
-    from sahgrasp.stream import ResultsWriter, is_jsonl, settings_header
+    from sahgrasp.ik.stream import ResultsWriter, is_jsonl, settings_header
+    from sahgrasp.model.hand import load_hand
 
     hand = load_hand(hand_name)
     check_run_outputs(args.json, hand_inputs(hand_name, hand))  # the URDF the description names

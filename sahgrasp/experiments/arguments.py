@@ -11,7 +11,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
-from sahgrasp.quality_indices import QUALITY_INDICES
+from sahgrasp.quality.indices import QUALITY_INDICES
 
 if TYPE_CHECKING:
     from sahgrasp.ik import IKSettings

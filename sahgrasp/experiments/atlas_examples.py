@@ -13,12 +13,12 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.errors import OptimizationError
-from sahgrasp.grasp import SahGraspManifold
+from sahgrasp.core.errors import OptimizationError
 from sahgrasp.objects import load_object
-from sahgrasp.optimization import OptimizationResult
-from sahgrasp.planar import PlanarGraspProblem, PlanarHand
-from sahgrasp.quality import SINGULAR_THRESHOLDS
+from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.optimization.optimizer import OptimizationResult
+from sahgrasp.optimization.planar import PlanarGraspProblem, PlanarHand
+from sahgrasp.quality.ellipsoids import SINGULAR_THRESHOLDS
 from sahgrasp.viz.atlas_view import AtlasPlot, ChartGrasp, show_atlas_grasps, show_atlas_scene
 from sahgrasp.viz.planar_view import show_planar_grasp, upright
 from sahgrasp.viz.viewer import Viewer, translation
@@ -31,8 +31,9 @@ def planar_drawing(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Finger chains (3, 3, 2) (anchor, joint, tip) and circle centres (3, 2) of a planar grasp.
 
-    ``x`` is laid out as ``sahgrasp.planar`` documents it: phalanx unit vectors ``x[0:12]``,
-    object position ``x[12:14]``, object orientation ``(s_o, c_o) = x[14:16]`` (Eqs. (21), (23)).
+    ``x`` is laid out as ``sahgrasp.optimization.planar`` documents it: phalanx unit vectors
+    ``x[0:12]``, object position ``x[12:14]``, object orientation ``(s_o, c_o) = x[14:16]`` (Eqs.
+    (21), (23)).
     """
     v = x[:12].reshape(3, 2, 2)
     joints = hand.anchors + hand.phalanges[:, :1] * v[:, 0]

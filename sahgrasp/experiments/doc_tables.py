@@ -24,15 +24,16 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Literal
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.fileio import write_bytes_atomic
+from sahgrasp.core.tables import format_table
 from sahgrasp.experiments.ik_examples import EXAMPLE_NAMES, solve_example
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.fileio import write_bytes_atomic
-from sahgrasp.hand import load_hand
 from sahgrasp.ik import IKSettings
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import PAPER_IK_REPORT
-from sahgrasp.tables import format_table
+from sahgrasp.objects.smooth_surface import fit_mesh_patch
 
 __all__ = ["DOCUMENTS", "TABLES", "DocTablesError", "main", "refresh", "stale_tables"]
 
@@ -146,8 +147,6 @@ def _analytic_errors(kind: str, radius: float, subdivisions: int) -> tuple[objec
     """One row of :func:`mesh_model_table`: the mesh, the model's errors to it and to the shape."""
     import numpy as np
     import trimesh
-
-    from sahgrasp.objects.smooth_surface import fit_mesh_patch
 
     if kind == "sphere":
         mesh = trimesh.creation.icosphere(subdivisions, radius)

@@ -18,9 +18,10 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget, ObjectCache
-from sahgrasp.hand import Hand
+from sahgrasp.core.tables import format_table
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
+from sahgrasp.model.contacts import GraspTarget, ObjectCache
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import (
     GRASP_NAMES,
     PAPER_IK_REPORT,
@@ -30,7 +31,6 @@ from sahgrasp.objects import (
     paper_grasp,
     transform_points,
 )
-from sahgrasp.tables import format_table
 from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.viewer import Viewer
 

@@ -2,11 +2,11 @@
 
 Rosales, Porta and Ros (RSS 2011) optimise over the grasps whose contacts stay on given contact
 regions of an analytic object. On a mesh the regions are smooth local models of the mesh around
-each start's contacts (:func:`sahgrasp.grasp.mesh_patches`, docs/atlas.md "The atlas on a mesh");
-:func:`optimize_mesh_grasps` builds the atlas of R (Eq. (11)) from each start, checks collisions at
-every chart centre as for the can (self-collision, and every link against the object's collision
-pieces with the contact fingertips allowed ``d_min`` deep), and returns per connected component
-the best grasp on the chosen index that passes a verification on the true mesh:
+each start's contacts (:func:`sahgrasp.optimization.grasp.mesh_patches`, docs/atlas.md "The atlas on
+a mesh"); :func:`optimize_mesh_grasps` builds the atlas of R (Eq. (11)) from each start, checks
+collisions at every chart centre as for the can (self-collision, and every link against the object's
+collision pieces with the contact fingertips allowed ``d_min`` deep), and returns per connected
+component the best grasp on the chosen index that passes a verification on the true mesh:
 :func:`verify_grasp` (every contact within ``d_min`` of the mesh, no link inside the object, no
 self-collision, joints within their limits). A start whose grasp lies in a component already
 covered (its contacts on that component's regions and, brought onto its R, within one chart
@@ -27,16 +27,16 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidTargetError, OptimizationError, SahGraspError
+from sahgrasp.core.errors import InvalidTargetError, OptimizationError, SahGraspError
+from sahgrasp.core.fileio import read_json
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.arguments import MESH_DEFAULTS
-from sahgrasp.fileio import read_json
-from sahgrasp.grasp import SahGraspManifold, make_mesh_manifold, mesh_patches
-from sahgrasp.hand import Hand
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearance
 from sahgrasp.objects.smooth_surface import MeshPatch
-from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.optimization.grasp import SahGraspManifold, make_mesh_manifold, mesh_patches
+from sahgrasp.optimization.optimizer import OptimizationResult, OptimizationSettings, optimize
 
 __all__ = [
     "MeshAtlasSearch",
@@ -273,8 +273,8 @@ def optimize_mesh_grasps(
         settings: Radius, epsilon (in the scaled coordinates), index, cap, workers; default
             :data:`MESH_DEFAULTS`' radius and epsilon with the volume index.
         k: Dimension of the relevant-grasp set R.
-        length_scale_m: See :func:`sahgrasp.grasp.make_mesh_manifold`.
-        unit_m: See :func:`sahgrasp.grasp.make_mesh_manifold`.
+        length_scale_m: See :func:`sahgrasp.optimization.grasp.make_mesh_manifold`.
+        unit_m: See :func:`sahgrasp.optimization.grasp.make_mesh_manifold`.
         motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
         progress: Hears of ``("mesh atlas: starts", done, len(starts))``.

@@ -13,10 +13,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.errors import OptimizationError
-from sahgrasp.optimization import OptimizationResult
-from sahgrasp.planar import PlanarGraspProblem, PlanarHand
-from sahgrasp.quality import INDICES, SINGULAR_THRESHOLDS, principal_projection
+from sahgrasp.core.errors import OptimizationError
+from sahgrasp.optimization.optimizer import OptimizationResult
+from sahgrasp.optimization.planar import PlanarGraspProblem, PlanarHand
+from sahgrasp.quality.ellipsoids import INDICES, SINGULAR_THRESHOLDS, principal_projection
 
 __all__ = ["plot_index_map", "plot_planar"]
 

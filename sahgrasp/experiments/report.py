@@ -1,8 +1,8 @@
 """Summaries of grasp optimizations: JSON for ``sahgrasp atlas``, text beside the paper's figures.
 
-One summary for every :class:`~sahgrasp.optimization.OptimizationResult`, whatever the grasp
-manifold; each grasp is described in the manifold's own terms (the planar hand's joint angles and
-object pose, the SAH's joint values).
+One summary for every :class:`~sahgrasp.optimization.optimizer.OptimizationResult`, whatever the
+grasp manifold; each grasp is described in the manifold's own terms (the planar hand's joint angles
+and object pose, the SAH's joint values).
 """
 
 from __future__ import annotations
@@ -11,10 +11,10 @@ from typing import Any
 
 import numpy as np
 
-from sahgrasp.grasp import SahGraspManifold
-from sahgrasp.optimization import OptimizationResult
-from sahgrasp.planar import PlanarGraspProblem
-from sahgrasp.quality import QUALITY_INDICES, SINGULAR_THRESHOLDS
+from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.optimization.optimizer import OptimizationResult
+from sahgrasp.optimization.planar import PlanarGraspProblem
+from sahgrasp.quality.ellipsoids import QUALITY_INDICES, SINGULAR_THRESHOLDS
 
 __all__ = ["collision_notes", "describe_grasp", "result_lines", "summary"]
 

@@ -3,8 +3,8 @@
 Rosales, Porta and Ros, "Global optimization of robotic grasps", RSS 2011, Section V: the planar
 three-finger hand (Figs. 8-9), the SAH holding a can (Fig. 10a) and an oil bottle (Fig. 10b).
 :func:`make_experiment` builds the problem, :func:`run_experiment` runs Algorithm 1 on it
-(:func:`sahgrasp.optimization.optimize`), with the experiment's default chart radius and epsilon
-(:data:`sahgrasp.experiments.arguments.ATLAS_DEFAULTS`) unless told otherwise.
+(:func:`sahgrasp.optimization.optimizer.optimize`), with the experiment's default chart radius and
+epsilon (:data:`sahgrasp.experiments.arguments.ATLAS_DEFAULTS`) unless told otherwise.
 """
 
 from __future__ import annotations
@@ -13,12 +13,13 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sahgrasp.atlas import AtlasCheckpoint
-from sahgrasp.errors import OptimizationError
+from sahgrasp.core.errors import OptimizationError
+from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
-from sahgrasp.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
-from sahgrasp.hand import load_hand
+from sahgrasp.model.hand import load_hand
 from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
-from sahgrasp.optimization import (
+from sahgrasp.optimization.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
+from sahgrasp.optimization.optimizer import (
     ComponentSearch,
     GraspManifold,
     OptimizationResult,
@@ -26,8 +27,7 @@ from sahgrasp.optimization import (
     optimize,
     optimize_components,
 )
-from sahgrasp.planar import make_planar_problem
-from sahgrasp.progress import ProgressCallback
+from sahgrasp.optimization.planar import make_planar_problem
 
 __all__ = [
     "EXPERIMENTS",
@@ -126,9 +126,9 @@ def make_experiment(
         k: Dimension of the relevant-grasp set R.
         hand: The hand of the SAH experiments (a name or a hand-description JSON).
         motions: Source of the SAH's principal motions, one of
-            :data:`~sahgrasp.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
+            :data:`~sahgrasp.optimization.grasp.MOTION_SOURCES` (``"grasps"``: 200 solved grasps).
         length_scale_m: Scale the SAH's coordinates at this length
-            (:func:`sahgrasp.grasp.coordinate_scales`); None: unscaled.
+            (:func:`sahgrasp.optimization.grasp.coordinate_scales`); None: unscaled.
         unit_m: What a unit of the scaled coordinates moves [m] (default ``length_scale_m``).
 
     Raises:
@@ -214,7 +214,8 @@ def run_components(
     """Algorithm 1 on every connected component of an SAH experiment's R met by IK seeds.
 
     The seeds are the first grasp and the IK's solutions of the same contacts from ``seeds``
-    random starts (:func:`sahgrasp.grasp.ik_seeds`); other arguments as :func:`run_experiment`.
+    random starts (:func:`sahgrasp.optimization.grasp.ik_seeds`); other arguments as
+    :func:`run_experiment`.
 
     Raises:
         OptimizationError: ``name`` is not an SAH experiment, or no seed reaches R.

@@ -19,7 +19,7 @@
 #include <string.h>
 
 #include "../_arrays.h"
-#include "../_gjk.h"
+#include "../collision/_gjk.h"
 
 typedef struct {
     double R[9];

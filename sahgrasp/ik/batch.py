@@ -33,19 +33,20 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from sahgrasp.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
-from sahgrasp.errors import (
+from sahgrasp.core.errors import (
     InvalidSettingsError,
     InvalidTargetError,
     SahGraspError,
     SequenceFileError,
 )
-from sahgrasp.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
+from sahgrasp.core.executors import open_executor
+from sahgrasp.core.parallel import check_workers
 from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.learned import GraspDatabase
 from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
-from sahgrasp.parallel import check_workers
+from sahgrasp.model.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
+from sahgrasp.model.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
 
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
@@ -413,8 +414,6 @@ def solve_many(
     items = list(_keyed(targets, obstacle))
     if not items or (executor is None and workers <= 1):
         return list(solve_stream(hand, items, settings, sequence, output="result"))  # type: ignore[arg-type]
-    from sahgrasp.sequence.executors import open_executor
-
     count = 1 if executor is not None else workers
     largest = CHUNK_SIZE if executor is None else CLUSTER_CHUNK_SIZE
     size = max(1, min(largest, math.ceil(len(items) / (CHUNKS_IN_FLIGHT * count))))

@@ -6,7 +6,7 @@ The tree is read from the hand's Pinocchio model, which stays the reference: eac
 placement, parent, configuration and velocity index, and its axis taken from Pinocchio's own
 joint Jacobian (so a revolute joint of any axis, a prismatic joint and a mimic joint all read
 the same way). ``tests/test_compiled.py`` checks the tree's contact stack, Jacobian and
-integration against :class:`~sahgrasp.hand.Hand` (Pinocchio) and finite differences.
+integration against :class:`~sahgrasp.model.hand.Hand` (Pinocchio) and finite differences.
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.errors import HandModelError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import HandModelError
 from sahgrasp.ik import _lm
 from sahgrasp.ik._lm import Tree
+from sahgrasp.model.hand import Hand
 
 __all__ = [
     "BOX",
@@ -48,8 +48,8 @@ OUTCOMES: Final = {
 }
 """Outcome of :meth:`Tree.solve`, by the code it returns (the codes are ``_lm.c``'s)."""
 
-# The shape kinds of the compiled verdicts, as ``sahgrasp/_gjk.h`` numbers them (read from the
-# compiled module, never copied).
+# The shape kinds of the compiled verdicts, as ``sahgrasp/collision/_gjk.h`` numbers them (read from
+# the compiled module, never copied).
 POINT: Final = _lm.SHAPE_POINT
 """A point, inflated: a sphere (sizes unused)."""
 BOX: Final = _lm.SHAPE_BOX
@@ -92,8 +92,8 @@ def compiled_tree(hand: Hand) -> Tree:
 def self_collides(hand: Hand, q: NDArray[np.float64]) -> bool:
     """True if the hand collides with itself at ``q``, the verdict of coal's distances.
 
-    Compiled (GJK in ``sahgrasp/_gjk.h``, the shapes placed by the tree's own kinematics) when
-    every collision shape is a sphere, box, cylinder, capsule or ellipsoid, as in the shipped
+    Compiled (GJK in ``sahgrasp/collision/_gjk.h``, the shapes placed by the tree's own kinematics)
+    when every collision shape is a sphere, box, cylinder, capsule or ellipsoid, as in the shipped
     hands: one native call instead of Pinocchio's and coal's broad phase through Python
     (docs/ik.md, "Compiled collision verdicts"). :meth:`Hand.in_collision` answers for other
     shapes (meshes). It can differ from this verdict for pairs within GJK's tolerance of

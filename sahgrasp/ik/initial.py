@@ -25,10 +25,10 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import write_json_atomic
-from sahgrasp.hand import Hand, check_made_for
+from sahgrasp.core.errors import SequenceFileError
+from sahgrasp.core.fileio import write_json_atomic
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, check_made_for
 
 __all__ = [
     "PAPER_TABLE1_LAMBDAS",

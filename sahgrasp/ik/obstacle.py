@@ -11,22 +11,17 @@ as body ``a`` (joint 0, fixed), so the IK's separation rows push the links out a
 from __future__ import annotations
 
 import functools
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.collision import Penetration
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.hand import Hand
+from sahgrasp.collision.hand_self import Penetration
+from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.ik._lm import Pieces
 from sahgrasp.ik.compiled import CONVEX, TIE_M, compiled_tree, describe_shape
-
-# The objects package is imported on first use: it adds 0.2 s to ``import sahgrasp``, and only
-# solves with an obstacle need it.
-if TYPE_CHECKING:
-    from sahgrasp.objects import GraspObject
-    from sahgrasp.objects.clearance import Clearance, HandObjectClearance
+from sahgrasp.model.hand import Hand
+from sahgrasp.objects.body import GraspObject
+from sahgrasp.objects.clearance import Clearance, HandObjectClearance
 
 __all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of", "pieces_of"]
 
@@ -52,8 +47,6 @@ def checker_of(hand: Hand, obj: GraspObject | None) -> HandObjectClearance:
     (0.01 s for the can, 0.15 s for the coffee cup, 1.6-2.2 s for the shipped meshes, whose
     triangle prisms are merged): too much to repeat for every problem.
     """
-    from sahgrasp.objects.clearance import HandObjectClearance
-
     return HandObjectClearance(hand, obj)
 
 
@@ -62,8 +55,8 @@ def pieces_of(checker: HandObjectClearance) -> Pieces | None:
     """The checker's object pieces for the compiled verdicts, None if they cannot be compiled.
 
     The compiled verdicts (``Tree.object_clearance``, ``Tree.shapes_near``: GJK in
-    ``sahgrasp/_gjk.h``) know the kinds of :func:`~sahgrasp.ik.compiled.describe_shape`; a piece
-    of another kind, or a hand whose own shapes are not compiled, leaves every query to coal.
+    ``sahgrasp/collision/_gjk.h``) know the kinds of :func:`~sahgrasp.ik.compiled.describe_shape`; a
+    piece of another kind, or a hand whose own shapes are not compiled, leaves every query to coal.
     """
     if not compiled_tree(checker.hand).shape_count:
         return None
@@ -119,8 +112,6 @@ def _neighbour_offsets(
 
 def check_obstacle(obj: object) -> None:
     """Raise :class:`InvalidTargetError` unless ``obj`` is a GraspObject."""
-    from sahgrasp.objects import GraspObject
-
     if not isinstance(obj, GraspObject):
         raise InvalidTargetError(
             f"obstacle must be a GraspObject (sahgrasp.objects: load_object(name) or a loaded "
@@ -198,8 +189,6 @@ class Obstacle:
         The same verdict and clearance up to GJK's tolerance (about 1e-12 of the distance);
         the closest link is the one geometry found at the smallest distance.
         """
-        from sahgrasp.objects.clearance import Clearance
-
         thresholds = self.checker.thresholds(self.contacts, 0.0, self.allowance_m)
         T = self.checker.object.T_world_object
         inside, distance_m, closest = self._tree.object_clearance(pieces, q, T, thresholds)

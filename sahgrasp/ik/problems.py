@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand
 
 __all__ = ["random_problem", "random_problems"]
 

@@ -28,17 +28,17 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import ContactState, Hand
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.ik.compiled import OUTCOMES, compiled_tree, near_pairs, self_collides, tree_joint
 from sahgrasp.ik.initial import Sequence, default_sequence, expansion_matrix, hang_from_thumb
 from sahgrasp.ik.learned import GraspDatabase, contact_key, default_database
 from sahgrasp.ik.obstacle import Obstacle, checker_of
 from sahgrasp.ik.starts import initial_lambdas
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import ContactState, Hand
 
 if TYPE_CHECKING:
-    from sahgrasp.collision import Penetration
+    from sahgrasp.collision.hand_self import Penetration
     from sahgrasp.objects import GraspObject
 
 __all__ = [

@@ -12,8 +12,8 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from sahgrasp.contacts import GraspTarget
 from sahgrasp.ik.initial import Sequence
+from sahgrasp.model.contacts import GraspTarget
 
 __all__ = ["initial_lambdas", "problem_digest", "problem_seed"]
 

@@ -7,37 +7,153 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
 :mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
 Lengths in metres, angles in radians.
+
+The names are loaded on first use: importing one module of the package (the IK imports
+:mod:`~sahgrasp.objects.clearance`) does not load the mesh readers (trimesh).
 """
 
-from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.catalog import (
-    CATALOG,
-    GRASP_NAMES,
-    OBJECT_NAMES,
-    PAPER_IK_REPORT,
-    CatalogEntry,
-    IKReport,
-    bottle_patches,
-    can_patches,
-    load_object,
-    paper_grasp,
-    register_object,
-)
-from sahgrasp.objects.clearance import CONTACT_ALLOWANCE_M, Clearance, HandObjectClearance
-from sahgrasp.objects.collision import CollisionShape, convex_hull, signed_distances
-from sahgrasp.objects.frames import as_placement, placement, rotation_about, transform_points
-from sahgrasp.objects.mesh_file import MeshFileError, MeshSolid, load_mesh
-from sahgrasp.objects.meshing import Mesh, tessellate
-from sahgrasp.objects.patches import ContactRegion, CurvePatch, FixedContact, GraspPatches, Patch
-from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline, sample_profile
-from sahgrasp.objects.solids import BoxSolid, EllipsoidSolid, RevolvedSolid, Solid
-from sahgrasp.objects.surfaces import (
-    EllipsoidSurface,
-    RectangleSurface,
-    RevolvedSurface,
-    Surface,
-    SurfaceJet,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sahgrasp.collision.shapes import (
+        CollisionShape,
+        convex_hull,
+        signed_distances,
+    )
+    from sahgrasp.core.frames import (
+        as_placement,
+        placement,
+        rotation_about,
+        transform_points,
+    )
+    from sahgrasp.objects.body import (
+        GraspObject,
+    )
+    from sahgrasp.objects.catalog import (
+        CATALOG,
+        GRASP_NAMES,
+        OBJECT_NAMES,
+        PAPER_IK_REPORT,
+        CatalogEntry,
+        IKReport,
+        bottle_patches,
+        can_patches,
+        load_object,
+        paper_grasp,
+        register_object,
+    )
+    from sahgrasp.objects.clearance import (
+        CONTACT_ALLOWANCE_M,
+        Clearance,
+        HandObjectClearance,
+    )
+    from sahgrasp.objects.mesh_file import (
+        MeshFileError,
+        MeshSolid,
+        load_mesh,
+    )
+    from sahgrasp.objects.meshing import (
+        Mesh,
+        tessellate,
+    )
+    from sahgrasp.objects.patches import (
+        ContactRegion,
+        CurvePatch,
+        FixedContact,
+        GraspPatches,
+        Patch,
+    )
+    from sahgrasp.objects.profiles import (
+        Arc,
+        Segment,
+        rounded_polyline,
+        sample_profile,
+    )
+    from sahgrasp.objects.solids import (
+        BoxSolid,
+        EllipsoidSolid,
+        RevolvedSolid,
+        Solid,
+    )
+    from sahgrasp.objects.surfaces import (
+        EllipsoidSurface,
+        RectangleSurface,
+        RevolvedSurface,
+        Surface,
+        SurfaceJet,
+    )
+
+_EXPORTS = {
+    "sahgrasp.collision.shapes": (
+        "CollisionShape",
+        "convex_hull",
+        "signed_distances",
+    ),
+    "sahgrasp.core.frames": (
+        "as_placement",
+        "placement",
+        "rotation_about",
+        "transform_points",
+    ),
+    "sahgrasp.objects.body": ("GraspObject",),
+    "sahgrasp.objects.catalog": (
+        "CATALOG",
+        "GRASP_NAMES",
+        "OBJECT_NAMES",
+        "PAPER_IK_REPORT",
+        "CatalogEntry",
+        "IKReport",
+        "bottle_patches",
+        "can_patches",
+        "load_object",
+        "paper_grasp",
+        "register_object",
+    ),
+    "sahgrasp.objects.clearance": (
+        "CONTACT_ALLOWANCE_M",
+        "Clearance",
+        "HandObjectClearance",
+    ),
+    "sahgrasp.objects.mesh_file": (
+        "MeshFileError",
+        "MeshSolid",
+        "load_mesh",
+    ),
+    "sahgrasp.objects.meshing": (
+        "Mesh",
+        "tessellate",
+    ),
+    "sahgrasp.objects.patches": (
+        "ContactRegion",
+        "CurvePatch",
+        "FixedContact",
+        "GraspPatches",
+        "Patch",
+    ),
+    "sahgrasp.objects.profiles": (
+        "Arc",
+        "Segment",
+        "rounded_polyline",
+        "sample_profile",
+    ),
+    "sahgrasp.objects.solids": (
+        "BoxSolid",
+        "EllipsoidSolid",
+        "RevolvedSolid",
+        "Solid",
+    ),
+    "sahgrasp.objects.surfaces": (
+        "EllipsoidSurface",
+        "RectangleSurface",
+        "RevolvedSurface",
+        "Surface",
+        "SurfaceJet",
+    ),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "CATALOG",
@@ -86,3 +202,16 @@ __all__ = [
     "tessellate",
     "transform_points",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

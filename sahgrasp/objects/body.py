@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sahgrasp.objects.collision import CollisionShape, signed_distances
-from sahgrasp.objects.frames import FloatArray, as_placement
+from sahgrasp.collision.shapes import CollisionShape, signed_distances
+from sahgrasp.core.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh
 from sahgrasp.objects.patches import Patch
 from sahgrasp.objects.solids import Solid

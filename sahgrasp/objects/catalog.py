@@ -21,10 +21,11 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidTargetError
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.core.frames import FloatArray, as_placement, placement, rotation_about
+from sahgrasp.core.registry import Registry
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.frames import FloatArray, as_placement, placement, rotation_about
 from sahgrasp.objects.patches import (
     ContactRegion,
     CurvePatch,
@@ -35,7 +36,6 @@ from sahgrasp.objects.patches import (
 from sahgrasp.objects.profiles import Arc, Segment, rounded_polyline
 from sahgrasp.objects.solids import BoxSolid, EllipsoidSolid, RevolvedSolid
 from sahgrasp.objects.surfaces import RevolvedSurface, SurfaceJet
-from sahgrasp.registry import Registry
 
 __all__ = [
     "CATALOG",

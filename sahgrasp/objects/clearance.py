@@ -1,6 +1,6 @@
 """Hand-object clearance: signed distances between a hand's collision shapes and an object.
 
-The object is a union of convex coal pieces (:mod:`sahgrasp.objects.collision`); every hand link
+The object is a union of convex coal pieces (:mod:`sahgrasp.collision.shapes`); every hand link
 shape (box, cylinder, sphere of the URDF) is convex too, so coal's GJK/EPA gives each (link, piece)
 pair an exact signed distance: the gap outside, minus the penetration depth inside. A triangle
 mesh (``coal.BVHModel``) would give no negative distance for a link wholly inside a closed surface.
@@ -17,7 +17,7 @@ the same joint is checked as every other link.
 
 Cost. The object may have thousands of small pieces (one per mesh triangle, or per sector of a
 revolved band), so no query tries them all. One numpy pass bounds every link against every
-coarse hull of the :class:`~sahgrasp.objects.collision.PieceTree` (the link's box or sphere, a
+coarse hull of the :class:`~sahgrasp.collision.shapes.PieceTree` (the link's box or sphere, a
 cylinder's box, against the hull's ball, and the two boxes' gap) and, through one anchor point
 inside each hull, bounds the closest distance from above: links bounded away cost nothing more.
 A remaining link's pieces are taken by increasing lower bound (the link's shape against the
@@ -29,8 +29,9 @@ The IK's acceptance test (:meth:`HandObjectClearance.clearance_if_clear`) and re
 (:meth:`HandObjectClearance.penetrations` with ``per_link=1``) go to the piece tree's C++ queries
 instead: collision tests and one broad-phase distance, whatever the number of links.
 
-The object side of a :class:`~sahgrasp.collision.Penetration` is joint 0 (the universe, which does
-not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a = 0``.
+The object side of a :class:`~sahgrasp.collision.hand_self.Penetration` is joint 0 (the universe,
+which does not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a =
+0``.
 """
 
 from __future__ import annotations
@@ -44,12 +45,12 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.collision import Penetration, copied_placements, geometry_placement_views
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.hand import Hand
+from sahgrasp.collision.hand_self import Penetration, copied_placements, geometry_placement_views
+from sahgrasp.collision.shapes import PieceTree
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
+from sahgrasp.core.frames import FloatArray, as_placement
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.collision import PieceTree
-from sahgrasp.objects.frames import FloatArray, as_placement
 
 __all__ = [
     "CONTACT_ALLOWANCE_M",

@@ -25,8 +25,8 @@ import numpy as np
 import trimesh.triangles
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
 from sahgrasp.objects.body import GraspObject
 
 __all__ = [

@@ -56,10 +56,10 @@ import numpy as np
 import trimesh
 from numpy.typing import NDArray
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.collision.shapes import BuiltOnce, CollisionShape, _support_points, convex_hull
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.frames import FloatArray, as_placement
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.collision import BuiltOnce, CollisionShape, _support_points, convex_hull
-from sahgrasp.objects.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh
 from sahgrasp.objects.patches import Patch
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.objects.frames import FloatArray, transform_points
+from sahgrasp.core.frames import FloatArray, transform_points
 from sahgrasp.objects.patches import Patch
 
 __all__ = ["Mesh", "tessellate"]

@@ -22,9 +22,9 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.objects.frames import FloatArray, as_placement
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.core.frames import FloatArray, as_placement
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
 from sahgrasp.objects.surfaces import Surface, SurfaceJet, placed_jet
 
 __all__ = ["ContactRegion", "CurvePatch", "FixedContact", "GraspPatches", "Patch"]

@@ -18,7 +18,7 @@ from typing import TypeAlias
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sahgrasp.objects.frames import FloatArray
+from sahgrasp.core.frames import FloatArray
 
 __all__ = [
     "Arc",

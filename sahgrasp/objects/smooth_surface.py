@@ -43,8 +43,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import SahGraspError
-from sahgrasp.objects.frames import FloatArray, as_placement
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.frames import FloatArray, as_placement
 from sahgrasp.objects.surfaces import SurfaceJet
 
 __all__ = ["DEGREE", "MeshPatch", "SurfaceModelError", "fit_mesh_patch"]

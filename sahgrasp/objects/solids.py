@@ -20,8 +20,8 @@ from typing import Protocol
 import coal
 import numpy as np
 
-from sahgrasp.objects.collision import BuiltOnce, CollisionShape, convex_hull
-from sahgrasp.objects.frames import FloatArray, as_placement
+from sahgrasp.collision.shapes import BuiltOnce, CollisionShape, convex_hull
+from sahgrasp.core.frames import FloatArray, as_placement
 from sahgrasp.objects.meshing import Mesh, tessellate
 from sahgrasp.objects.patches import Patch
 from sahgrasp.objects.profiles import (

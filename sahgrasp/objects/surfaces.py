@@ -18,7 +18,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import ArrayLike
 
-from sahgrasp.objects.frames import FloatArray
+from sahgrasp.core.frames import FloatArray
 from sahgrasp.objects.profiles import ProfilePiece
 
 __all__ = [

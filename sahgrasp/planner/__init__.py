@@ -2,8 +2,9 @@
 
 :func:`plan_grasps` (:mod:`~sahgrasp.planner.plan`) draws candidate contact sets
 (:mod:`~sahgrasp.planner.candidates`), solves them with the IK, re-checks each independently
-(:mod:`~sahgrasp.planner.verify`), scores (:mod:`sahgrasp.wrench`, :mod:`sahgrasp.quality`) and
-ranks them; :mod:`~sahgrasp.planner.folder` plans a folder of meshes on worker processes.
+(:mod:`~sahgrasp.planner.verify`), scores (:mod:`sahgrasp.quality.wrench`,
+:mod:`sahgrasp.quality.ellipsoids`) and ranks them; :mod:`~sahgrasp.planner.folder` plans a folder
+of meshes on worker processes.
 """
 
 from sahgrasp.planner.plan import GraspPlan, PlannedGrasp, PlanSummary, plan_grasps

@@ -31,9 +31,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.hand import Hand
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
-from sahgrasp.wrench import CONE_EDGES, epsilon, primitive_wrenches
+from sahgrasp.quality.wrench import CONE_EDGES, epsilon, primitive_wrenches
 
 __all__ = [
     "Candidate",

@@ -21,8 +21,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.hand import HandDescription
+from sahgrasp.ik import worker_hand
+from sahgrasp.model.hand import Hand, HandDescription
+from sahgrasp.objects import GraspObject, load_mesh
 from sahgrasp.objects.mesh_file import MESH_SUFFIXES, MeshFileError
+from sahgrasp.planner.plan import plan_grasps
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 
 __all__ = ["ObjectJob", "folder_jobs", "object_digest", "plan_file", "plan_jobs"]
@@ -69,17 +72,18 @@ def folder_jobs(
 
 
 def plan_file(
-    description: HandDescription, job: ObjectJob, settings: PlanSettings, hold: Any = None
+    description: HandDescription,
+    job: ObjectJob,
+    settings: PlanSettings,
+    make_check: Callable[[Hand, GraspObject], Any] | None = None,
 ) -> dict[str, Any]:
     """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused).
 
-    ``hold``: the physics hold test's settings (:class:`sahgrasp.sim.HoldSettings`) to keep only
-    grasps that hold (``plan --verify physics``), or None.
+    ``make_check``: builds the extra check of every verified grasp for the file's hand and object
+    (``plan_grasps(check=)``; e.g. :class:`sahgrasp.sim.verify.PhysicsCheckFactory` for ``plan
+    --verify physics``), picklable so that workers build their own; a check with an ``annotate``
+    method adds its verdicts to the document. None: no extra check.
     """
-    from sahgrasp.ik import worker_hand
-    from sahgrasp.objects import load_mesh
-    from sahgrasp.planner.plan import plan_grasps
-
     start = time.perf_counter()
     hand = worker_hand(description, description.digest())
     try:
@@ -89,13 +93,12 @@ def plan_file(
     spec: dict[str, Any] = {"mesh": job.path, "xyz": [0.0, 0.0, 0.0], "quat": [0.0, 0.0, 0.0, 1.0]}
     if job.scale != 1.0:
         spec["scale"] = job.scale
-    check = None
-    if hold is not None:
-        from sahgrasp.sim.verify import PhysicsCheck
-
-        check = PhysicsCheck(hand, obj, hold)
+    check = None if make_check is None else make_check(hand, obj)
     plan = plan_grasps(hand, obj, settings, object_spec=spec, check=check, started=start)
-    document = plan.to_dict() if check is None else check.annotate(plan.to_dict())
+    document = plan.to_dict()
+    annotate = getattr(check, "annotate", None)
+    if annotate is not None:
+        document = annotate(document)
     return {**document, "object_digest": job.digest}
 
 
@@ -105,16 +108,16 @@ def plan_jobs(
     settings: PlanSettings,
     executor: Executor | None,
     in_flight: int = 4,
-    hold: Any = None,
+    make_check: Callable[[Hand, GraspObject], Any] | None = None,
 ) -> Iterator[dict[str, Any]]:
     """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers."""
     if executor is None:
         for job in jobs:
-            yield plan_file(description, job, settings, hold)
+            yield plan_file(description, job, settings, make_check)
         return
     pending: list[Future[dict[str, Any]]] = []
     submit: Callable[[ObjectJob], Future[dict[str, Any]]] = lambda job: executor.submit(  # noqa: E731
-        plan_file, description, job, settings, hold
+        plan_file, description, job, settings, make_check
     )
     iterator = iter(jobs)
     for job in iterator:

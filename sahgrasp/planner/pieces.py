@@ -18,8 +18,8 @@ from functools import cached_property
 
 import numpy as np
 
+from sahgrasp.collision.shapes import CollisionShape, convex_hull
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.collision import CollisionShape, convex_hull
 from sahgrasp.objects.mesh_file import MeshSolid
 
 __all__ = ["PrismSolid", "planning_object"]

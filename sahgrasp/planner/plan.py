@@ -5,7 +5,7 @@ counts of :attr:`PlanSettings.fingers`), the IK (:func:`sahgrasp.ik.solve_ik`) s
 with the object as an obstacle, the fingers without a contact placed clear of the object and of
 the hand. Every solved grasp is then re-checked independently
 (:class:`~sahgrasp.planner.verify.GraspVerifier`); only grasps that pass it are kept. Each kept
-grasp gets its force closure and L1 epsilon (:mod:`sahgrasp.wrench`) and the atlas paper's
+grasp gets its force closure and L1 epsilon (:mod:`sahgrasp.quality.wrench`) and the atlas paper's
 manipulability indices; the grasps are ranked (force closure first, then by
 :attr:`PlanSettings.rank`), duplicates dropped (same fingers, wrists and contacts within
 ``distinct_m``/``distinct_deg``), an optional extra check applied (e.g. a physics test: it may
@@ -31,9 +31,9 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.hand import Hand, load_hand
 from sahgrasp.ik import IKSettings, solve_ik
+from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.grasp_sampler import SurfaceMesh
 from sahgrasp.planner.candidates import (
@@ -46,8 +46,8 @@ from sahgrasp.planner.candidates import (
 from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
-from sahgrasp.quality import INDICES, ellipsoid_indices, null_space
-from sahgrasp.wrench import grasp_quality
+from sahgrasp.quality.ellipsoids import INDICES, ellipsoid_indices, null_space
+from sahgrasp.quality.wrench import grasp_quality
 
 __all__ = [
     "GraspCheck",
@@ -201,7 +201,7 @@ class GraspPlan:
 def manipulability_indices(
     hand: Hand, q: FloatArray, fingers: tuple[str, ...], reference_m: FloatArray
 ) -> dict[str, float]:
-    """The atlas paper's manipulability indices of a grasp (:mod:`sahgrasp.quality`).
+    """The atlas paper's manipulability indices of a grasp (:mod:`sahgrasp.quality.ellipsoids`).
 
     Hard-finger velocity constraints at the contact frames (the fingertip's material point moves
     with the object's point there), ``J_h qdot - G^T nu = 0`` with ``qdot`` the actuated joints

@@ -7,9 +7,9 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from sahgrasp.errors import SahGraspError
-from sahgrasp.quality import INDICES
-from sahgrasp.wrench import CONE_EDGES, FRICTION, LINF_CONE_EDGES
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.quality.ellipsoids import INDICES
+from sahgrasp.quality.wrench import CONE_EDGES, FRICTION, LINF_CONE_EDGES
 
 __all__ = ["FINGER_COUNTS", "RANKINGS", "PlanSettings", "PlanningError"]
 
@@ -35,8 +35,9 @@ class PlanSettings:
         mu: Coulomb friction coefficient of the quality and of the pre-filter.
         cone_edges: Friction cone edges of the L1 epsilon and of force closure.
         linf_edges: Friction cone edges of the L-infinity epsilon (computed for returned grasps).
-        rank: ``"epsilon"`` (L1) or a manipulability index (:data:`sahgrasp.quality.INDICES`);
-            force-closure grasps always rank before the others.
+        rank: ``"epsilon"`` (L1) or a manipulability index
+            (:data:`sahgrasp.quality.ellipsoids.INDICES`); force-closure grasps always rank before
+            the others.
         time_limit_s: Optional cap on the planning time [s]: a run it cuts depends on the
             machine's speed (the candidate budget does not).
         ik_max_inits: Initial configurations the IK tries per candidate.

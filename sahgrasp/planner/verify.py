@@ -33,7 +33,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.hand import HandDescription
+from sahgrasp.model.hand import HandDescription
 from sahgrasp.objects.grasp_sampler import SurfaceMesh
 
 __all__ = [

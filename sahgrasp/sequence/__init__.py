@@ -5,8 +5,8 @@ processes by default, Dask, MPI), checkpoints as it goes, and writes a
 :class:`~sahgrasp.ik.Sequence` file that ``solve_ik`` can use.
 """
 
+from sahgrasp.core.executors import open_executor
 from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState
-from sahgrasp.sequence.executors import open_executor
 from sahgrasp.sequence.search import (
     Progress,
     RoundResult,

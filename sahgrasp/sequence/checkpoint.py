@@ -29,8 +29,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import write_json_atomic
+from sahgrasp.core.errors import SequenceFileError
+from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.ik import PoseBasis
 from sahgrasp.sequence.folder import CHECKPOINT, HEADER, RESULTS
 

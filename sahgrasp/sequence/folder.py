@@ -5,7 +5,7 @@
   never leaves the folder locked; a second search (or a second ``--resume``) gets a
   :class:`SequenceFileError` naming the folder and the holder's pid. ``flock`` needs a POSIX
   system and a local file system (over NFS it may not exclude a run on another machine).
-* Files are written with :mod:`sahgrasp.fileio`'s atomic writer, whose temporary files have a
+* Files are written with :mod:`sahgrasp.core.fileio`'s atomic writer, whose temporary files have a
   name no user file is mistaken for, so :func:`remove_stale_temporaries` (run by the lock holder,
   when no write of its own is in progress) deletes exactly the temporaries of killed writes.
 """
@@ -20,8 +20,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from sahgrasp.errors import SequenceFileError
-from sahgrasp.fileio import is_temporary
+from sahgrasp.core.errors import SequenceFileError
+from sahgrasp.core.fileio import is_temporary
 
 __all__ = [
     "CHECKPOINT",

@@ -32,13 +32,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.fileio import write_bytes_atomic, write_json_atomic
-from sahgrasp.hand import Hand, HandDescription, load_hand
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.executors import open_executor
+from sahgrasp.core.fileio import write_bytes_atomic, write_json_atomic
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, pose_basis
 from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED, expansion_matrix
+from sahgrasp.model.hand import Hand, HandDescription, load_hand
 from sahgrasp.sequence.checkpoint import CellOutcome, Checkpoint, RoundState, refuse_leftovers
-from sahgrasp.sequence.executors import open_executor
 from sahgrasp.sequence.figure import success_maps_png
 from sahgrasp.sequence.folder import (
     CHECKPOINT,

@@ -23,9 +23,9 @@ import threading
 import time
 from dataclasses import dataclass, replace
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand, HandDescription
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, random_problem, solve_ik, worker_hand
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, HandDescription
 
 __all__ = ["Chunk", "ChunkResult", "solve_chunk"]
 

@@ -21,10 +21,11 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import InvalidProblem, ObjectSpec, object_spec, read_problems
-from sahgrasp.errors import SahGraspError
-from sahgrasp.fileio import read_json
-from sahgrasp.hand import Hand, load_hand
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.fileio import read_json
+from sahgrasp.core.parallel import process_pool
+from sahgrasp.model.contacts import InvalidProblem, ObjectSpec, object_spec, read_problems
+from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.sim.hold import HoldResult, HoldTester
 from sahgrasp.sim.settings import HoldSettings
 
@@ -179,7 +180,7 @@ def read_grasps(
             document(s) carrying their object (then ``targets`` may be None).
         targets: The targets file the results were solved from (names each grasp's object).
         allow_outside_paths: Accept object meshes named outside the folder of the file that
-            names them (see :func:`sahgrasp.contacts.object_spec`).
+            names them (see :func:`sahgrasp.model.contacts.object_spec`).
 
     Raises:
         ResultsFileError: A file cannot be read, the results are not of the targets' problems
@@ -312,8 +313,6 @@ def check_grasps(
         for task, chunk in zip(tasks, where, strict=True):
             record(chunk, _check_chunk(task))  # type: ignore[arg-type]
         return out
-    from sahgrasp.parallel import process_pool
-
     with process_pool(min(workers, len(tasks))) as pool:
         for chunk, results in zip(where, pool.map(_check_chunk, tasks), strict=True):
             record(chunk, results)

@@ -22,8 +22,8 @@ import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import nnls
 
-from sahgrasp.hand import Hand
 from sahgrasp.ik import IKResult
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject
 from sahgrasp.sim.model import SimModel, build_model
 from sahgrasp.sim.settings import DIRECTIONS, HoldSettings
@@ -558,8 +558,8 @@ def hold_test(
     Args:
         hand: The hand.
         grasp: An :class:`~sahgrasp.ik.IKResult` or a configuration ``q`` (wrist pose then
-            joint coordinates, see :class:`~sahgrasp.hand.Hand`); build one from a wrist pose
-            and joint values with :meth:`~sahgrasp.hand.Hand.configuration`.
+            joint coordinates, see :class:`~sahgrasp.model.hand.Hand`); build one from a wrist pose
+            and joint values with :meth:`~sahgrasp.model.hand.Hand.configuration`.
         obj: The object at its placement in the world.
         settings: The test's parameters.
     """

@@ -1,6 +1,6 @@
 """The MuJoCo model of a grasp: the hand from its description, the object from its convex pieces.
 
-The hand is built from the Pinocchio model :func:`~sahgrasp.hand.load_hand` makes of its URDF:
+The hand is built from the Pinocchio model :func:`~sahgrasp.model.hand.load_hand` makes of its URDF:
 one body per URDF joint (fixed links merged into their parent, as Pinocchio merges them), each
 URDF collision shape as a MuJoCo geom (boxes, cylinders, spheres, capsules, ellipsoids; a mesh
 becomes its convex hull, as MuJoCo collides meshes), coupled (``<mimic>``) joints as joint
@@ -25,8 +25,8 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.errors import HandModelError, SahGraspError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import HandModelError, SahGraspError
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject
 from sahgrasp.sim.settings import HoldSettings
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from sahgrasp.errors import InvalidSettingsError
+from sahgrasp.core.errors import InvalidSettingsError
 
 __all__ = ["DIRECTIONS", "LIGHT_SQUEEZE_N", "HoldSettings"]
 

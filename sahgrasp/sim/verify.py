@@ -11,14 +11,15 @@ independent simulator, a real hand).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
-from sahgrasp.hand import Hand
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject
 from sahgrasp.sim.hold import HoldResult, HoldTester
 from sahgrasp.sim.settings import HoldSettings
 
-__all__ = ["PhysicsCheck", "hold_margin", "hold_rates", "hold_verdict"]
+__all__ = ["PhysicsCheck", "PhysicsCheckFactory", "hold_margin", "hold_rates", "hold_verdict"]
 
 
 def hold_margin(result: HoldResult, settings: HoldSettings) -> float:
@@ -101,6 +102,24 @@ class PhysicsCheck:
         document.setdefault("summary", {})["hold_checked"] = len(held)
         document["summary"]["hold_passed"] = sum(v["holds"] for v in held)
         return document
+
+
+@dataclass(frozen=True)
+class PhysicsCheckFactory:
+    """Builds a :class:`PhysicsCheck` for a hand and an object.
+
+    Picklable, so that a folder run's workers build their own
+    (``sahgrasp.planner.folder.plan_file(make_check=)``).
+
+    Attributes:
+        settings: The hold test's parameters.
+    """
+
+    settings: HoldSettings
+
+    def __call__(self, hand: Hand, obj: GraspObject) -> PhysicsCheck:
+        """The check of ``hand``'s grasps of ``obj``."""
+        return PhysicsCheck(hand, obj, self.settings)
 
 
 def hold_rates(

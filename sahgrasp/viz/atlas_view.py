@@ -17,10 +17,10 @@ import meshcat.geometry as mg
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import VizError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import VizError
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
-from sahgrasp.quality import principal_projection
+from sahgrasp.quality.ellipsoids import principal_projection
 from sahgrasp.viz.colors import hex_color, quality_colors
 from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.viewer import Viewer, translation

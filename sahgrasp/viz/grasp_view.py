@@ -11,8 +11,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
 from sahgrasp.viz.hand_view import HandView, visual_corners
 from sahgrasp.viz.markers import show_contacts, show_object

@@ -15,8 +15,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from pinocchio.visualize import MeshcatVisualizer
 
-from sahgrasp.errors import HandModelError
-from sahgrasp.hand import Hand
+from sahgrasp.core.errors import HandModelError
+from sahgrasp.model.hand import Hand
 from sahgrasp.viz.viewer import Viewer
 
 __all__ = ["HandView", "visual_corners", "visual_model"]

@@ -14,7 +14,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.contacts import GraspTarget
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.objects import GraspObject
 from sahgrasp.viz.colors import FINGER_COLORS, MARKER_COLOR, hex_color
 from sahgrasp.viz.viewer import Viewer

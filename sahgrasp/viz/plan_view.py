@@ -17,10 +17,11 @@ import meshcat.geometry as mg
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.hand import Hand
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.planner.plan import GraspPlan, PlannedGrasp
+from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.viewer import Viewer
 
 __all__ = ["draw_plan", "plan_scene", "write_plan_html"]
@@ -80,8 +81,6 @@ def draw_plan(
     viewer: Viewer, hand: Hand, obj: GraspObject, plan: GraspPlan, count: int = _MAX_SHOWN
 ) -> None:
     """Draw the plan's first ``count`` grasps side by side into ``viewer`` (module docstring)."""
-    from sahgrasp.viz import grasp_points, show_grasp
-
     grasps = plan.grasps[:count]
     columns = max(1, math.ceil(math.sqrt(1.8 * len(grasps))))
     turned = []

@@ -20,7 +20,7 @@ import time
 from contextlib import suppress
 from pathlib import Path
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
 
 __all__ = [
     "CHROMIUM_NAMES",

@@ -34,8 +34,8 @@ import meshcat.animation
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import SahGraspError
-from sahgrasp.fileio import write_bytes_atomic
+from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.fileio import write_bytes_atomic
 from sahgrasp.viz.recording import RecordingWindow
 
 __all__ = ["CAMERA_FOV_DEG", "CLEANUP_SIGNALS", "Viewer", "ViewerError", "translation"]

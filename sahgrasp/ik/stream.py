@@ -12,7 +12,7 @@ written with other settings (or from a targets file whose hand or default object
 refused, and the output stays where it was. Each result carries the :func:`problem_digest` of its
 problem: a resumed run keeps the results whose problems are unchanged, in order, and solves the
 rest again from the first changed one. The output is locked while it is written
-(:func:`sahgrasp.fileio.lock_output`), so a second run writing it is refused at once. A targets
+(:func:`sahgrasp.core.fileio.lock_output`), so a second run writing it is refused at once. A targets
 file may be a pipe: it is read once, as it comes. The format is documented in docs/formats.md.
 """
 
@@ -28,7 +28,17 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from sahgrasp.contacts import (
+from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
+from sahgrasp.core.fileio import (
+    OutputPathError,
+    file_digest,
+    json_safe,
+    lock_output,
+    read_json,
+    side_files,
+    write_error,
+)
+from sahgrasp.model.contacts import (
     GraspTarget,
     InvalidProblem,
     ObjectSpec,
@@ -36,15 +46,6 @@ from sahgrasp.contacts import (
     problem_from_line,
     read_problems,
     targets_hand,
-)
-from sahgrasp.errors import InvalidSettingsError, InvalidTargetError
-from sahgrasp.fileio import (
-    OutputPathError,
-    file_digest,
-    json_safe,
-    lock_output,
-    side_files,
-    write_error,
 )
 
 __all__ = [
@@ -102,7 +103,7 @@ def open_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = Fa
 
     A ``.jsonl`` file is read once, from its start to its end: a named pipe loses no line. A
     UTF-8 byte order mark before its first line is skipped. ``allow_outside_paths``: accept object
-    meshes outside the file's folder (:func:`sahgrasp.contacts.read_problems`).
+    meshes outside the file's folder (:func:`sahgrasp.model.contacts.read_problems`).
 
     Raises:
         InvalidTargetError: The file cannot be read, or its header (first line of a ``.jsonl``
@@ -145,8 +146,6 @@ def _mesh_of(problem: GraspTarget | InvalidProblem) -> str | None:
 
 def _document_default(path: Path, allow_outside_paths: bool = False) -> ObjectSpec | None:
     """The default object of a JSON targets document (already read and checked whole)."""
-    from sahgrasp.fileio import read_json
-
     data = read_json(path, "targets file", InvalidTargetError)
     return object_spec(data.get("object"), path.parent, allow_outside_paths=allow_outside_paths)
 
@@ -262,7 +261,7 @@ def settings_header(
     """The header line of a results file: what its results depend on, and its digest.
 
     Args:
-        hand: The :class:`sahgrasp.hand.Hand`.
+        hand: The :class:`sahgrasp.model.hand.Hand`.
         settings: The :class:`sahgrasp.ik.IKSettings`.
         sequence: The JSON form of the pose sequence used.
         targets: The targets file (its name is recorded, not its content).

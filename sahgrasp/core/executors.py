@@ -1,13 +1,13 @@
 """Where the chunks of the search run: any :class:`concurrent.futures.Executor`.
 
-* local worker processes (default): :func:`sahgrasp.parallel.process_pool`, started with
+* local worker processes (default): :func:`sahgrasp.core.parallel.process_pool`, started with
   ``spawn``, one worker per core unless told otherwise, each with a single BLAS thread, each
   ending when the process that started it ends (even by ``kill -9``);
 * Dask distributed: a scheduler address (``tcp://HOST:PORT``) or a ``dask.distributed.Client``;
   chunks go through ``Client.get_executor()``. Dask reruns the chunks of a worker that dies. An
   address is checked before anything starts, a scheduler that does not answer is given up after
-  :data:`~sahgrasp.parallel.SCHEDULER_TIMEOUT_S`, and one lost mid-run ends the run with a
-  :class:`~sahgrasp.parallel.SchedulerError` (the work done so far stays, to be resumed);
+  :data:`~sahgrasp.core.parallel.SCHEDULER_TIMEOUT_S`, and one lost mid-run ends the run with a
+  :class:`~sahgrasp.core.parallel.SchedulerError` (the work done so far stays, to be resumed);
 * anything else with the ``Executor`` interface, e.g. ``mpi4py.futures.MPIPoolExecutor``.
 
 Chunks are pure functions of their arguments, so the result does not depend on which of these ran
@@ -23,8 +23,8 @@ from concurrent.futures import CancelledError, Executor
 from contextlib import contextmanager
 from typing import Any
 
-from sahgrasp.errors import InvalidSettingsError
-from sahgrasp.parallel import (
+from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.parallel import (
     SCHEDULER_TIMEOUT_S,
     SchedulerError,
     SchedulerLostError,

@@ -2,7 +2,7 @@
 
 :func:`process_pool` is the one way sahgrasp starts worker processes on this machine::
 
-    from sahgrasp.parallel import process_pool
+    from sahgrasp.core.parallel import process_pool
 
     with process_pool(workers=2) as pool:  # a concurrent.futures.ProcessPoolExecutor
         results = list(pool.map(function, items))
@@ -55,7 +55,7 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, wait
 from contextlib import contextmanager
 
-from sahgrasp.errors import InvalidSettingsError, SahGraspError
+from sahgrasp.core.errors import InvalidSettingsError, SahGraspError
 
 __all__ = [
     "SCHEDULER_ADDRESS_FORMS",

@@ -23,8 +23,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, cast
 
-from sahgrasp import fileio
-from sahgrasp.errors import HandModelError
+from sahgrasp.core import fileio
+from sahgrasp.core.errors import HandModelError
 
 __all__ = [
     "MAX_MAGNITUDE",

@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
 
 __all__ = [
     "CONE_EDGES",

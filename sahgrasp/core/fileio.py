@@ -44,7 +44,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
 
 __all__ = [
     "OutputLockedError",

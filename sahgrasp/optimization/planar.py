@@ -23,10 +23,10 @@ vectors (Section III), and Eq. (13) reads ``E_s^T (theta(x_h) - theta(x_1,h)) = 
 unit-vector coordinates themselves the least-variance directions are the radial ones (normal to the
 unit circles), which would make Eq. (13) tangent to F at ``x_1``. ``s = t - k`` such equations
 (Eq. (12)) reduce F to the k-manifold R of Eq. (11), which the atlas covers (Section IV).
-:class:`PlanarGraspProblem` is a :class:`~sahgrasp.optimization.GraspManifold`:
-:func:`sahgrasp.optimization.optimize` runs Algorithm 1 on it. Its manipulability indices
-(:mod:`sahgrasp.quality`) come from the tangent space of F, the actuated joint rates and the object
-twist ``(vx, vy, omega)``.
+:class:`PlanarGraspProblem` is a :class:`~sahgrasp.optimization.optimizer.GraspManifold`:
+:func:`sahgrasp.optimization.optimizer.optimize` runs Algorithm 1 on it. Its manipulability indices
+(:mod:`sahgrasp.quality.ellipsoids`) come from the tangent space of F, the actuated joint rates and
+the object twist ``(vx, vy, omega)``.
 
 Geometry (``DEFAULT_HAND``, SI units): fingers based at x = -0.08, 0 and 0.08 m on the palm (the
 x axis), the outer ones with phalanges of 0.07 m and 0.035 m, the middle one of 0.035 m and
@@ -49,10 +49,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas._planar import features as features_of
 from sahgrasp.atlas._planar import jacobian
-from sahgrasp.errors import GraspSystemError
-from sahgrasp.motions import principal_motions
-from sahgrasp.optimization import ChartChecks
-from sahgrasp.quality import Manipulability, full_rank_null_space, manipulability
+from sahgrasp.core.errors import GraspSystemError
+from sahgrasp.optimization.motions import principal_motions
+from sahgrasp.optimization.optimizer import ChartChecks
+from sahgrasp.quality.ellipsoids import Manipulability, full_rank_null_space, manipulability
 
 __all__ = [
     "DEFAULT_HAND",

@@ -36,15 +36,15 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.collision import Penetration, SelfCollision
-from sahgrasp.errors import (
+from sahgrasp.collision.hand_self import Penetration, SelfCollision
+from sahgrasp.core.errors import (
     HandModelError,
     InvalidConfigurationError,
     InvalidSettingsError,
     InvalidTargetError,
     SahGraspError,
 )
-from sahgrasp.hand_checks import (
+from sahgrasp.model.hand_checks import (
     check_name,
     check_urdf,
     native_message,

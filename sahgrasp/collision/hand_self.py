@@ -110,9 +110,9 @@ def settle_box_support() -> bool:
 
 if not settle_box_support():
     warnings.warn(
-        "coal answered a box query before sahgrasp.collision was imported, so its box support "
-        "rule differs from a fresh process's: results may differ from other processes in the "
-        "last bits (import sahgrasp before querying coal for bit-identical results)",
+        "coal answered a box query before sahgrasp.collision.hand_self was imported, so its box "
+        "support rule differs from a fresh process's: results may differ from other processes in "
+        "the last bits (import sahgrasp before querying coal for bit-identical results)",
         RuntimeWarning,
         stacklevel=2,
     )

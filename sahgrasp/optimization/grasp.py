@@ -24,8 +24,8 @@ rank, first derivatives only; the sign is kept by continuity from the first gras
 Dimension reduction (Section III): the PCA of sampled hand configurations gives ``E``; the ``s``
 directions of least variance, through the first grasp ``x_1``, add ``E_s^T (x_h - x_1h) = 0``
 (Eq. (13)), with ``s = t - k`` (Eq. (12)). :class:`SahGraspManifold` is that reduced set R as a
-:class:`~sahgrasp.optimization.GraspManifold`, with the collision checks of its chart centres: at
-each, the fingers without a contact region are first placed where they touch nothing
+:class:`~sahgrasp.optimization.optimizer.GraspManifold`, with the collision checks of its chart
+centres: at each, the fingers without a contact region are first placed where they touch nothing
 (``HandObjectClearance.place_free_fingers``: the nearest configuration of their own joints clear of
 the object and of the other links; they are no part of F, so this changes neither the grasp nor its
 index), then the hand is checked for self-collision and, given the object, for hand-object
@@ -43,19 +43,19 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.contacts import GraspTarget
-from sahgrasp.errors import GraspSystemError, OptimizationError
-from sahgrasp.hand import Hand, HandDescription
+from sahgrasp.core.errors import GraspSystemError, OptimizationError
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik.batch import object_key, worker_hand, worker_obstacle
 from sahgrasp.ik.obstacle import checker_of
-from sahgrasp.motions import PrincipalMotions, principal_motions
+from sahgrasp.model.contacts import GraspTarget
+from sahgrasp.model.hand import Hand, HandDescription
 from sahgrasp.objects import GraspObject
 from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
 from sahgrasp.objects.smooth_surface import fit_mesh_patch
-from sahgrasp.optimization import ChartChecks
-from sahgrasp.quality import Manipulability, ellipsoid_indices, null_space
+from sahgrasp.optimization.motions import PrincipalMotions, principal_motions
+from sahgrasp.optimization.optimizer import ChartChecks
+from sahgrasp.quality.ellipsoids import Manipulability, ellipsoid_indices, null_space
 
 __all__ = [
     "MOTION_SOURCES",
@@ -669,7 +669,7 @@ def first_grasp_system(
     Fingers without a contact region are left free (they do not enter ``x``); given the object
     (in the regions' frame), they are placed clear of it and of the other links
     (``HandObjectClearance.place_free_fingers``). ``free_object`` and ``symmetry_axis`` are those
-    of :class:`~sahgrasp.grasp.GraspSystem`.
+    of :class:`~sahgrasp.optimization.grasp.GraspSystem`.
 
     Raises:
         OptimizationError: The IK finds no such grasp.
@@ -729,7 +729,7 @@ def make_sah_manifold(
 
 
 def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
-    """Seed grasps for :func:`~sahgrasp.optimization.optimize_components`, (S, n).
+    """Seed grasps for :func:`~sahgrasp.optimization.optimizer.optimize_components`, (S, n).
 
     In the atlas's coordinates ``y``: ``x_1`` first, then the IK's solutions of the same contacts
     (the regions' nominal parameters) from ``count`` random starts (seeds 0..count-1); problems

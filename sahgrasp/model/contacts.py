@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import InvalidTargetError
-from sahgrasp.fileio import read_json, write_json_atomic
+from sahgrasp.core.errors import InvalidTargetError
+from sahgrasp.core.fileio import read_json, write_json_atomic
 
 __all__ = [
     "MAX_PATH_CHARS",
@@ -661,7 +661,7 @@ def problem_from_line(
     """One problem line of a JSON Lines targets file (without its newline), or why it is invalid.
 
     A UTF-8 byte-order mark at the start of the line (an editor's, at the start of the file)
-    is skipped, as :func:`sahgrasp.fileio.read_json` skips it at the start of a document.
+    is skipped, as :func:`sahgrasp.core.fileio.read_json` skips it at the start of a document.
 
     Args:
         line: The line's bytes.

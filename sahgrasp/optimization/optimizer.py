@@ -8,9 +8,9 @@ from a first grasp ``x_1`` and evaluates a quality index at every chart centre.
 One protocol, :class:`GraspManifold`, says what the optimization needs of a problem: ``F`` and
 ``J`` of ``R``, its box bounds, the start point, the dimension ``k``, the manipulability ellipsoid
 at chart centres and the collision checks of chart centres. The planar hand
-(:class:`sahgrasp.planar.PlanarGraspProblem`) and the SAH grasp system with its principal motions
-(:class:`sahgrasp.grasp.SahGraspManifold`) implement it; :func:`optimize` runs Algorithm 1 on
-either and returns one :class:`OptimizationResult`.
+(:class:`sahgrasp.optimization.planar.PlanarGraspProblem`) and the SAH grasp system with its
+principal motions (:class:`sahgrasp.optimization.grasp.SahGraspManifold`) implement it;
+:func:`optimize` runs Algorithm 1 on either and returns one :class:`OptimizationResult`.
 
 Collisions (Section IV: "collisions could be considered as well ... returning the best collision
 free grasp"): the problem checks every chart centre (:meth:`GraspManifold.check_charts`; the SAH
@@ -37,10 +37,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas import Atlas, AtlasCheckpoint, AtlasSettings, build_atlas
-from sahgrasp.errors import OptimizationError
-from sahgrasp.parallel import check_workers, process_pool
-from sahgrasp.progress import ProgressCallback
-from sahgrasp.quality import (
+from sahgrasp.core.errors import OptimizationError
+from sahgrasp.core.parallel import check_workers, process_pool
+from sahgrasp.core.progress import ProgressCallback
+from sahgrasp.quality.ellipsoids import (
     QUALITY_INDICES,
     IndexEvaluation,
     Manipulability,
@@ -63,8 +63,8 @@ FloatArray = NDArray[np.float64]
 IndexFunction = Callable[[FloatArray], ArrayLike]
 """A user quality index: chart centres (N, n) -> N values, larger is better (NaN: undefined).
 
-The centres are in the problem's coordinates (a scaled :class:`~sahgrasp.grasp.SahGraspManifold`
-maps them back with ``x_of``)."""
+The centres are in the problem's coordinates (a scaled
+:class:`~sahgrasp.optimization.grasp.SahGraspManifold` maps them back with ``x_of``)."""
 
 
 @dataclass(frozen=True)
@@ -150,11 +150,12 @@ class OptimizationSettings:
     Attributes:
         radius: Chart radius ``r`` (in the units of ``x``).
         epsilon: Threshold of Eqs. (17)-(18).
-        index: Manipulability index to maximise (:data:`~sahgrasp.quality.QUALITY_INDICES`);
-            ignored when ``index_fn`` is given.
+        index: Manipulability index to maximise
+            (:data:`~sahgrasp.quality.ellipsoids.QUALITY_INDICES`); ignored when ``index_fn`` is
+            given.
         index_fn: A user quality index instead of ``index`` (see :data:`IndexFunction`).
         max_charts: Cap on the atlas size (``result.atlas.stop_reason`` says if it was hit).
-        progress: Hears of every new chart (:class:`~sahgrasp.progress.ProgressCallback`).
+        progress: Hears of every new chart (:class:`~sahgrasp.core.progress.ProgressCallback`).
         workers: Processes that check the chart centres for collisions while the atlas is
             built (0: this process checks them after the build). The result is the same for any
             number.

@@ -9,7 +9,7 @@ velocity compatible with the constraints, ``{B tau : |A tau| <= 1}``. With the t
 the ellipsoid's semi-axes. The atlas paper (Section V, Fig. 9) optimises three indices of it: the
 inverse condition number, the volume and the smallest semi-axis, and calls a grasp singular when
 the index falls below 1e-3, 1e-4 and 1e-3 respectively. Indices are registered objects (name,
-function, threshold, description: :mod:`sahgrasp.quality_indices`, whose names this module
+function, threshold, description: :mod:`sahgrasp.quality.indices`, whose names this module
 re-exports); :func:`register_index` adds one.
 
 Everything here is vectorised over leading axes (one entry per chart). ``evaluate_index``
@@ -30,8 +30,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.atlas._quality import orthogonal_tail
 from sahgrasp.atlas._quality import semi_axes as compiled_semi_axes
-from sahgrasp.errors import QualityError
-from sahgrasp.quality_indices import (
+from sahgrasp.core.errors import QualityError
+from sahgrasp.quality.indices import (
     PAPER_INDICES,
     QUALITY_INDICES,
     SINGULAR_THRESHOLDS,

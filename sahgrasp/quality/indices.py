@@ -1,14 +1,14 @@
 """The registry of grasp quality indices: name, function, singularity threshold, description.
 
 An index maps the manipulability ellipsoids of a batch of grasps (:class:`Ellipsoids`, that is
-:class:`sahgrasp.quality.Manipulability`) to one value per grasp, larger is better; a grasp whose
-value is below the index's threshold is singular. The atlas paper's three indices (Rosales, Porta
-and Ros, Section V, Fig. 9) are registered here; :func:`register_index` adds another, and from
-then on ``Manipulability.index``, the optimization's ``index`` setting, the reports and the
-``--index`` choices of ``sahgrasp atlas`` all know it.
+:class:`sahgrasp.quality.ellipsoids.Manipulability`) to one value per grasp, larger is better; a
+grasp whose value is below the index's threshold is singular. The atlas paper's three indices
+(Rosales, Porta and Ros, Section V, Fig. 9) are registered here; :func:`register_index` adds
+another, and from then on ``Manipulability.index``, the optimization's ``index`` setting, the
+reports and the ``--index`` choices of ``sahgrasp atlas`` all know it.
 
 This module imports only the standard library, so that ``sahgrasp --help`` lists the indices
-without loading numpy; :mod:`sahgrasp.quality` re-exports its names.
+without loading numpy; :mod:`sahgrasp.quality.ellipsoids` re-exports its names.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from dataclasses import dataclass
 from operator import attrgetter
 from typing import TYPE_CHECKING, Protocol
 
-from sahgrasp.errors import QualityError
-from sahgrasp.registry import Registry
+from sahgrasp.core.errors import QualityError
+from sahgrasp.core.registry import Registry
 
 if TYPE_CHECKING:
     import numpy as np
@@ -38,7 +38,7 @@ __all__ = [
 class Ellipsoids(Protocol):
     """What an index reads: manipulability ellipsoids of a batch of grasps (leading axes ``...``).
 
-    :class:`sahgrasp.quality.Manipulability` is one; its docstring defines each field.
+    :class:`sahgrasp.quality.ellipsoids.Manipulability` is one; its docstring defines each field.
     """
 
     @property

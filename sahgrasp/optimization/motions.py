@@ -5,8 +5,8 @@ the columns of ``E`` are the principal motions, sorted by decreasing variance ``
 directions of least variance give the constraints ``E_s^T (x_h - x_1h) = 0`` of Eq. (13) that
 reduce the feasible-grasp manifold to the set of relevant grasps (Eqs. (10)-(12)).
 
-Shared by the planar hand (:mod:`sahgrasp.planar`) and the SAH grasp system
-(:mod:`sahgrasp.grasp`); it knows nothing of either.
+Shared by the planar hand (:mod:`sahgrasp.optimization.planar`) and the SAH grasp system
+(:mod:`sahgrasp.optimization.grasp`); it knows nothing of either.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.errors import PrincipalMotionsError
+from sahgrasp.core.errors import PrincipalMotionsError
 
 __all__ = ["PrincipalMotions", "principal_motions"]
 

@@ -23,7 +23,7 @@ import coal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.objects.frames import FloatArray, transform_points
+from sahgrasp.core.frames import FloatArray, transform_points
 
 __all__ = [
     "COARSE_CELL_M",

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Generic, TypeVar, overload
 
-from sahgrasp.errors import SahGraspError
+from sahgrasp.core.errors import SahGraspError
 
 __all__ = ["Registry", "RegistryNames"]
 
@@ -65,8 +65,8 @@ class Registry(Mapping[str, T], Generic[T]):
 
     Args:
         kind: What an entry is, for messages (``"quality index"``).
-        error: The :class:`~sahgrasp.errors.SahGraspError` subclass raised for an unknown name or
-            a bad registration.
+        error: The :class:`~sahgrasp.core.errors.SahGraspError` subclass raised for an unknown name
+            or a bad registration.
     """
 
     def __init__(self, kind: str, error: type[SahGraspError]) -> None:

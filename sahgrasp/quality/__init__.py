@@ -1,0 +1,84 @@
+"""Grasp quality: manipulability ellipsoids, the registry of their indices, wrench-space measures.
+
+:mod:`~sahgrasp.quality.ellipsoids` evaluates manipulability indices at chart centres;
+:mod:`~sahgrasp.quality.indices` registers the indices without numpy (the parsers list them);
+:mod:`~sahgrasp.quality.wrench` gives force closure and the Ferrari-Canny epsilon. Names are loaded
+on first use, so that importing :mod:`sahgrasp.quality.indices` does not import numpy.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from sahgrasp.quality.ellipsoids import (
+        INDICES,
+        QUALITY_INDICES,
+        SINGULAR_THRESHOLDS,
+        ChartCentres,
+        IndexEvaluation,
+        Manipulability,
+        QualityIndex,
+        ellipsoid_indices,
+        evaluate_index,
+        full_rank_null_space,
+        manipulability,
+        null_space,
+        principal_projection,
+        register_index,
+        semi_axes,
+    )
+
+_EXPORTS = {
+    "sahgrasp.quality.ellipsoids": (
+        "ChartCentres",
+        "INDICES",
+        "IndexEvaluation",
+        "Manipulability",
+        "QUALITY_INDICES",
+        "QualityIndex",
+        "SINGULAR_THRESHOLDS",
+        "ellipsoid_indices",
+        "evaluate_index",
+        "full_rank_null_space",
+        "manipulability",
+        "null_space",
+        "principal_projection",
+        "register_index",
+        "semi_axes",
+    ),
+}
+_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
+
+__all__ = [
+    "INDICES",
+    "QUALITY_INDICES",
+    "SINGULAR_THRESHOLDS",
+    "ChartCentres",
+    "IndexEvaluation",
+    "Manipulability",
+    "QualityIndex",
+    "ellipsoid_indices",
+    "evaluate_index",
+    "full_rank_null_space",
+    "manipulability",
+    "null_space",
+    "principal_projection",
+    "register_index",
+    "semi_axes",
+]
+
+
+def __getattr__(name: str) -> Any:
+    # Loaded on first use: importing one submodule does not load its siblings' dependencies.
+    module = _MODULE_OF.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
