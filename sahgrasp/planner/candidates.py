@@ -50,6 +50,8 @@ FloatArray = NDArray[np.float64]
 Contact = tuple[FloatArray, FloatArray]
 
 _SPACING_ITERATIONS = 4
+_RAY_EPS_M = 1e-7
+"""Ray crossings this near the origin are its own face (as in :meth:`SurfaceMesh.ray_hits`)."""
 _OFF_SURFACE_M = 1e-6
 _REACH_SAMPLES = 1000
 """Random configurations whose fingertip distances bound a hand's span."""
@@ -150,20 +152,29 @@ def derive_reach(hand: Hand) -> HandReach:
     rng = np.random.default_rng(0)
     specs = dict(zip(hand.fingers, hand.description.fingers, strict=True))
     frames = {f: model.getFrameId(s.tip_link) for f, s in specs.items()}
-    span = 0.0
-    for _ in range(_REACH_SAMPLES):
-        pin.framesForwardKinematics(model, data, hand.random_configuration(rng, pin.SE3.Identity()))
-        tip = data.oMf[frames[thumb]]
-        pad = tip.rotation @ np.array(specs[thumb].pad_axis)
+    others = [f for f in hand.fingers if f != thumb]
+    # The same draws as hand.random_configuration(rng, identity) one after the other (a
+    # Generator fills an array in order), assembled at once: q = identity wrist + coordinates.
+    coordinates = rng.uniform(hand.lower, hand.upper, size=(_REACH_SAMPLES, len(hand.lower)))
+    q = np.zeros((_REACH_SAMPLES, model.nq))
+    q[:, 6] = 1.0
+    q[:, 7:] = coordinates
+    positions = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
+    pads = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
+    for k in range(_REACH_SAMPLES):
+        pin.framesForwardKinematics(model, data, q[k])
         for f in hand.fingers:
-            if f == thumb:
-                continue
-            other = data.oMf[frames[f]]
-            gap = other.translation - tip.translation
-            facing = pad @ (other.rotation @ np.array(specs[f].pad_axis))
-            # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
-            if facing < -_FACING_COS and gap @ pad > 0.0:
-                span = max(span, float(np.linalg.norm(gap)))
+            placement = data.oMf[frames[f]]
+            positions[f][k] = placement.translation
+            pads[f][k] = placement.rotation @ np.array(specs[f].pad_axis)
+    span = 0.0
+    for f in others:
+        gap = positions[f] - positions[thumb]
+        facing = np.einsum("ij,ij->i", pads[thumb], pads[f])
+        # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
+        ok = (facing < -_FACING_COS) & (np.einsum("ij,ij->i", gap, pads[thumb]) > 0.0)
+        if ok.any():
+            span = max(span, float(np.linalg.norm(gap[ok], axis=1).max()))
     span = span - 2.0 * hand.radius_m if span > 2.0 * hand.radius_m else 0.15
     return HandReach(
         finger_spacing_m=(0.7 * spacing, spacing),
@@ -197,7 +208,7 @@ class CandidateDraw:
         self.edges = edges
         self.single_shell = _shells(surface) == 1
         self.surface = surface
-        self.nearest = NearestPoint(surface.triangles)
+        self.nearest = NearestPoint(surface.triangles, surface.normals)
         self.reach = reach
         self.frame = frame
         self.mu = mu
@@ -276,7 +287,7 @@ class CandidateDraw:
     def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
         point, normal = thumb
         direction = _in_cone(rng, -normal, self.cone_cos)
-        distances, faces = self.surface.ray_hits(point, direction)
+        distances, faces = self.nearest.ray_hits(point, direction)
         lo, hi = self.reach.span_m
         exits = (self.surface.normals[faces] @ direction > 0.0) & (distances >= lo)
         exits &= distances <= hi
@@ -314,7 +325,7 @@ class CandidateDraw:
     def _exposed(self, contacts: list[Contact]) -> bool:
         if self.single_shell:  # one closed shell: no surface point is inside another
             return True
-        return all(self.surface.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
+        return all(self.nearest.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
 
     def _fits(self, contacts: list[Contact]) -> bool:
         radius = self.reach.fingertip_radius_m
@@ -333,7 +344,7 @@ class CandidateDraw:
 
 
 class NearestPoint:
-    """Closest points of a triangle mesh, exact, for one query point at a time.
+    """Closest points and ray crossings of a triangle mesh, exact, one query at a time.
 
     The nearest point of the surface's corners and face centroids bounds the distance from
     above; each face's bounding sphere (about its centroid) and its plane bound the face's
@@ -344,19 +355,22 @@ class NearestPoint:
 
     Args:
         triangles: Corners of each face, (M, 3, 3) [m].
+        normals: Outward unit normal of each face, (M, 3).
     """
 
     _TREE_FACES = 256
     """Meshes with more faces than this look the nearest surface point up in a k-d tree and
     the faces whose boxes meet the ball it bounds in an R-tree."""
 
-    def __init__(self, triangles: FloatArray) -> None:
+    def __init__(self, triangles: FloatArray, normals: FloatArray) -> None:
+        self.face_normals = normals
         self.a = np.ascontiguousarray(triangles[:, 0])
         self.ab = triangles[:, 1] - triangles[:, 0]
         self.ac = triangles[:, 2] - triangles[:, 0]
         self.centroids = triangles.mean(axis=1)
         self.radii = np.linalg.norm(triangles - self.centroids[:, None], axis=2).max(axis=1)
         self.max_radius = float(self.radii.max())
+        self.radii_sq = self.radii**2
         normals = np.cross(self.ab, self.ac)
         self.unit_normals = normals / np.linalg.norm(normals, axis=1)[:, None]
         self.plane_offsets = (self.unit_normals * self.a).sum(axis=1)
@@ -369,6 +383,45 @@ class NearestPoint:
 
             self.sample_tree = cKDTree(self.samples)
             self.box_tree = _box_tree(triangles)
+
+    def ray_hits(
+        self, origin: FloatArray, direction: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.intp]]:
+        """Distances [m] and faces of a unit ray's crossings (:meth:`SurfaceMesh.ray_hits`).
+
+        Nearest first, the origin's own face left out.
+        The cross products are written out: ``np.cross`` costs more in its set-up than in its
+        arithmetic on a few faces.
+        """
+        offset = self.centroids - origin
+        along = offset @ direction
+        near = (offset * offset).sum(axis=1) - along * along <= self.radii_sq
+        faces = np.flatnonzero(near & (along >= -self.radii))
+        e1, e2, v0 = self.ab[faces], self.ac[faces], self.a[faces]
+        dx, dy, dz = float(direction[0]), float(direction[1]), float(direction[2])
+        # p = direction x e2, det = e1 . p (Moller-Trumbore).
+        px = dy * e2[:, 2] - dz * e2[:, 1]
+        py = dz * e2[:, 0] - dx * e2[:, 2]
+        pz = dx * e2[:, 1] - dy * e2[:, 0]
+        det = e1[:, 0] * px + e1[:, 1] * py + e1[:, 2] * pz
+        ok = np.abs(det) > 1e-18
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        sv = origin - v0
+        u = (sv[:, 0] * px + sv[:, 1] * py + sv[:, 2] * pz) * inv
+        # q = s x e1.
+        qx = sv[:, 1] * e1[:, 2] - sv[:, 2] * e1[:, 1]
+        qy = sv[:, 2] * e1[:, 0] - sv[:, 0] * e1[:, 2]
+        qz = sv[:, 0] * e1[:, 1] - sv[:, 1] * e1[:, 0]
+        v = (qx * dx + qy * dy + qz * dz) * inv
+        t = (e2[:, 0] * qx + e2[:, 1] * qy + e2[:, 2] * qz) * inv
+        hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > _RAY_EPS_M)
+        order = np.argsort(t[hit])
+        return t[hit][order], faces[hit][order]
+
+    def shells_around(self, point: FloatArray, direction: FloatArray) -> int:
+        """Number of closed shells holding ``point``: exits minus entries of a ray from it."""
+        _, faces = self.ray_hits(point, direction)
+        return int(np.sign(self.face_normals[faces] @ direction).sum())
 
     def closest(self, point: FloatArray) -> tuple[FloatArray, int, float]:
         """Closest point of the mesh to ``point`` [m], its face, and the distance [m]."""
