@@ -189,13 +189,44 @@ def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict
     }
 
 
+def _command_run(hand: str, target: str, scale: float, settings: Any, tmp: str) -> dict[str, Any]:
+    """``sahgrasp plan TARGET`` in a fresh process: its times, from the process's start."""
+    import json
+    import subprocess
+    import sys
+
+    out = Path(tmp) / "command_plan.json"
+    argv = [sys.executable, "-m", "sahgrasp", "plan", target, "--hand", hand, "--quiet"]
+    argv += ["--candidates", str(settings.candidates), "--grasps", str(settings.grasps)]
+    argv += ["--seed", str(settings.seed), "--json", str(out)]
+    if scale != 1.0:
+        argv += ["--scale", repr(scale)]
+    start = time.perf_counter()
+    done = subprocess.run(argv, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - start
+    if done.returncode not in (0, 1) or not out.is_file():
+        return {"command_time_to_first_s": None, "command_s": wall, "command_error": done.stderr}
+    summary = json.loads(out.read_text(encoding="utf-8"))["summary"]
+    out.unlink()
+    return {"command_time_to_first_s": summary["time_to_first_s"], "command_s": wall}
+
+
 def warm_worker(description: Any) -> None:
-    """A worker's start-up: the planner's modules imported, the hand and its reach built."""
+    """A worker's start-up, once per hand and process.
+
+    The planner's modules imported; the hand, its reach, the IK's initial-pose sequence and
+    grasp database loaded.
+    """
     from sahgrasp.ik import worker_hand
+    from sahgrasp.ik.initial import default_sequence
+    from sahgrasp.ik.learned import default_database
     from sahgrasp.planner.candidates import hand_reach
     from sahgrasp.planner.plan import plan_grasps  # noqa: F401
 
-    hand_reach(worker_hand(description, description.digest()))
+    hand = worker_hand(description, description.digest())
+    hand_reach(hand)
+    default_sequence(hand)
+    default_database(hand)
 
 
 def run(
@@ -210,6 +241,7 @@ def run(
     workers: Sequence[int] = (1, 2),
     atlas: bool = True,
     quiet: bool = False,
+    commands: bool = True,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (module docstring).
 
@@ -225,6 +257,9 @@ def run(
         workers: Worker counts of the folder run (empty: no folder run).
         atlas: Compare with the atlas optimum on the can and the bottle (when among the objects).
         quiet: No progress bar.
+        commands: Also run ``sahgrasp plan`` on each object in a fresh process and record the
+            seconds from the process's start (interpreter, imports, hand, mesh: all included)
+            to its first verified force-closure grasp.
     """
     from tqdm import tqdm
 
@@ -282,11 +317,17 @@ def run(
             if s == 1.0
         ]
         runs = [_folder_run(the_hand, jobs, settings, w) for w in workers] if jobs else []
+        if commands:
+            targets = [(n, 1.0) for n in names] + list(files.items())
+            for row, (target, scale) in zip(rows, targets, strict=True):
+                row.update(_command_run(hand, target, scale, settings, tmp))
     comparison = [
         atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS if atlas and n in names
     ]
     firsts = [r["time_to_first_s"] for r in rows]
     reached = [t for t in firsts if t is not None]
+    commanded = [r["command_time_to_first_s"] for r in rows if "command_time_to_first_s" in r]
+    commanded_reached = [t for t in commanded if t is not None]
     speedup = None
     by_workers = {r["workers"]: r for r in runs}
     if 1 in by_workers and 2 in by_workers:
@@ -301,6 +342,9 @@ def run(
             "with_force_closure_grasp": len(reached),
             "share_with_force_closure_grasp": len(reached) / len(rows) if rows else 0.0,
             "median_time_to_first_s": float(median(reached)) if reached else None,
+            "median_command_time_to_first_s": (
+                float(median(commanded_reached)) if commanded_reached else None
+            ),
             "returned_failing_recheck": sum(r["returned_failing_recheck"] for r in rows),
             "returned": sum(r["returned"] for r in rows),
         },
@@ -319,11 +363,13 @@ def format_table(doc: dict[str, Any]) -> str:
     for r in doc["objects"]:
         f = r["by_fingers"]
         first = r["time_to_first_s"]
+        command = r.get("command_time_to_first_s")
         rows.append(
             (
                 r["object"],
                 r["faces"],
                 "-" if first is None else round(first, 3),
+                "-" if command is None else round(command, 3),
                 round(r["verified_per_s"], 1),
                 round(r["force_closure_per_cpu_s"], 1),
                 round(100 * r["force_closure_share"]),
@@ -337,6 +383,7 @@ def format_table(doc: dict[str, Any]) -> str:
         "object",
         "faces",
         "first FC [s]",
+        "command first FC [s]",
         "verified/s",
         "FC/CPU s",
         "FC [%]",
@@ -356,12 +403,19 @@ def format_table(doc: dict[str, Any]) -> str:
         f"it: {'-' if first is None else f'{first:.3f} s'}; returned grasps failing the "
         f"re-check: {s['returned_failing_recheck']}/{s['returned']}",
     ]
+    command = s.get("median_command_time_to_first_s")
+    if command is not None:
+        lines.append(
+            f"median time to it from the start of 'sahgrasp plan OBJECT' (a fresh process: "
+            f"interpreter, imports, hand and mesh included): {command:.3f} s"
+        )
     for r in doc["folder_runs"]:
         lines.append(
             f"folder, {r['workers']} worker(s): {r['objects']} objects in {r['seconds']:.1f} s, "
             f"{r['force_closure_per_s']:.1f} verified force-closure grasps/s "
             f"({r['verified_per_s']:.1f} verified grasps/s); workers' CPU "
-            f"{r['workers_cpu_s']:.1f} s (start-up included), "
+            f"{r['workers_cpu_s']:.1f} s (their start-up included, {r['warm_up_s']:.1f} s wall "
+            "before the clock), "
             f"{r['force_closure_per_cpu_s'] or 0.0:.1f} force-closure grasps per CPU second"
         )
     for c in doc.get("atlas_comparison", []):
