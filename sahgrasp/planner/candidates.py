@@ -375,7 +375,7 @@ class NearestPoint:
         self.unit_normals = normals / np.linalg.norm(normals, axis=1)[:, None]
         self.plane_offsets = (self.unit_normals * self.a).sum(axis=1)
         self.samples = np.unique(np.concatenate([triangles.reshape(-1, 3), self.centroids]), axis=0)
-        self._corners = [tuple(float(x) for x in t.ravel()) for t in triangles]
+        self._corners = triangles.reshape(-1, 9).tolist()
         self.sample_tree: Any = None
         self.box_tree: Any = None
         if len(triangles) > self._TREE_FACES:
@@ -469,7 +469,7 @@ def _box_tree(triangles: FloatArray) -> Any:
 
 
 def _closest_on_triangle(
-    px: float, py: float, pz: float, corners: tuple[float, ...]
+    px: float, py: float, pz: float, corners: list[float]
 ) -> tuple[float, float, float]:
     """Closest point to ``p`` on the triangle of ``corners`` (a, b, c flattened) [m].
 
