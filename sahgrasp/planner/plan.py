@@ -5,8 +5,9 @@ counts of :attr:`PlanSettings.fingers`), the IK (:func:`sahgrasp.ik.solve_ik`) s
 with the object as an obstacle, the fingers without a contact placed clear of the object and of
 the hand. Every solved grasp is then re-checked independently
 (:class:`~sahgrasp.planner.verify.GraspVerifier`); only grasps that pass it are kept. Each kept
-grasp gets its force closure and L1 epsilon (:mod:`sahgrasp.wrench`) and the atlas paper's
-manipulability indices; the grasps are ranked (force closure first, then by
+grasp has its force closure (the draw's exact test, :func:`sahgrasp.wrench.force_closure`), its
+L1 epsilon where the ranking needs it (:func:`_select`) and the atlas paper's manipulability
+indices; the grasps are ranked (force closure first, then by
 :attr:`PlanSettings.rank`), duplicates dropped (same fingers, wrists and contacts within
 ``distinct_m``/``distinct_deg``), an optional extra check applied (e.g. a physics test: it may
 drop a grasp or re-rank by its score), and the best :attr:`PlanSettings.grasps` returned with
