@@ -459,6 +459,13 @@ def _wrenches(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -
     ).reshape(-1, 6)
 
 
+def _epsilon_of(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> None:
+    """Set a grasp's L1 epsilon (the joggled hull: within about 1e-10 of the exact value)."""
+    value = epsilon(_wrenches(grasp, frame, settings), exact=False)
+    grasp.quality["epsilon_l1"] = value
+    grasp.quality["force_closure"] = value > 0.0
+
+
 def _epsilon_bound(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> float:
     """An upper bound of a grasp's L1 epsilon, without the hull.
 
@@ -512,7 +519,9 @@ def _select(
     Ranked by epsilon, the force-closure grasps' epsilons are computed lazily: in the order of
     an upper bound of each (:func:`_epsilon_bound`), until the grasps chosen from those computed
     cannot change -- every grasp not computed has a bound, hence an epsilon, below the last
-    chosen one, so it ranks after every chosen grasp.
+    chosen one, so it ranks after every chosen grasp. With an extra check, every epsilon is
+    computed first: the check is asked about the same grasps, in the same order, as when every
+    epsilon is known.
     """
     scores: dict[int, float | None] = {}  # the extra check's verdicts, by grasp index
     if settings.rank != "epsilon":
@@ -528,6 +537,9 @@ def _select(
                 if g.force_closure
             ),
         )
+        if check is not None:  # a costly check (physics) is asked once, in the final order
+            while waiting:
+                _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
         while True:
             known = [(i, g) for i, g in enumerate(verified) if g.quality["epsilon_l1"] is not None]
             chosen = _choose(
@@ -539,11 +551,7 @@ def _select(
                 last = min(float(g.quality["epsilon_l1"]) for _, _, g in chosen)
                 if -waiting[0][0] < last and all(g.force_closure for _, _, g in chosen):
                     break
-            _, index = waiting.pop(0)
-            grasp = verified[index]
-            value = epsilon(_wrenches(grasp, frame, settings), exact=False)
-            grasp.quality["epsilon_l1"] = value
-            grasp.quality["force_closure"] = value > 0.0
+            _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
         chosen = _choose(hand, known, settings, check, frame, scores, complete=not waiting)
     chosen.sort(key=lambda e: (e[0], _rank_key(e[2], settings.rank), e[1]))
     out = []
