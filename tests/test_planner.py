@@ -236,3 +236,24 @@ def test_an_extra_check_drops_and_reranks(hand, box_file: Path) -> None:  # type
     scores = [g.quality["check"] for g in checked.grasps]
     assert scores == sorted(scores, reverse=True)
     assert len(plain.grasps) >= len(checked.grasps)
+
+
+def test_epsilon_bound_is_never_below_the_epsilon(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    from sahgrasp.planner.candidates import ObjectFrame
+    from sahgrasp.planner.plan import _epsilon_bound, _wrenches
+    from sahgrasp.quality.wrench import epsilon
+
+    obj = load_mesh(box_file)
+    mesh = obj.mesh()
+    frame = ObjectFrame.of(mesh.vertices_m, mesh.faces)
+    settings = PlanSettings(grasps=10, candidates=20, fingers=(3, 4), seed=3)
+    plan = plan_grasps(hand, obj, settings)
+    assert plan.grasps
+    previous = np.inf
+    for grasp in plan.grasps:
+        value = epsilon(_wrenches(grasp, frame, settings))
+        assert grasp.quality["epsilon_l1"] == pytest.approx(value, abs=1e-12)
+        assert _epsilon_bound(grasp, frame, settings) >= value - 1e-12
+        # Force-closure grasps come ranked by their exact epsilon (ties aside).
+        assert value <= previous + 1e-9
+        previous = value

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 import trimesh
 
 from sahgrasp.bench import plan as bench_plan
@@ -16,7 +17,7 @@ def test_bench_plan_document_and_table(tmp_path: Path) -> None:
     box = tmp_path / "box.stl"
     trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(box)
     doc = bench_plan.run(objects=["can"], meshes=[str(box)], test_meshes=False, candidates=4,
-                         grasps=2, workers=(), atlas=False, quiet=True)  # fmt: skip
+                         grasps=2, workers=(), atlas=False, quiet=True, commands=False)  # fmt: skip
     assert doc["benchmark"] == "plan"
     assert [r["object"] for r in doc["objects"]] == ["can", "box.stl"]
     assert doc["summary"]["returned_failing_recheck"] == 0
@@ -41,8 +42,20 @@ def test_bench_plan_command_writes_json(tmp_path: Path, capsys) -> None:  # type
     out = tmp_path / "bench.json"
     argv = ["bench", "plan", "--objects", "bottle", "--no-test-meshes", "--mesh",
             str(Path(__file__).resolve().parent.parent / "examples" / "meshes" / "bottle.obj"),
-            "--candidates", "3", "--grasps", "1", "--workers", "--no-atlas", "--quiet",
-            "--json", str(out)]  # fmt: skip
+            "--candidates", "3", "--grasps", "1", "--workers", "--no-atlas", "--no-commands",
+            "--quiet", "--json", str(out)]  # fmt: skip
     assert main(argv) == 0
     assert json.loads(out.read_text())["summary"]["objects"] == 2
     assert "objects with a verified force-closure grasp" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_bench_plan_times_the_command_from_its_process_start(tmp_path: Path) -> None:
+    doc = bench_plan.run(objects=["can"], test_meshes=False, meshes=[], candidates=6, grasps=1,
+                         workers=(), atlas=False, quiet=True)  # fmt: skip
+    can = doc["objects"][0]
+    assert "command_error" not in can
+    # The same plan (same settings and seed) in a fresh process, which also starts up.
+    assert can["time_to_first_s"] is not None and can["command_time_to_first_s"] is not None
+    assert can["command_time_to_first_s"] > can["time_to_first_s"]
+    assert can["command_s"] > can["command_time_to_first_s"]

@@ -11,6 +11,7 @@ from sahgrasp.quality.wrench import (
     WrenchError,
     cone_edges,
     epsilon,
+    force_closure,
     grasp_quality,
     primitive_wrenches,
 )
@@ -129,3 +130,29 @@ def test_bad_parameters_are_refused() -> None:
         grasp_quality(p, p, [0, 0, 0], 1.0, edges=2)
     with pytest.raises(WrenchError, match="radius"):
         grasp_quality(p, p, [0, 0, 0], 0.0)
+
+
+def test_force_closure_without_the_hull_agrees_with_the_hull() -> None:
+    # The hand-computed cases: the antipodal pinch (flat) is not, the cube grasp is.
+    poles = [[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]]
+    assert not force_closure(primitive_wrenches(poles, poles, [0, 0, 0], 1.0, MU).reshape(-1, 6))
+    cube = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    assert force_closure(primitive_wrenches(cube, cube, [0, 0, 0], 1.0, MU).reshape(-1, 6))
+    # Without friction the cube's three contacts hold nothing along -y: not force closure.
+    assert not force_closure(primitive_wrenches(cube, cube, [0, 0, 0], 1.0, 0.0).reshape(-1, 6))
+    # Random 3- and 4-contact sets on a sphere, both outcomes: the same verdict as the hull.
+    rng = np.random.default_rng(7)
+    verdicts = []
+    for _ in range(60):
+        points = rng.normal(size=(int(rng.integers(3, 5)), 3))
+        points /= np.linalg.norm(points, axis=1, keepdims=True)
+        normals = points + rng.normal(scale=0.3, size=points.shape)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        w = primitive_wrenches(points, normals, [0, 0, 0], 1.0, MU).reshape(-1, 6)
+        verdicts.append(force_closure(w))
+        assert verdicts[-1] == (epsilon(w) > 0.0)
+    assert any(verdicts) and not all(verdicts)
+    # Too few, non-finite or malformed wrenches: never force closure.
+    assert not force_closure(np.zeros((6, 6)))
+    assert not force_closure(np.full((12, 6), np.nan))
+    assert not force_closure(np.zeros((12, 5)))

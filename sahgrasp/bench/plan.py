@@ -7,7 +7,8 @@ the median and best L1 epsilon, and the verified grasps by finger count. Every r
 then checked once more by a fresh :class:`~sahgrasp.planner.verify.GraspVerifier` from its JSON
 form (the count of failures must be 0). Then the machine's throughput: the folder of mesh objects
 planned by :func:`sahgrasp.planner.folder.plan_jobs` on 1 and on 2 worker processes (wall time
-from the first object submitted to the last document; the workers' start-up is not counted):
+from the first object submitted to the last document; the workers' start-up -- the process,
+the planner's imports, the hand -- comes before and is reported apart as ``warm_up_s``):
 verified force-closure grasps per second and the speed-up.
 
 The test meshes (:func:`write_test_meshes`) are trimesh primitives of graspable size (4-15 cm):
@@ -176,12 +177,24 @@ def atlas_comparison(hand: Any, name: str, settings: Any) -> dict[str, Any]:
 
 def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict[str, Any]:
     import resource
+    from concurrent.futures import wait
 
     from sahgrasp.core.parallel import process_pool
     from sahgrasp.planner.folder import plan_jobs
 
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     with process_pool(workers) as pool:
+        # Each worker imports the planner and builds the hand before the clock starts (a
+        # worker's start-up, once per run, not a cost of the objects).
+        warm = time.perf_counter()
+        started = [pool.submit(warm_worker, hand.description) for _ in range(workers)]
+        wait(started)
+        warm_up_s = time.perf_counter() - warm
+        # Each worker's CPU seconds since its start, by process (two warm-ups may share one).
+        start_up_cpu: dict[int, float] = {}
+        for future in started:
+            pid, cpu = future.result()
+            start_up_cpu[pid] = max(cpu, start_up_cpu.get(pid, 0.0))
         start = time.perf_counter()
         docs = list(plan_jobs(hand.description, jobs, settings, pool, 2 * workers))
         seconds = time.perf_counter() - start
@@ -199,7 +212,55 @@ def _folder_run(hand: Any, jobs: list[Any], settings: Any, workers: int) -> dict
         "verified_per_s": verified / seconds,
         "workers_cpu_s": cpu_s,
         "force_closure_per_cpu_s": closure / cpu_s if cpu_s > 0 else None,
+        "warm_up_s": warm_up_s,
+        "start_up_cpu_s": sum(start_up_cpu.values()),
+        "force_closure_per_planning_cpu_s": (
+            closure / (cpu_s - sum(start_up_cpu.values()))
+            if cpu_s > sum(start_up_cpu.values())
+            else None
+        ),
     }
+
+
+def _command_run(hand: str, target: str, scale: float, settings: Any, tmp: str) -> dict[str, Any]:
+    """``sahgrasp plan TARGET`` in a fresh process: its times, from the process's start."""
+    import json
+    import subprocess
+    import sys
+
+    out = Path(tmp) / "command_plan.json"
+    argv = [sys.executable, "-m", "sahgrasp", "plan", target, "--hand", hand, "--quiet"]
+    argv += ["--candidates", str(settings.candidates), "--grasps", str(settings.grasps)]
+    argv += ["--seed", str(settings.seed), "--json", str(out)]
+    if scale != 1.0:
+        argv += ["--scale", repr(scale)]
+    start = time.perf_counter()
+    done = subprocess.run(argv, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - start
+    if done.returncode not in (0, 1) or not out.is_file():
+        return {"command_time_to_first_s": None, "command_s": wall, "command_error": done.stderr}
+    summary = json.loads(out.read_text(encoding="utf-8"))["summary"]
+    out.unlink()
+    return {"command_time_to_first_s": summary["time_to_first_s"], "command_s": wall}
+
+
+def warm_worker(description: Any) -> tuple[int, float]:
+    """A worker's start-up, once per hand and process.
+
+    The planner's modules imported; the hand, its reach, the IK's initial-pose sequence and
+    grasp database loaded. Returns the worker's process id and its CPU seconds so far.
+    """
+    from sahgrasp.ik import worker_hand
+    from sahgrasp.ik.initial import default_sequence
+    from sahgrasp.ik.learned import default_database
+    from sahgrasp.planner.candidates import hand_reach
+    from sahgrasp.planner.plan import plan_grasps  # noqa: F401
+
+    hand = worker_hand(description, description.digest())
+    hand_reach(hand)
+    default_sequence(hand)
+    default_database(hand)
+    return os.getpid(), time.process_time()
 
 
 def run(
@@ -214,6 +275,7 @@ def run(
     workers: Sequence[int] = (1, 2),
     atlas: bool = True,
     quiet: bool = False,
+    commands: bool = True,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (module docstring).
 
@@ -229,6 +291,9 @@ def run(
         workers: Worker counts of the folder run (empty: no folder run).
         atlas: Compare with the atlas optimum on the can and the bottle (when among the objects).
         quiet: No progress bar.
+        commands: Also run ``sahgrasp plan`` on each object in a fresh process and record the
+            seconds from the process's start (interpreter, imports, hand, mesh: all included)
+            to its first verified force-closure grasp.
     """
     from tqdm import tqdm
 
@@ -286,11 +351,17 @@ def run(
             if s == 1.0
         ]
         runs = [_folder_run(the_hand, jobs, settings, w) for w in workers] if jobs else []
+        if commands:
+            targets = [(n, 1.0) for n in names] + list(files.items())
+            for row, (target, scale) in zip(rows, targets, strict=True):
+                row.update(_command_run(hand, target, scale, settings, tmp))
     comparison = [
         atlas_comparison(the_hand, n, settings) for n in ATLAS_OBJECTS if atlas and n in names
     ]
     firsts = [r["time_to_first_s"] for r in rows]
     reached = [t for t in firsts if t is not None]
+    commanded = [r["command_time_to_first_s"] for r in rows if "command_time_to_first_s" in r]
+    commanded_reached = [t for t in commanded if t is not None]
     speedup = None
     by_workers = {r["workers"]: r for r in runs}
     if 1 in by_workers and 2 in by_workers:
@@ -305,6 +376,9 @@ def run(
             "with_force_closure_grasp": len(reached),
             "share_with_force_closure_grasp": len(reached) / len(rows) if rows else 0.0,
             "median_time_to_first_s": float(median(reached)) if reached else None,
+            "median_command_time_to_first_s": (
+                float(median(commanded_reached)) if commanded_reached else None
+            ),
             "returned_failing_recheck": sum(r["returned_failing_recheck"] for r in rows),
             "returned": sum(r["returned"] for r in rows),
         },
@@ -341,11 +415,13 @@ def format_table(doc: dict[str, Any]) -> str:
     for r in doc["objects"]:
         f = r["by_fingers"]
         first = r["time_to_first_s"]
+        command = r.get("command_time_to_first_s")
         rows.append(
             (
                 r["object"],
                 r["faces"],
                 "-" if first is None else round(first, 3),
+                "-" if command is None else round(command, 3),
                 round(r["verified_per_s"], 1),
                 round(r["force_closure_per_cpu_s"], 1),
                 round(100 * r["force_closure_share"]),
@@ -360,6 +436,7 @@ def format_table(doc: dict[str, Any]) -> str:
         "object",
         "faces",
         "first FC [s]",
+        "command first FC [s]",
         "verified/s",
         "FC/CPU s",
         "FC [%]",
@@ -383,13 +460,22 @@ def format_table(doc: dict[str, Any]) -> str:
         f"it: {'-' if first is None else f'{first:.3f} s'}; returned grasps failing the "
         f"re-check: {s['returned_failing_recheck']}/{s['returned']}",
     ]
+    command = s.get("median_command_time_to_first_s")
+    if command is not None:
+        lines.append(
+            f"median time to it from the start of 'sahgrasp plan OBJECT' (a fresh process: "
+            f"interpreter, imports, hand and mesh included): {command:.3f} s"
+        )
     for r in doc["folder_runs"]:
         lines.append(
             f"folder, {r['workers']} worker(s): {r['objects']} objects in {r['seconds']:.1f} s, "
             f"{r['force_closure_per_s']:.1f} verified force-closure grasps/s "
             f"({r['verified_per_s']:.1f} verified grasps/s); workers' CPU "
-            f"{r['workers_cpu_s']:.1f} s (start-up included), "
-            f"{r['force_closure_per_cpu_s'] or 0.0:.1f} force-closure grasps per CPU second"
+            f"{r['workers_cpu_s']:.1f} s (their start-up included, {r['warm_up_s']:.1f} s wall "
+            "before the clock), "
+            f"{r['force_closure_per_cpu_s'] or 0.0:.1f} force-closure grasps per CPU second, "
+            f"{r['force_closure_per_planning_cpu_s'] or 0.0:.1f} per CPU second of planning "
+            f"(start-up, {r['start_up_cpu_s']:.1f} s, left out)"
         )
     for c in doc.get("atlas_comparison", []):
         parts = [

@@ -194,6 +194,10 @@ def _plan(benches: Any) -> None:
         "--no-atlas", dest="atlas", action="store_false",
         help="no comparison with the atlas optimum on the can and the bottle",
     )  # fmt: skip
+    plan.add_argument(
+        "--no-commands", dest="commands", action="store_false",
+        help="do not run 'sahgrasp plan' per object in a fresh process (time from its start)",
+    )  # fmt: skip
     _add_quiet(plan)
     add_json_argument(plan, "the results")
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
 import time
 from pathlib import Path
@@ -25,8 +26,33 @@ from sahgrasp.cli.solve import resume_hint
 
 __all__ = ["add_parser", "run"]
 
-_STARTED = time.perf_counter()
-"""The command's start (this module is imported as the parser is built): times count from it."""
+_START_UP_S = 10.0
+"""A process older than this when the module is imported did not start as this command."""
+
+
+def _process_start() -> float:
+    """``time.perf_counter()``'s value at this process's start (Linux), else now.
+
+    The interpreter's start-up and every import come before this module runs: a command's
+    times count from the process's creation (``/proc/self/stat``, in clock ticks since boot,
+    against ``/proc/uptime``: 10 ms resolution).
+    """
+    now = time.perf_counter()
+    try:
+        with open("/proc/self/stat", encoding="ascii") as stat:
+            fields = stat.read().rsplit(")", 1)[1].split()
+        with open("/proc/uptime", encoding="ascii") as uptime:
+            since_boot_s = float(uptime.read().split()[0])
+        age_s = since_boot_s - int(fields[19]) / os.sysconf("SC_CLK_TCK")  # field 22: starttime
+    except (OSError, ValueError, IndexError):
+        return now
+    if not 0.0 <= age_s <= _START_UP_S:  # imported late in a longer-lived process: from now
+        return now
+    return now - age_s
+
+
+_STARTED = _process_start()
+"""The command's start (the process's creation): times count from it."""
 
 OBJECT_HELP = (
     "a mesh file (STL, OBJ, PLY), a catalog object name (see 'sahgrasp info'), or a folder of "

@@ -26,6 +26,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -33,11 +34,12 @@ from numpy.typing import NDArray
 
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
-from sahgrasp.quality.wrench import CONE_EDGES, epsilon, primitive_wrenches
+from sahgrasp.quality.wrench import CONE_EDGES, force_closure, primitive_wrenches
 
 __all__ = [
     "Candidate",
     "CandidateDraw",
+    "NearestPoint",
     "ObjectFrame",
     "derive_reach",
     "finger_set",
@@ -48,6 +50,8 @@ FloatArray = NDArray[np.float64]
 Contact = tuple[FloatArray, FloatArray]
 
 _SPACING_ITERATIONS = 4
+_RAY_EPS_M = 1e-7
+"""Ray crossings this near the origin are its own face (as in :meth:`SurfaceMesh.ray_hits`)."""
 _OFF_SURFACE_M = 1e-6
 _REACH_SAMPLES = 1000
 """Random configurations whose fingertip distances bound a hand's span."""
@@ -88,15 +92,16 @@ class Candidate:
         points_m: Contact points, world frame [m], (k, 3).
         normals: Outward unit normals there, (k, 3).
         seed: The seed of the draw that gave it (:meth:`CandidateDraw.draw` reproduces it).
-        epsilon_l1: The contact set's L1 epsilon (0: not force closure; always 0 for two
-            fingers).
+        force_closure: The contact set is in force closure
+            (:func:`sahgrasp.quality.wrench.force_closure`; never for two fingers); the planner
+            computes the epsilon of those it verifies.
     """
 
     fingers: tuple[str, ...]
     points_m: FloatArray
     normals: FloatArray
     seed: int
-    epsilon_l1: float = 0.0
+    force_closure: bool = False
 
 
 def finger_set(hand: Hand, count: int) -> tuple[str, ...]:
@@ -148,20 +153,29 @@ def derive_reach(hand: Hand) -> HandReach:
     rng = np.random.default_rng(0)
     specs = dict(zip(hand.fingers, hand.description.fingers, strict=True))
     frames = {f: model.getFrameId(s.tip_link) for f, s in specs.items()}
-    span = 0.0
-    for _ in range(_REACH_SAMPLES):
-        pin.framesForwardKinematics(model, data, hand.random_configuration(rng, pin.SE3.Identity()))
-        tip = data.oMf[frames[thumb]]
-        pad = tip.rotation @ np.array(specs[thumb].pad_axis)
+    others = [f for f in hand.fingers if f != thumb]
+    # The same draws as hand.random_configuration(rng, identity) one after the other (a
+    # Generator fills an array in order), assembled at once: q = identity wrist + coordinates.
+    coordinates = rng.uniform(hand.lower, hand.upper, size=(_REACH_SAMPLES, len(hand.lower)))
+    q = np.zeros((_REACH_SAMPLES, model.nq))
+    q[:, 6] = 1.0
+    q[:, 7:] = coordinates
+    positions = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
+    pads = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
+    for k in range(_REACH_SAMPLES):
+        pin.framesForwardKinematics(model, data, q[k])
         for f in hand.fingers:
-            if f == thumb:
-                continue
-            other = data.oMf[frames[f]]
-            gap = other.translation - tip.translation
-            facing = pad @ (other.rotation @ np.array(specs[f].pad_axis))
-            # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
-            if facing < -_FACING_COS and gap @ pad > 0.0:
-                span = max(span, float(np.linalg.norm(gap)))
+            placement = data.oMf[frames[f]]
+            positions[f][k] = placement.translation
+            pads[f][k] = placement.rotation @ np.array(specs[f].pad_axis)
+    span = 0.0
+    for f in others:
+        gap = positions[f] - positions[thumb]
+        facing = np.einsum("ij,ij->i", pads[thumb], pads[f])
+        # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
+        ok = (facing < -_FACING_COS) & (np.einsum("ij,ij->i", gap, pads[thumb]) > 0.0)
+        if ok.any():
+            span = max(span, float(np.linalg.norm(gap[ok], axis=1).max()))
     span = span - 2.0 * hand.radius_m if span > 2.0 * hand.radius_m else 0.15
     return HandReach(
         finger_spacing_m=(0.7 * spacing, spacing),
@@ -195,6 +209,7 @@ class CandidateDraw:
         self.edges = edges
         self.single_shell = _shells(surface) == 1
         self.surface = surface
+        self.nearest = NearestPoint(surface.triangles, surface.normals)
         self.reach = reach
         self.frame = frame
         self.mu = mu
@@ -260,21 +275,20 @@ class CandidateDraw:
         if count == 2:
             if not self._antipodal(contacts):
                 return "no_closure"
-            return Candidate(fingers, points, normals, seed, 0.0)
+            return Candidate(fingers, points, normals, seed, False)
         wrenches = primitive_wrenches(
             points, normals, self.frame.centroid_m, self.frame.radius_m, self.mu, self.edges
         )
-        # Screening: the joggled hull (within about 1e-10 of the exact epsilon, five times
-        # faster); the returned grasps get the exact value.
-        quality = epsilon(wrenches.reshape(-1, 6), exact=False)
-        if quality <= 0.0:
+        # Force closure without the hull (a hundredth of its time): most sets drawn fail here,
+        # and only the verified grasps need their epsilon.
+        if not force_closure(wrenches.reshape(-1, 6)):
             return "no_closure"
-        return Candidate(fingers, points, normals, seed, quality)
+        return Candidate(fingers, points, normals, seed, True)
 
     def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
         point, normal = thumb
         direction = _in_cone(rng, -normal, self.cone_cos)
-        distances, faces = self.surface.ray_hits(point, direction)
+        distances, faces = self.nearest.ray_hits(point, direction)
         lo, hi = self.reach.span_m
         exits = (self.surface.normals[faces] @ direction > 0.0) & (distances >= lo)
         exits &= distances <= hi
@@ -296,7 +310,7 @@ class CandidateDraw:
             lo, hi = 0.5 * lo, 0.5 * hi
         step = step_m
         for _ in range(_SPACING_ITERATIONS):
-            closest, face, _ = self.surface.closest(start + step * direction)
+            closest, face, _ = self.nearest.closest(start + step * direction)
             chord = float(np.linalg.norm(closest - start))
             if lo <= chord <= hi:
                 return closest, self.surface.normals[face]
@@ -312,11 +326,11 @@ class CandidateDraw:
     def _exposed(self, contacts: list[Contact]) -> bool:
         if self.single_shell:  # one closed shell: no surface point is inside another
             return True
-        return all(self.surface.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
+        return all(self.nearest.shells_around(p + _OFF_SURFACE_M * n, n) == 0 for p, n in contacts)
 
     def _fits(self, contacts: list[Contact]) -> bool:
         radius = self.reach.fingertip_radius_m
-        return all(self.surface.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
+        return all(self.nearest.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
 
     def _antipodal(self, contacts: list[Contact]) -> bool:
         """Two contacts: the line between them inside both friction cones."""
@@ -328,6 +342,174 @@ class CandidateDraw:
         axis /= length
         # Each contact pushes along -n: the line must lie within both friction cones.
         return bool(-n1 @ axis >= self.friction_cos and n2 @ axis >= self.friction_cos)
+
+
+class NearestPoint:
+    """Closest points and ray crossings of a triangle mesh, exact, one query at a time.
+
+    The nearest point of the surface's corners and face centroids bounds the distance from
+    above; each face's bounding sphere (about its centroid) and its plane bound the face's
+    distance from below: only faces whose lower bound is within the upper one can hold the
+    closest point (:meth:`SurfaceMesh.closest` with a tighter bound, which this replaces in the
+    draws, without trimesh's per-call set-up). Meshes of many faces look the nearest surface
+    point up in a k-d tree and the faces near it in an R-tree instead of measuring them all.
+
+    Args:
+        triangles: Corners of each face, (M, 3, 3) [m].
+        normals: Outward unit normal of each face, (M, 3).
+    """
+
+    _TREE_FACES = 256
+    """Meshes with more faces than this look the nearest surface point up in a k-d tree and
+    the faces whose boxes meet the ball it bounds in an R-tree."""
+
+    def __init__(self, triangles: FloatArray, normals: FloatArray) -> None:
+        self.face_normals = normals
+        self.a = np.ascontiguousarray(triangles[:, 0])
+        self.ab = triangles[:, 1] - triangles[:, 0]
+        self.ac = triangles[:, 2] - triangles[:, 0]
+        self.centroids = triangles.mean(axis=1)
+        self.radii = np.linalg.norm(triangles - self.centroids[:, None], axis=2).max(axis=1)
+        self.max_radius = float(self.radii.max())
+        self.radii_sq = self.radii**2
+        normals = np.cross(self.ab, self.ac)
+        self.unit_normals = normals / np.linalg.norm(normals, axis=1)[:, None]
+        self.plane_offsets = (self.unit_normals * self.a).sum(axis=1)
+        self.samples = np.unique(np.concatenate([triangles.reshape(-1, 3), self.centroids]), axis=0)
+        self._corners = triangles.reshape(-1, 9).tolist()
+        self.sample_tree: Any = None
+        self.box_tree: Any = None
+        if len(triangles) > self._TREE_FACES:
+            from scipy.spatial import cKDTree
+
+            self.sample_tree = cKDTree(self.samples)
+            self.box_tree = _box_tree(triangles)
+
+    def ray_hits(
+        self, origin: FloatArray, direction: FloatArray
+    ) -> tuple[FloatArray, NDArray[np.intp]]:
+        """Distances [m] and faces of a unit ray's crossings (:meth:`SurfaceMesh.ray_hits`).
+
+        Nearest first, the origin's own face left out.
+        The cross products are written out: ``np.cross`` costs more in its set-up than in its
+        arithmetic on a few faces.
+        """
+        offset = self.centroids - origin
+        along = offset @ direction
+        near = (offset * offset).sum(axis=1) - along * along <= self.radii_sq
+        faces = np.flatnonzero(near & (along >= -self.radii))
+        e1, e2, v0 = self.ab[faces], self.ac[faces], self.a[faces]
+        dx, dy, dz = float(direction[0]), float(direction[1]), float(direction[2])
+        # p = direction x e2, det = e1 . p (Moller-Trumbore).
+        px = dy * e2[:, 2] - dz * e2[:, 1]
+        py = dz * e2[:, 0] - dx * e2[:, 2]
+        pz = dx * e2[:, 1] - dy * e2[:, 0]
+        det = e1[:, 0] * px + e1[:, 1] * py + e1[:, 2] * pz
+        ok = np.abs(det) > 1e-18
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        sv = origin - v0
+        u = (sv[:, 0] * px + sv[:, 1] * py + sv[:, 2] * pz) * inv
+        # q = s x e1.
+        qx = sv[:, 1] * e1[:, 2] - sv[:, 2] * e1[:, 1]
+        qy = sv[:, 2] * e1[:, 0] - sv[:, 0] * e1[:, 2]
+        qz = sv[:, 0] * e1[:, 1] - sv[:, 1] * e1[:, 0]
+        v = (qx * dx + qy * dy + qz * dz) * inv
+        t = (e2[:, 0] * qx + e2[:, 1] * qy + e2[:, 2] * qz) * inv
+        hit = ok & (u >= 0.0) & (v >= 0.0) & (u + v <= 1.0) & (t > _RAY_EPS_M)
+        order = np.argsort(t[hit])
+        return t[hit][order], faces[hit][order]
+
+    def shells_around(self, point: FloatArray, direction: FloatArray) -> int:
+        """Number of closed shells holding ``point``: exits minus entries of a ray from it."""
+        _, faces = self.ray_hits(point, direction)
+        return int(np.sign(self.face_normals[faces] @ direction).sum())
+
+    def closest(self, point: FloatArray) -> tuple[FloatArray, int, float]:
+        """Closest point of the mesh to ``point`` [m], its face, and the distance [m]."""
+        if self.sample_tree is None:
+            bound = float(np.sqrt(((self.samples - point) ** 2).sum(axis=1).min()))
+            near = None
+            offset = self.centroids - point
+            sphere = np.sqrt((offset * offset).sum(axis=1)) - self.radii
+            plane = np.abs(self.plane_offsets - self.unit_normals @ point)
+        else:
+            bound = float(self.sample_tree.query(point)[0])
+            box = (*(point - bound).tolist(), *(point + bound).tolist())
+            near = np.fromiter(self.box_tree.intersection(box), dtype=np.intp)
+            offset = self.centroids[near] - point
+            sphere = np.sqrt((offset * offset).sum(axis=1)) - self.radii[near]
+            plane = np.abs(self.plane_offsets[near] - self.unit_normals[near] @ point)
+        lower = np.maximum(sphere, plane)
+        kept = np.flatnonzero(lower <= bound)
+        kept = kept[np.argsort(lower[kept], kind="stable")]
+        faces = kept if near is None else near[kept]
+        # Faces by increasing lower bound, in plain floats (numpy's per-call overhead costs more
+        # on a few faces), until the next bound exceeds the best distance found.
+        px, py, pz = float(point[0]), float(point[1]), float(point[2])
+        found = (0.0, 0.0, 0.0)
+        face, best_sq = -1, math.inf
+        for f, low in zip(faces.tolist(), lower[kept].tolist(), strict=True):
+            if low > 0.0 and low * low > best_sq:
+                break
+            q = _closest_on_triangle(px, py, pz, self._corners[f])
+            d_sq = (q[0] - px) ** 2 + (q[1] - py) ** 2 + (q[2] - pz) ** 2
+            if d_sq < best_sq:
+                found, face, best_sq = q, f, d_sq
+        return np.array(found), face, math.sqrt(best_sq)
+
+
+def _box_tree(triangles: FloatArray) -> Any:
+    """An R-tree of the triangles' axis-aligned boxes (3-D), item i the face i."""
+    from rtree import index
+
+    properties = index.Property()
+    properties.dimension = 3
+    boxes = np.concatenate([triangles.min(axis=1), triangles.max(axis=1)], axis=1)
+    stream = ((i, tuple(b), None) for i, b in enumerate(boxes.tolist()))
+    return index.Index(stream, properties=properties)
+
+
+def _closest_on_triangle(
+    px: float, py: float, pz: float, corners: list[float]
+) -> tuple[float, float, float]:
+    """Closest point to ``p`` on the triangle of ``corners`` (a, b, c flattened) [m].
+
+    The Voronoi regions of the corners, edges and face, tested in turn (C. Ericson, "Real-Time
+    Collision Detection", Morgan Kaufmann 2005, section 5.1.5).
+    """
+    ax, ay, az, bx, by, bz, cx, cy, cz = corners
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return ax, ay, az
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bx, by, bz
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return ax + v * abx, ay + v * aby, az + v * abz
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cx, cy, cz
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return ax + w * acx, ay + w * acy, az + w * acz
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+    total = va + vb + vc
+    v, w = vb / total, vc / total
+    return ax + v * abx + w * acx, ay + v * aby + w * acy, az + v * abz + w * acz
 
 
 def _shells(surface: SurfaceMesh) -> int:

@@ -16,7 +16,7 @@ import json
 import os
 import time
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import Executor, Future
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -110,23 +110,42 @@ def plan_jobs(
     in_flight: int = 4,
     make_check: Callable[[Hand, GraspObject], Any] | None = None,
 ) -> Iterator[dict[str, Any]]:
-    """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers."""
+    """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers.
+
+    Up to ``in_flight`` objects are planned at once, largest file first (a mesh's planning time
+    grows with its size: the long ones start early and the short ones fill the gaps at the
+    end), and a worker gets the next object as soon as it finishes one; the documents are held
+    back until those before them are done, so that they come out in ``jobs``' order.
+    """
     if executor is None:
         for job in jobs:
             yield plan_file(description, job, settings, make_check)
         return
-    pending: list[Future[dict[str, Any]]] = []
-    submit: Callable[[ObjectJob], Future[dict[str, Any]]] = lambda job: executor.submit(  # noqa: E731
-        plan_file, description, job, settings, make_check
-    )
-    iterator = iter(jobs)
-    for job in iterator:
-        pending.append(submit(job))
-        if len(pending) >= in_flight:
-            break
-    while pending:
-        done = pending.pop(0)
-        nxt = next(iterator, None)
-        if nxt is not None:
-            pending.append(submit(nxt))
-        yield done.result()
+    ordered = list(jobs)
+    queue = sorted(range(len(ordered)), key=lambda i: (-_size(ordered[i].path), i))
+    running: dict[Future[dict[str, Any]], int] = {}
+    finished: dict[int, dict[str, Any]] = {}
+    following = 0
+    try:
+        while following < len(ordered):
+            while queue and len(running) < max(in_flight, 1):
+                index = queue.pop(0)
+                running[
+                    executor.submit(plan_file, description, ordered[index], settings, make_check)
+                ] = index
+            done, _ = wait(list(running), return_when=FIRST_COMPLETED)
+            for future in done:
+                finished[running.pop(future)] = future.result()
+            while following in finished:
+                yield finished.pop(following)
+                following += 1
+    finally:
+        for future in running:
+            future.cancel()
+
+
+def _size(path: str) -> int:
+    try:
+        return os.stat(path).st_size
+    except OSError:  # planned anyway: plan_file reports the error
+        return 0

@@ -5,12 +5,13 @@ counts of :attr:`PlanSettings.fingers`), the IK (:func:`sahgrasp.ik.solve_ik`) s
 with the object as an obstacle, the fingers without a contact placed clear of the object and of
 the hand. Every solved grasp is then re-checked independently
 (:class:`~sahgrasp.planner.verify.GraspVerifier`); only grasps that pass it are kept. Each kept
-grasp gets its force closure and L1 epsilon (:mod:`sahgrasp.quality.wrench`) and the atlas paper's
-manipulability indices; the grasps are ranked (force closure first, then by
-:attr:`PlanSettings.rank`), duplicates dropped (same fingers, wrists and contacts within
-``distinct_m``/``distinct_deg``), an optional extra check applied (e.g. a physics test: it may
-drop a grasp or re-rank by its score), and the best :attr:`PlanSettings.grasps` returned with
-their L-infinity epsilon.
+grasp has its force closure (the draw's exact test,
+:func:`sahgrasp.quality.wrench.force_closure`), its L1 epsilon where the ranking needs it
+(:func:`_select`) and the atlas paper's manipulability indices; the grasps are ranked (force
+closure first, then by :attr:`PlanSettings.rank`), duplicates dropped (same fingers, wrists and
+contacts within ``distinct_m``/``distinct_deg``), an optional extra check applied (e.g. a physics
+test: it may drop a grasp or re-rank by its score), and the best :attr:`PlanSettings.grasps`
+returned with their L-infinity epsilon.
 
 The work done is a fixed number of candidates (:attr:`PlanSettings.candidates`), each drawn from a
 seed derived from the plan's seed, the object's name and the draw's index: the same seed gives the
@@ -47,7 +48,7 @@ from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
 from sahgrasp.quality.ellipsoids import INDICES, ellipsoid_indices, null_space
-from sahgrasp.quality.wrench import grasp_quality
+from sahgrasp.quality.wrench import epsilon, grasp_quality, primitive_wrenches
 
 __all__ = [
     "GraspCheck",
@@ -383,10 +384,11 @@ def _solve(
     if not verdict.ok:
         failed[verdict.problems[0].split(" ")[0]] += 1
         return None
-    # The quality of the contact set the IK reached (the draw computed it on the same targets).
+    # Force closure of the contact set the IK reached (the draw's exact test); its epsilon is
+    # computed when the ranking needs it (_select).
     quality: dict[str, Any] = {
-        "force_closure": candidate.epsilon_l1 > 0.0,
-        "epsilon_l1": candidate.epsilon_l1,
+        "force_closure": candidate.force_closure,
+        "epsilon_l1": None,
         "epsilon_linf": None,
     }
     if settings.rank != "epsilon":  # ranked by an index: every verified grasp needs it
@@ -404,9 +406,90 @@ def _solve(
     )
 
 
+def _choose(
+    hand: Hand,
+    grasps: list[tuple[int, PlannedGrasp]],
+    settings: PlanSettings,
+    check: GraspCheck | None,
+    frame: ObjectFrame,
+    scores: dict[int, float | None],
+    complete: bool = True,
+    indices: bool = True,
+) -> list[tuple[float, int, PlannedGrasp]]:
+    """The first distinct grasps in rank order that pass ``check`` (at most ``grasps``).
+
+    Without ``complete``, the grasps not in ``grasps`` are force-closure grasps whose epsilon
+    is not known yet: the grasps without force closure, which rank after all of them, wait.
+    With ``indices``, the chosen grasps get their manipulability indices (a check may use them).
+    """
+    ranked = sorted(grasps, key=lambda e: (*_rank_key(e[1], settings.rank), e[0]))
+    chosen: list[tuple[float, int, PlannedGrasp]] = []
+    for order, grasp in ranked:
+        if len(chosen) == settings.grasps or (not complete and not grasp.force_closure):
+            break
+        if any(_same(grasp, c, settings) for _, _, c in chosen):
+            continue
+        if (indices or check is not None) and INDICES[0] not in grasp.quality:
+            # Ranked by epsilon: the indices of the grasps kept only.
+            grasp.quality.update(
+                manipulability_indices(hand, grasp.q, grasp.fingers, frame.centroid_m)
+            )
+        score = 0.0
+        if check is not None:
+            if order not in scores:
+                scores[order] = check(grasp)
+            value = scores[order]
+            if value is None:
+                continue
+            score = -float(value)
+            grasp.quality["check"] = float(value)
+        chosen.append((score, order, grasp))
+    return chosen
+
+
+def _wrenches(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> FloatArray:
+    """The primitive wrenches (K, 6) of a grasp's contacts (the plan's friction and cone)."""
+    return primitive_wrenches(
+        np.array([c.point for c in grasp.contacts]),
+        np.array([c.normal for c in grasp.contacts]),
+        frame.centroid_m,
+        frame.radius_m,
+        settings.mu,
+        settings.cone_edges,
+    ).reshape(-1, 6)
+
+
+def _epsilon_of(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> None:
+    """Set a grasp's L1 epsilon (the joggled hull: within about 1e-10 of the exact value)."""
+    value = epsilon(_wrenches(grasp, frame, settings), exact=False)
+    grasp.quality["epsilon_l1"] = value
+    grasp.quality["force_closure"] = value > 0.0
+
+
+def _epsilon_bound(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> float:
+    """An upper bound of a grasp's L1 epsilon, without the hull.
+
+    For any unit direction ``u``, the ball of radius epsilon inside the hull reaches
+    ``epsilon u``, so epsilon is at most the hull's support ``max_i u . w_i``: the smallest
+    support over fixed directions (:data:`_BOUND_DIRECTIONS`) bounds it.
+    """
+    return float((_wrenches(grasp, frame, settings) @ _BOUND_DIRECTIONS.T).max(axis=0).min())
+
+
+def _directions(count: int) -> FloatArray:
+    """The 12 signed axes and ``count`` fixed random unit directions of the wrench space."""
+    random = np.random.default_rng(0).normal(size=(count, 6))
+    random /= np.linalg.norm(random, axis=1, keepdims=True)
+    return np.concatenate([np.eye(6), -np.eye(6), random])
+
+
+_BOUND_DIRECTIONS = _directions(116)
+"""Directions of :func:`_epsilon_bound` (128 in all)."""
+
+
 def _rank_key(grasp: PlannedGrasp, rank: str) -> tuple[float, float]:
     value = grasp.quality["epsilon_l1" if rank == "epsilon" else rank]
-    return (-float(grasp.force_closure), -float(value))
+    return (-float(grasp.force_closure), -float(value or 0.0))
 
 
 def _same(a: PlannedGrasp, b: PlannedGrasp, settings: PlanSettings) -> bool:
@@ -431,26 +514,45 @@ def _select(
     check: GraspCheck | None,
     frame: ObjectFrame,
 ) -> list[PlannedGrasp]:
-    """The best distinct grasps (module docstring), with their L-infinity epsilon."""
-    ranked = sorted(enumerate(verified), key=lambda e: (*_rank_key(e[1], settings.rank), e[0]))
-    chosen: list[tuple[float, int, PlannedGrasp]] = []
-    for order, grasp in ranked:
-        if len(chosen) == settings.grasps:
-            break
-        if any(_same(grasp, c, settings) for _, _, c in chosen):
-            continue
-        if INDICES[0] not in grasp.quality:  # ranked by epsilon: the indices of those kept only
-            grasp.quality.update(
-                manipulability_indices(hand, grasp.q, grasp.fingers, frame.centroid_m)
+    """The best distinct grasps (module docstring), with their L-infinity epsilon.
+
+    Ranked by epsilon, the force-closure grasps' epsilons are computed lazily: in the order of
+    an upper bound of each (:func:`_epsilon_bound`), until the grasps chosen from those computed
+    cannot change -- every grasp not computed has a bound, hence an epsilon, below the last
+    chosen one, so it ranks after every chosen grasp. With an extra check, every epsilon is
+    computed first: the check is asked about the same grasps, in the same order, as when every
+    epsilon is known.
+    """
+    scores: dict[int, float | None] = {}  # the extra check's verdicts, by grasp index
+    if settings.rank != "epsilon":
+        chosen = _choose(hand, list(enumerate(verified)), settings, check, frame, scores)
+    else:
+        for grasp in verified:
+            if not grasp.force_closure:
+                grasp.quality["epsilon_l1"] = 0.0
+        waiting = sorted(
+            (
+                (-_epsilon_bound(g, frame, settings), i)
+                for i, g in enumerate(verified)
+                if g.force_closure
+            ),
+        )
+        if check is not None:  # a costly check (physics) is asked once, in the final order
+            while waiting:
+                _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
+        while True:
+            known = [(i, g) for i, g in enumerate(verified) if g.quality["epsilon_l1"] is not None]
+            chosen = _choose(
+                hand, known, settings, check, frame, scores, complete=not waiting, indices=False
             )
-        score = 0.0
-        if check is not None:
-            value = check(grasp)
-            if value is None:
-                continue
-            score = -float(value)
-            grasp.quality["check"] = float(value)
-        chosen.append((score, order, grasp))
+            if not waiting:
+                break
+            if len(chosen) == settings.grasps:
+                last = min(float(g.quality["epsilon_l1"]) for _, _, g in chosen)
+                if -waiting[0][0] < last and all(g.force_closure for _, _, g in chosen):
+                    break
+            _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
+        chosen = _choose(hand, known, settings, check, frame, scores, complete=not waiting)
     chosen.sort(key=lambda e: (e[0], _rank_key(e[2], settings.rank), e[1]))
     out = []
     for _, _, grasp in chosen:

@@ -57,6 +57,7 @@ __all__ = [
     "WrenchQuality",
     "cone_edges",
     "epsilon",
+    "force_closure",
     "grasp_quality",
     "primitive_wrenches",
 ]
@@ -75,6 +76,8 @@ _INSIDE_TOL = 1e-9
 """The origin counts as strictly inside when it is at least this far inside every facet [1]."""
 _RANK_TOL = 1e-9
 """Relative singular value below which the wrenches span fewer than six dimensions."""
+_NNLS_TOL = 1e-10
+"""Relative residual of :func:`force_closure`'s least squares counted as an exact solution."""
 
 
 class WrenchError(SahGraspError):
@@ -169,6 +172,34 @@ def primitive_wrenches(
     forces = cone_edges(normal, mu, edges)
     arms = (points - centre)[:, None, :] / radius_m
     return np.concatenate([forces, np.cross(np.broadcast_to(arms, forces.shape), forces)], axis=2)
+
+
+def force_closure(wrenches: ArrayLike) -> bool:
+    """Whether the origin lies in the interior of ``ConvexHull(wrenches)``, without the hull.
+
+    The interior of the hull of points spanning six dimensions is the set of their combinations
+    with every weight strictly positive, so the origin is inside exactly when the wrenches span
+    six dimensions and ``sum_i lambda_i w_i = 0`` has a solution with every ``lambda_i >= 1``
+    (any strictly positive solution, scaled). With ``lambda = 1 + x``, that is a non-negative
+    least-squares problem ``min ||W x + W 1||, x >= 0`` (scipy's ``nnls``) whose residual is 0
+    exactly when a solution exists: tens of microseconds, against milliseconds for the hull.
+    A contact set this calls force closure may still have an epsilon of 0 by :func:`epsilon`'s
+    margin (the origin within 1e-9 of a facet).
+
+    Args:
+        wrenches: Points (K, 6).
+    """
+    from scipy.optimize import nnls
+
+    w = np.asarray(wrenches, dtype=np.float64)
+    if w.ndim != 2 or w.shape[1] != 6 or len(w) < 7 or not np.all(np.isfinite(w)):
+        return False
+    singular = np.linalg.svd(w, compute_uv=False)
+    if singular[-1] <= _RANK_TOL * max(singular[0], 1e-300):
+        return False  # flat: fewer than six dimensions
+    target = -w.sum(axis=0)
+    _, residual = nnls(w.T, target)
+    return bool(residual <= _NNLS_TOL * max(float(np.linalg.norm(target)), singular[0]))
 
 
 def epsilon(wrenches: ArrayLike, exact: bool = True) -> float:
