@@ -31,23 +31,34 @@ from sahgrasp.contacts import ContactTarget, GraspTarget
 from sahgrasp.errors import InvalidTargetError, OptimizationError, SahGraspError
 from sahgrasp.experiments.arguments import MESH_DEFAULTS
 from sahgrasp.fileio import read_json
-from sahgrasp.grasp import SahGraspManifold, make_mesh_manifold, mesh_patches
+from sahgrasp.grasp import SahGraspManifold, make_mesh_manifold
 from sahgrasp.hand import Hand
 from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearance
-from sahgrasp.objects.smooth_surface import MeshPatch
+from sahgrasp.objects.patches import ContactRegion, GraspPatches
+from sahgrasp.objects.smooth_surface import MeshPatch, fit_mesh_patch
 from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.planner.verify import LINK_TOLERANCE_M, GraspVerifier, Verdict
 from sahgrasp.progress import ProgressCallback
 
 __all__ = [
+    "MAX_HALF_WIDTH_M",
+    "MODEL_TOLERANCE_M",
     "MeshAtlasSearch",
     "MeshComponent",
     "MeshStart",
     "Verification",
+    "mesh_verifier",
     "optimize_mesh_grasps",
     "read_starts",
+    "start_patches",
     "verify_grasp",
 ]
 
+
+MAX_HALF_WIDTH_M = 0.02
+"""Largest half width of a contact region around a start's contact [m]."""
+MODEL_TOLERANCE_M = 3e-4
+"""Largest distance of a region's smooth model from the mesh [m]."""
 
 _VERIFY_TRIES = 50  # valid charts, best first, tried until one passes the verification
 
@@ -104,8 +115,13 @@ class MeshComponent:
         start_value: The index at the first start, brought onto R (chart 0).
         best_chart: The best valid chart that passed :func:`verify_grasp` (None: none did).
         q_world: The hand at ``best_chart`` in the world frame (free fingers placed), or None.
-        contacts: Its contacts (world frame, points on the model of the mesh).
-        verification: Its verification (None when no chart passed).
+        contacts: Its contacts (world frame): the model's contact points moved to the closest
+            point of the true mesh, with the model's normal.
+        verification: Its verification by :func:`verify_grasp` (None when no chart passed).
+        verdict: Its verification by the planner's independent verifier
+            (:class:`sahgrasp.planner.verify.GraspVerifier`, as every planned grasp is
+            checked), None when no chart passed.
+        verified_tries: Valid charts checked, best first, before one passed (or all tried).
     """
 
     problem: SahGraspManifold
@@ -116,6 +132,8 @@ class MeshComponent:
     q_world: np.ndarray | None
     contacts: tuple[ContactTarget, ...]
     verification: Verification | None
+    verdict: Verdict | None = None
+    verified_tries: int = 0
 
     @property
     def best_value(self) -> float:
@@ -193,26 +211,94 @@ def _world_grasp(
     return q, tuple(contacts)
 
 
+def start_patches(
+    obj: GraspObject,
+    target: GraspTarget,
+    max_half_width_m: float = MAX_HALF_WIDTH_M,
+    tolerance_m: float = MODEL_TOLERANCE_M,
+) -> GraspPatches:
+    """Contact regions around a start's contacts: smooth models anchored at each contact.
+
+    As :func:`sahgrasp.grasp.mesh_patches`, but each model passes through its contact point
+    with the contact's normal (``fit_mesh_patch(..., anchored=True)``): a start that reaches its
+    contacts is on F as it is, so the atlas's first chart is the start itself and the optimum
+    is never worse than the start.
+
+    Raises:
+        SurfaceModelError: No smooth model of the mesh fits around a contact.
+    """
+    import trimesh
+
+    mesh = obj.mesh()
+    tm = trimesh.Trimesh(mesh.vertices_m, mesh.faces, process=False)
+    T_object_world = np.linalg.inv(obj.T_world_object)
+    regions: dict[str, ContactRegion] = {}
+    for c in target.contacts:
+        point = T_object_world[:3, :3] @ c.point + T_object_world[:3, 3]
+        normal = T_object_world[:3, :3] @ c.normal
+        regions[c.finger] = fit_mesh_patch(
+            c.finger, tm, point, normal, max_half_width_m=max_half_width_m,
+            tolerance_m=tolerance_m, anchored=True,
+        )  # fmt: skip
+    return GraspPatches(target.name, regions)
+
+
+def _on_mesh(
+    contacts: tuple[ContactTarget, ...], verifier: GraspVerifier
+) -> tuple[ContactTarget, ...]:
+    """The contacts with their points moved to the closest point of the true mesh."""
+    moved = []
+    for c in contacts:
+        point, _, _ = verifier.surface.closest(np.asarray(c.point, dtype=np.float64))
+        moved.append(ContactTarget(c.finger, point, c.normal))
+    return tuple(moved)
+
+
 def _component(
     hand: Hand,
     obj: GraspObject,
     problem: SahGraspManifold,
     result: OptimizationResult,
     starts: tuple[int, ...],
+    verifier: GraspVerifier,
 ) -> MeshComponent:
-    """The component's best chart that passes :func:`verify_grasp`."""
+    """The component's best chart that passes :func:`verify_grasp` and ``verifier``.
+
+    The smooth models are within their tolerance of the mesh, not on it: the contacts are
+    checked at their closest points of the true mesh (the fingertip within ``d_min`` of
+    ``point + radius * normal`` there, as for a planned grasp).
+    """
     fingers = [c.finger for c in problem.system.contacts]
     values = np.where(result.valid, result.all_values, -np.inf)
     order = np.argsort(-values, kind="stable")[:_VERIFY_TRIES]
+    start_value = float(result.all_values[0])
+    tries = 0
     for chart in order.tolist():
         if not np.isfinite(values[chart]):
             break
+        tries += 1
         q, contacts = _world_grasp(problem, result, chart, obj)
         verification = verify_grasp(hand, obj, q, fingers)
-        if verification.ok:
-            return MeshComponent(problem, starts, result, float(result.all_values[0]), chart, q,
-                                 contacts, verification)  # fmt: skip
-    return MeshComponent(problem, starts, result, float(result.all_values[0]), None, None, (), None)
+        if not verification.ok:
+            continue
+        on_mesh = _on_mesh(contacts, verifier)
+        wrist = {"xyz": q[:3].tolist(), "quat": q[3:7].tolist()}
+        verdict = verifier.check(wrist, hand.joint_values(q), [c.to_dict() for c in on_mesh])
+        if verdict.ok:
+            return MeshComponent(problem, starts, result, start_value, chart, q, on_mesh,
+                                 verification, verdict, tries)  # fmt: skip
+    return MeshComponent(problem, starts, result, start_value, None, None, (), None, None, tries)
+
+
+def mesh_verifier(
+    hand: Hand,
+    obj: GraspObject,
+    d_min_m: float = CONTACT_ALLOWANCE_M,
+    tolerance_m: float = LINK_TOLERANCE_M,
+) -> GraspVerifier:
+    """The planner's independent verifier of grasps of ``obj`` (its true mesh, world frame)."""
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    return GraspVerifier(hand.description, mesh.vertices_m, mesh.faces, d_min_m, tolerance_m)
 
 
 def _in_component(
@@ -263,6 +349,9 @@ def optimize_mesh_grasps(
     motion_samples: int = 2000,
     seed: int = 0,
     progress: ProgressCallback | None = None,
+    max_half_width_m: float = MAX_HALF_WIDTH_M,
+    tolerance_m: float = MODEL_TOLERANCE_M,
+    verifier: GraspVerifier | None = None,
 ) -> MeshAtlasSearch:
     """Algorithm 1 on a mesh object from each start; the best verified grasp of every component.
 
@@ -278,6 +367,9 @@ def optimize_mesh_grasps(
         motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
         progress: Hears of ``("mesh atlas: starts", done, len(starts))``.
+        max_half_width_m: Largest half width of a contact region [m] (:func:`mesh_patches`).
+        tolerance_m: Largest distance of a region's model from the mesh [m].
+        verifier: The independent verifier of the optimum (default: :func:`mesh_verifier`).
 
     Returns:
         The components; a start that cannot be used (no smooth model around a contact, no IK
@@ -297,7 +389,7 @@ def optimize_mesh_grasps(
         error = None
         if owner is None:
             try:
-                patches = mesh_patches(obj, start.target)
+                patches = start_patches(obj, start.target, max_half_width_m, tolerance_m)
                 problem = make_mesh_manifold(
                     hand, obj, start.target, start.q, k, motion_samples, seed, length_scale_m,
                     unit_m, patches,
@@ -318,7 +410,8 @@ def optimize_mesh_grasps(
         raise OptimizationError(
             "no start could be used: " + "; ".join(e for e in errors if e is not None)
         )
-    components = tuple(_component(hand, obj, p, r, tuple(s)) for p, r, s in built)
+    verifier = verifier or mesh_verifier(hand, obj)
+    components = tuple(_component(hand, obj, p, r, tuple(s), verifier) for p, r, s in built)
     return MeshAtlasSearch(components, tuple(owners), tuple(errors))
 
 
