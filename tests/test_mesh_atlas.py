@@ -104,6 +104,9 @@ def test_every_component_once_and_its_best_grasp_verified_on_the_mesh(
         assert component.result.atlas.complete
         assert component.best_chart is not None and component.verification is not None
         assert component.verification.ok
+        # The planner's independent verifier passed it too, its contacts on the true mesh.
+        assert component.verdict is not None and component.verdict.ok
+        assert max(component.verdict.contact_errors_m) <= 1.5e-3
         assert component.best_value >= component.start_value
         # Independent of the search's own bookkeeping: the returned hand, checked again.
         assert component.q_world is not None
@@ -145,3 +148,48 @@ def test_the_command_refuses_a_mesh_without_starts(cylinder: tuple[Path, GraspOb
     )  # fmt: skip
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr.startswith("sahgrasp atlas: error: give an experiment")
+
+
+@pytest.mark.slow
+def test_the_first_chart_is_the_start_and_the_optimum_is_no_worse(
+    cylinder: tuple[Path, GraspObject], hand: Hand, starts: list[MeshStart]
+) -> None:
+    from sahgrasp.experiments.mesh_atlas import _world_grasp
+    from sahgrasp.planner.plan import manipulability_indices
+
+    obj = cylinder[1]
+    start = starts[0]
+    settings = OptimizationSettings(radius=2.0, epsilon=0.5, max_charts=2000)
+    search = optimize_mesh_grasps(hand, obj, [start], settings, motion_samples=300)
+    (component,) = search.components
+    # The models pass through the start's contacts: chart 0 is the start (up to the 1e-4 the
+    # start is moved inside the bounds), its index the start's.
+    q0, _ = _world_grasp(component.problem, component.result, 0, obj)
+    assert start.q is not None
+    assert np.abs(q0[:7] - start.q[:7]).max() < 1e-3
+    centre = obj.T_world_object[:3, 3]
+    at_start = manipulability_indices(hand, start.q, FINGERS, centre)["volume"]
+    assert component.start_value == pytest.approx(at_start, rel=1e-2)
+    assert component.best_value >= component.start_value
+
+
+@pytest.mark.slow
+def test_the_refine_example_plans_then_refines_the_mug(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import importlib.util
+
+    path = ROOT / "examples" / "refine_mug.py"
+    spec = importlib.util.spec_from_file_location("example_refine_mug", path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    out = tmp_path / "refined.json"
+    assert module.main(["--starts", "1", "--candidates", "20", "--json", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "rank 1:" in printed and "verified on the mesh" in printed
+    document = json.loads(out.read_text())
+    (grasp,) = document["grasps"]
+    # The refined grasp reads back as a start (the atlas's --start), hand and all.
+    (again,) = read_starts(out, hand=load_hand("sah"))
+    assert again.q is not None and len(grasp["contacts"]) >= 3

@@ -428,10 +428,12 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply")
 
 
 def mesh_objects() -> tuple[str, ...]:
-    """Objects of the ``mesh_objects`` case: every catalog object and every shipped mesh
-    (``examples/meshes``, ``mesh:`` prefix), in that order."""
-    folder = _MESH_FOLDER
-    shipped = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+    """Objects of the ``mesh_objects`` case, catalog objects first.
+
+    Every catalog object (its display mesh) and every shipped mesh (``examples/meshes``, with a
+    ``mesh:`` prefix).
+    """
+    shipped = sorted(p.name for p in _MESH_FOLDER.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
     return MESH_CATALOG + tuple(f"mesh:{name}" for name in shipped)
 
 

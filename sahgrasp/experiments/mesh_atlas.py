@@ -37,6 +37,7 @@ from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearan
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
 from sahgrasp.objects.smooth_surface import MeshPatch, fit_mesh_patch
 from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
+from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.verify import LINK_TOLERANCE_M, GraspVerifier, Verdict
 from sahgrasp.progress import ProgressCallback
 
@@ -380,6 +381,9 @@ def optimize_mesh_grasps(
         OptimizationError: No start could be used.
     """
     settings = settings or OptimizationSettings(MESH_DEFAULTS["radius"], MESH_DEFAULTS["epsilon"])
+    # The collision checks at the chart centres use the planner's pieces (the triangles' prisms,
+    # unjoined): the same solid as the joined pieces, built in a fraction of the time.
+    obj = planning_object(obj)
     built: list[tuple[SahGraspManifold, OptimizationResult, list[int]]] = []
     owners: list[int | None] = []
     errors: list[str | None] = []

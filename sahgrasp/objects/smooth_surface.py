@@ -66,6 +66,10 @@ class SurfaceModelError(SahGraspError):
     """
 
 
+_FAR = 1e3
+"""Largest ``|u| / a`` and ``|v| / a`` at which :meth:`MeshPatch.height` evaluates the model."""
+
+
 @functools.cache
 def _exponents(degree: int) -> tuple[tuple[int, int], ...]:
     return tuple((i, total - i) for total in range(degree + 1) for i in range(total, -1, -1))
@@ -121,7 +125,9 @@ class MeshPatch:
     def height(self, u: float, v: float) -> tuple[float, float, float, float, float, float]:
         """``h`` and its derivatives ``h_u, h_v, h_uu, h_uv, h_vv`` at ``(u, v)`` [m]."""
         a = self.half_width_m
-        s, t = u / a, v / a
+        # A diverging Newton step may ask for the model far outside its square, where it means
+        # nothing: the polynomial is held at |s|, |t| <= 1e3 there, never overflowing.
+        s, t = min(max(u / a, -_FAR), _FAR), min(max(v / a, -_FAR), _FAR)
         h = hu = hv = huu = huv = hvv = 0.0
         for c, (i, j) in zip(self.coefficients.tolist(), _exponents(self.degree), strict=True):
             si = s**i
