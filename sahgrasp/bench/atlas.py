@@ -445,15 +445,20 @@ optimizes."""
 
 
 MESH_ATLAS = {
+    "candidate_starts": 10,
     "starts": 3,
+    "rounds": 1,
     "k": 2,
     "radius": 1.0,
     "epsilon": 0.5,
     "max_half_width_m": 0.02,
     "tolerance_m": 3e-4,
 }
-"""The ``mesh_objects`` case's atlas: the planner's best ``starts`` grasps, R of dimension ``k``,
-chart radius and epsilon in units of 3 mm, the regions' largest half width and model tolerance."""
+"""The ``mesh_objects`` case's atlas: the first ``starts`` of the planner's best
+``candidate_starts`` grasps whose contacts all have a smooth model, ``rounds`` atlases in
+all from the best optimum (:func:`sahgrasp.experiments.mesh_atlas.refine_mesh_grasp`), R of
+dimension ``k``, chart radius and epsilon in units of 3 mm, the regions' largest half width and
+model tolerance."""
 
 
 def _mesh_object(name: str) -> Any:
@@ -467,9 +472,11 @@ def _mesh_object(name: str) -> Any:
 def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
     """The mesh atlas on one object from the planner's best grasps, against its best one.
 
-    The starts are the planner's best :data:`MESH_ATLAS` ``starts`` distinct 3- or 4-finger
-    grasps ranked by the atlas's index (rank 1 first); each optimum is the atlas's best chart that
-    passes the planner's independent verifier on the true mesh. Start and optima are scored with
+    The starts are the first :data:`MESH_ATLAS` ``starts`` of the planner's best
+    ``candidate_starts`` distinct 3- or 4-finger grasps, ranked by the atlas's index, whose
+    contacts all have a smooth model (a contact on a sharp edge has none); each optimum is the
+    atlas's best chart that passes the planner's independent verifier on the true mesh. Start
+    and optima are scored with
     the planner's index function (:func:`sahgrasp.planner.plan.manipulability_indices`), one
     computation for both; the atlas's own value at chart 0 (the start brought onto R) is reported
     beside. ``improved``: the best verified optimum beats the planner's best grasp (rank 1);
@@ -480,7 +487,13 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
         **atlas: Overrides of :data:`MESH_ATLAS`.
     """
     from sahgrasp.contacts import GraspTarget
-    from sahgrasp.experiments.mesh_atlas import MeshStart, mesh_verifier, optimize_mesh_grasps
+    from sahgrasp.experiments.mesh_atlas import (
+        MeshStart,
+        mesh_verifier,
+        optimize_mesh_grasps,
+        refine_mesh_grasp,
+        start_patches,
+    )
     from sahgrasp.hand import load_hand
     from sahgrasp.optimization import OptimizationSettings
     from sahgrasp.planner import PlanSettings, plan_grasps
@@ -495,7 +508,7 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
     obj = planning_object(_mesh_object(name))
     settings = PlanSettings(
         fingers=MESH_PLAN["fingers"], candidates=MESH_PLAN["candidates"], seed=MESH_PLAN["seed"],
-        rank=index, grasps=int(config["starts"]),
+        rank=index, grasps=int(config["candidate_starts"]),
     )  # fmt: skip
     plan = plan_grasps(hand, obj, settings)
     planned = time.perf_counter()
@@ -511,10 +524,23 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
     row["start_index"] = float(best_planned.quality[index])
     row["start_indices"] = [float(g.quality[index]) for g in plan.grasps]
     verifier = mesh_verifier(hand, obj, settings.d_min_m, settings.link_tolerance_m)
-    starts = [
-        MeshStart(GraspTarget(f"{name} rank {i + 1}", list(g.contacts)), g.q, f"rank {i + 1}")
-        for i, g in enumerate(plan.grasps)
-    ]
+    # The best planned grasps whose contacts all have a smooth model (cheap to tell: no atlas).
+    starts, skipped = [], []
+    for i, g in enumerate(plan.grasps):
+        target = GraspTarget(f"{name} rank {i + 1}", list(g.contacts))
+        try:
+            start_patches(obj, target, float(config["max_half_width_m"]),
+                          float(config["tolerance_m"]))  # fmt: skip
+        except SahGraspError as exc:
+            skipped.append(f"rank {i + 1}: {exc}")
+            continue
+        starts.append(MeshStart(target, g.q, f"rank {i + 1}"))
+        if len(starts) == int(config["starts"]):
+            break
+    row["skipped_starts"] = skipped
+    if not starts:
+        row["reason"] = f"no smooth model at the contacts of the best {len(plan.grasps)} grasps"
+        return row
     optimization = OptimizationSettings(float(config["radius"]), float(config["epsilon"]), index)
     try:
         search = optimize_mesh_grasps(
@@ -555,6 +581,26 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
         return row
     best = max(found, key=lambda c: c["best_index"])
     first = next((c for c in found if "rank 1" in c["starts"]), None)
+    if int(config["rounds"]) > 1:  # further rounds from the best optimum (refine_mesh_grasp)
+        chosen = search.components[components.index(best)]
+        assert chosen.q_world is not None
+        again = MeshStart(GraspTarget(f"{name} refined", list(chosen.contacts)), chosen.q_world,
+                          f"{best['starts'][0]}, round 2")  # fmt: skip
+        rounds = refine_mesh_grasp(
+            hand, obj, again, optimization, rounds=int(config["rounds"]) - 1, k=int(config["k"]),
+            max_half_width_m=float(config["max_half_width_m"]),
+            tolerance_m=float(config["tolerance_m"]), verifier=verifier,
+        )  # fmt: skip
+        row["rounds"] = [{"charts": r.result.atlas.n_charts, "best_chart": r.best_chart}
+                         for r in rounds]  # fmt: skip
+        row["charts"] += sum(r.result.atlas.n_charts for r in rounds)
+        for r in rounds:
+            if r.q_world is not None and r.verdict is not None and r.verdict.ok:
+                fingers = tuple(t.finger for t in r.contacts)
+                value = float(manipulability_indices(hand, r.q_world, fingers, centroid)[index])
+                if value > best["best_index"]:
+                    best = {**best, "best_index": value}
+        row["atlas_seconds"] = time.perf_counter() - planned
     row.update({
         "best_index": best["best_index"], "best_from": best["starts"][0],
         "gain": best["best_index"] / row["start_index"] - 1.0,

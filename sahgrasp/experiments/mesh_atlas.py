@@ -28,7 +28,12 @@ import numpy as np
 import pinocchio as pin
 
 from sahgrasp.contacts import ContactTarget, GraspTarget
-from sahgrasp.errors import InvalidTargetError, OptimizationError, SahGraspError
+from sahgrasp.errors import (
+    InvalidSettingsError,
+    InvalidTargetError,
+    OptimizationError,
+    SahGraspError,
+)
 from sahgrasp.experiments.arguments import MESH_DEFAULTS
 from sahgrasp.fileio import read_json
 from sahgrasp.grasp import SahGraspManifold, make_mesh_manifold
@@ -51,6 +56,7 @@ __all__ = [
     "mesh_verifier",
     "optimize_mesh_grasps",
     "read_starts",
+    "refine_mesh_grasp",
     "start_patches",
     "verify_grasp",
 ]
@@ -417,6 +423,59 @@ def optimize_mesh_grasps(
     verifier = verifier or mesh_verifier(hand, obj)
     components = tuple(_component(hand, obj, p, r, tuple(s), verifier) for p, r, s in built)
     return MeshAtlasSearch(components, tuple(owners), tuple(errors))
+
+
+def refine_mesh_grasp(
+    hand: Hand,
+    obj: GraspObject,
+    start: MeshStart,
+    settings: OptimizationSettings | None = None,
+    rounds: int = 3,
+    **options: Any,
+) -> tuple[MeshComponent, ...]:
+    """Rounds of :func:`optimize_mesh_grasps`, each from the previous round's verified optimum.
+
+    One atlas covers the grasps whose contacts stay on regions at most ``2 * max_half_width_m``
+    wide around the start's; when its best verified grasp lies away from the start, new regions
+    around that grasp's contacts (its points on the true mesh, its model normals) reach further.
+    Each round is a complete atlas and its optimum passes the same verifications; the rounds stop
+    when a round's best verified grasp is its first chart (the start), when no chart passes the
+    verification, or when a round's start cannot be used (its error is not raised: the rounds
+    before it stand).
+
+    Args:
+        hand: The hand.
+        obj: The object, placed in the world.
+        start: The first round's start.
+        settings: See :func:`optimize_mesh_grasps`.
+        rounds: Most rounds (>= 1).
+        **options: Further arguments of :func:`optimize_mesh_grasps`.
+
+    Returns:
+        The component of each round, in order; the last verified one holds the best grasp.
+
+    Raises:
+        OptimizationError: The first start cannot be used.
+        InvalidSettingsError: ``rounds`` < 1.
+    """
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or rounds < 1:
+        raise InvalidSettingsError(f"rounds must be an integer >= 1, got {rounds!r}")
+    done: list[MeshComponent] = []
+    current = start
+    for number in range(rounds):
+        try:
+            search = optimize_mesh_grasps(hand, obj, [current], settings, **options)
+        except OptimizationError:
+            if not done:
+                raise
+            break
+        component = search.components[0]
+        done.append(component)
+        if component.q_world is None or component.best_chart in (None, 0):
+            break
+        target = GraspTarget(start.target.name, list(component.contacts))
+        current = MeshStart(target, component.q_world, f"{start.label}, round {number + 2}")
+    return tuple(done)
 
 
 def _grasp_q(hand: Hand, item: dict[str, Any], where: str) -> np.ndarray | None:
