@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
 import sys
@@ -193,3 +194,34 @@ def test_the_refine_example_plans_then_refines_the_mug(
     # The refined grasp reads back as a start (the atlas's --start), hand and all.
     (again,) = read_starts(out, hand=load_hand("sah"))
     assert again.q is not None and len(grasp["contacts"]) >= 3
+
+
+def test_refine_refuses_a_bad_number_of_rounds(
+    cylinder: tuple[Path, GraspObject], hand: Hand, starts: list[MeshStart]
+) -> None:
+    from sahgrasp.errors import InvalidSettingsError
+    from sahgrasp.experiments.mesh_atlas import refine_mesh_grasp
+
+    for rounds in (0, -1, True, 1.5):
+        with pytest.raises(InvalidSettingsError, match="rounds must be an integer >= 1"):
+            refine_mesh_grasp(hand, cylinder[1], starts[0], rounds=rounds)  # type: ignore[arg-type]
+
+
+@pytest.mark.slow
+def test_rounds_start_from_the_last_optimum_and_never_lose(
+    cylinder: tuple[Path, GraspObject], hand: Hand, starts: list[MeshStart]
+) -> None:
+    from sahgrasp.experiments.mesh_atlas import refine_mesh_grasp
+
+    settings = OptimizationSettings(radius=2.0, epsilon=0.5, max_charts=2000)
+    rounds = refine_mesh_grasp(hand, cylinder[1], starts[0], settings, rounds=3,
+                               motion_samples=300)  # fmt: skip
+    assert 1 <= len(rounds) <= 3
+    for before, after in itertools.pairwise(rounds):
+        # A round starts where the last one's best verified grasp was (on the true mesh, so
+        # within the model's tolerance of it) and ends no worse.
+        assert before.best_chart not in (None, 0)
+        assert after.start_value == pytest.approx(before.best_value, rel=0.02)
+        assert after.best_value >= after.start_value
+    for r in rounds:
+        assert r.verdict is None or r.verdict.ok

@@ -447,7 +447,7 @@ optimizes."""
 MESH_ATLAS = {
     "candidate_starts": 10,
     "starts": 3,
-    "rounds": 1,
+    "rounds": 4,
     "k": 2,
     "radius": 1.0,
     "epsilon": 0.5,
