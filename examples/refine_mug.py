@@ -17,9 +17,10 @@ from pathlib import Path
 import sahgrasp
 from sahgrasp.contacts import GraspTarget
 from sahgrasp.experiments.arguments import MESH_DEFAULTS, positive_int
-from sahgrasp.experiments.mesh_atlas import MeshStart, optimize_mesh_grasps
+from sahgrasp.experiments.mesh_atlas import MeshStart, optimize_mesh_grasps, start_patches
 from sahgrasp.fileio import write_json_atomic
 from sahgrasp.objects import MeshFileError, load_mesh
+from sahgrasp.objects.smooth_surface import SurfaceModelError
 from sahgrasp.optimization import OptimizationSettings
 from sahgrasp.planner.candidates import ObjectFrame
 from sahgrasp.planner.pieces import planning_object
@@ -44,32 +45,42 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.error(str(error))
     # 1. Plan: 3- and 4-finger grasps (two hard fingers have no manipulability), by the index.
     settings = sahgrasp.PlanSettings(
-        fingers=(3, 4), grasps=args.starts, candidates=args.candidates, rank=INDEX, seed=0
+        fingers=(3, 4), grasps=10, candidates=args.candidates, rank=INDEX, seed=0
     )
     plan = sahgrasp.plan_grasps(hand, obj, settings)
-    if not plan.grasps:
-        print(f"{obj.name}: the planner found no 3- or 4-finger grasp")
+    # 2. The best planned grasps the atlas can start from: a smooth model of the mesh at every
+    #    contact (a contact on a sharp edge or a rim has none).
+    starts, planned = [], []
+    for i, grasp in enumerate(plan.grasps, start=1):
+        target = GraspTarget(f"rank {i}", list(grasp.contacts))
+        try:
+            start_patches(obj, target)
+        except SurfaceModelError as error:
+            print(f"  rank {i}: not refined: {error}")
+            continue
+        starts.append(MeshStart(target, grasp.q, f"rank {i}"))
+        planned.append(grasp)
+        if len(starts) == args.starts:
+            break
+    if not starts:
+        print(f"{obj.name}: no planned grasp with a smooth model at every contact")
         return 1
-    # 2. Refine: the atlas around each planned grasp, each optimum verified on the true mesh.
-    starts = [
-        MeshStart(GraspTarget(f"rank {i}", list(g.contacts)), g.q, f"rank {i}")
-        for i, g in enumerate(plan.grasps, start=1)
-    ]
+    # 3. Refine: the atlas around each start, each optimum verified on the true mesh.
     atlas = OptimizationSettings(MESH_DEFAULTS["radius"], MESH_DEFAULTS["epsilon"], INDEX)
     search = optimize_mesh_grasps(hand, obj, starts, atlas)
     mesh = obj.mesh().transformed(obj.T_world_object)
     centroid = ObjectFrame.of(mesh.vertices_m, mesh.faces).centroid_m
     refined = []
-    for i, (grasp, owner, error) in enumerate(
-        zip(plan.grasps, search.start_components, search.start_errors, strict=True), start=1
+    for k, (start, grasp, owner, error) in enumerate(
+        zip(starts, planned, search.start_components, search.start_errors, strict=True)
     ):
-        line = f"  rank {i}: {'+'.join(grasp.fingers)}, {INDEX} {grasp.quality[INDEX]:.4g}"
+        line = f"  {start.label}: {'+'.join(grasp.fingers)}, {INDEX} {grasp.quality[INDEX]:.4g}"
         if owner is None:
             print(f"{line}; not refined: {error}")
             continue
         c = search.components[owner]
-        if c.starts[0] != i - 1:
-            print(f"{line}; in the component of rank {c.starts[0] + 1}")
+        if c.starts[0] != k:
+            print(f"{line}; in the component of {starts[c.starts[0]].label}")
             continue
         if c.q_world is None:
             print(f"{line}; no chart of {c.result.atlas.n_charts} passed the verification")
@@ -85,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             "wrist": {"xyz": c.q_world[:3].tolist(), "quat": c.q_world[3:7].tolist()},
             "joints": hand.joint_values(c.q_world), "quality": {INDEX: value},
         })  # fmt: skip
-    print(f"{obj.name}: {len(refined)} of {len(plan.grasps)} planned grasps refined")
+    print(f"{obj.name}: {len(refined)} of {len(starts)} planned grasps refined")
     if args.json is not None:
         document = plan.to_dict()
         write_json_atomic(args.json, {**document, "grasps": refined})
