@@ -438,7 +438,7 @@ def mesh_objects() -> tuple[str, ...]:
 
 
 _MESH_FOLDER = Path(__file__).resolve().parents[2] / "examples" / "meshes"
-MESH_PLAN = {"fingers": (3, 4), "candidates": 60, "seed": 0, "index": "volume"}
+MESH_PLAN: dict[str, Any] = {"fingers": (3, 4), "candidates": 60, "seed": 0, "index": "volume"}
 """How the ``mesh_objects`` case plans its start: 3- and 4-finger grasps (two hard fingers have
 no manipulability), the planner's default candidate budget, seed 0, ranked by the index the atlas
 optimizes."""
