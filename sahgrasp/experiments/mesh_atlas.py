@@ -2,17 +2,20 @@
 
 Rosales, Porta and Ros (RSS 2011) optimise over the grasps whose contacts stay on given contact
 regions of an analytic object. On a mesh the regions are smooth local models of the mesh around
-each start's contacts (:func:`sahgrasp.grasp.mesh_patches`, docs/atlas.md "The atlas on a mesh");
-:func:`optimize_mesh_grasps` builds the atlas of R (Eq. (11)) from each start, checks collisions at
-every chart centre as for the can (self-collision, and every link against the object's collision
-pieces with the contact fingertips allowed ``d_min`` deep), and returns per connected component
-the best grasp on the chosen index that passes a verification on the true mesh:
-:func:`verify_grasp` (every contact within ``d_min`` of the mesh, no link inside the object, no
-self-collision, joints within their limits). A start whose grasp lies in a component already
-covered (its contacts on that component's regions and, brought onto its R, within one chart
-radius of one of its chart centres) adds no atlas: each component is covered once.
-:func:`read_starts` reads the starts from a planner's grasps (``{"grasps": [...]}``) or a targets
-file (``{"problems": [...]}``).
+each start's contacts, anchored there (:func:`start_patches`; docs/atlas.md "The atlas on a
+mesh", Eqs. (M1)-(M4)): the start is the atlas's first chart. :func:`optimize_mesh_grasps`
+builds the atlas of R (Eq. (11)) from each start, checks collisions at every chart centre as for
+the can (self-collision, and every link against the object's collision pieces with the contact
+fingertips allowed ``d_min`` deep), and returns per connected component the best grasp on the
+chosen index that passes two verifications on the true mesh: :func:`verify_grasp` (every contact
+within ``d_min`` of the mesh, no link inside the object, no self-collision, joints within their
+limits) and the planner's independent verifier
+(:class:`~sahgrasp.planner.verify.GraspVerifier`, as every planned grasp). A start whose grasp
+lies in a component already covered (its contacts on that component's regions and, brought onto
+its R, within one chart radius of one of its chart centres) adds no atlas: each component is
+covered once. :func:`refine_mesh_grasp` builds rounds of atlases, each from the last one's
+optimum. :func:`read_starts` reads the starts from a planner's grasps (``{"grasps": [...]}``) or
+a targets file (``{"problems": [...]}``).
 """
 
 from __future__ import annotations
@@ -374,7 +377,7 @@ def optimize_mesh_grasps(
         motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
         progress: Hears of ``("mesh atlas: starts", done, len(starts))``.
-        max_half_width_m: Largest half width of a contact region [m] (:func:`mesh_patches`).
+        max_half_width_m: Largest half width of a contact region [m] (:func:`start_patches`).
         tolerance_m: Largest distance of a region's model from the mesh [m].
         verifier: The independent verifier of the optimum (default: :func:`mesh_verifier`).
 
