@@ -225,3 +225,27 @@ def test_rounds_start_from_the_last_optimum_and_never_lose(
         assert after.best_value >= after.start_value
     for r in rounds:
         assert r.verdict is None or r.verdict.ok
+
+
+def test_a_plan_without_contact_params_puts_the_contact_frames_on_the_contacts(
+    tmp_path: Path, hand: Hand, starts: list[MeshStart]
+) -> None:
+    # sahgrasp plan writes the wrist and every URDF joint, not the virtual contact joints.
+    q = starts[0].q
+    assert q is not None
+    grasp = {
+        "contacts": [c.to_dict() for c in starts[0].target.contacts],
+        "wrist": {"xyz": q[:3].tolist(), "quat": q[3:7].tolist()},
+        "joints": hand.joint_values(q),
+    }
+    (tmp_path / "plan.json").write_text(json.dumps({"grasps": [grasp]}))
+    (read,) = read_starts(tmp_path / "plan.json", hand)
+    assert read.q is not None
+    for c in starts[0].target.contacts:
+        # As close to the contact as the IK's own virtual joints put it (the IK stops at d_min).
+        placed = hand.contact_placement(read.q, c.finger).translation
+        solved = hand.contact_placement(q, c.finger).translation
+        assert np.linalg.norm(placed - c.point) <= np.linalg.norm(solved - c.point) + 1e-9
+    # The wrist and the URDF joints stay as the plan gives them.
+    assert np.allclose(read.q[:7], q[:7], atol=1e-12)
+    assert hand.joint_values(read.q) == pytest.approx(hand.joint_values(q), abs=1e-12)

@@ -481,7 +481,9 @@ def refine_mesh_grasp(
     return tuple(done)
 
 
-def _grasp_q(hand: Hand, item: dict[str, Any], where: str) -> np.ndarray | None:
+def _grasp_q(
+    hand: Hand, item: dict[str, Any], where: str, target: GraspTarget
+) -> np.ndarray | None:
     """The hand of a grasp entry (``wrist``, ``joints``, optional ``contact_params``), or None."""
     if item.get("wrist") is None or item.get("joints") is None:
         return None
@@ -505,7 +507,49 @@ def _grasp_q(hand: Hand, item: dict[str, Any], where: str) -> np.ndarray | None:
     if unknown:
         raise InvalidTargetError(f"{where}: unknown joint(s) {unknown} for this hand")
     T = pin.XYZQUATToSE3(np.concatenate([xyz, quat]))
-    return hand.configuration(T, {k: v for k, v in coords.items() if k in known})
+    q = hand.configuration(T, {k: v for k, v in coords.items() if k in known})
+    if not item.get("contact_params"):  # a plan gives none: the fingertip point at each contact
+        q = _contact_params_at(hand, q, target)
+    return q
+
+
+_TIGHT = {"xtol": 1e-12, "ftol": 1e-12, "gtol": 1e-12}
+
+
+def _contact_params_at(hand: Hand, q: np.ndarray, target: GraspTarget) -> np.ndarray:
+    """``q`` with each contact finger's contact frame at its contact point.
+
+    The virtual contact joints are fitted by least squares within their limits; the wrist and
+    the URDF joints are left as they are.
+    ``sahgrasp plan``'s grasps give the wrist and every URDF joint, not the virtual contact
+    joints; the atlas's F needs them (its first chart is the start as given).
+    """
+    from scipy.optimize import least_squares
+
+    q = q.copy()
+    lower, upper = hand.model.lowerPositionLimit, hand.model.upperPositionLimit
+    for contact in target.contacts:
+        index = [
+            7 + hand.coordinate_index(f"{contact.finger}_contact_{a}") for a in ("pitch", "yaw")
+        ]
+        low, high = lower[index], upper[index]
+
+        def residual(p: np.ndarray, index: list[int] = index, finger: str = contact.finger,
+                     point: np.ndarray = contact.point) -> np.ndarray:  # fmt: skip
+            moved = q.copy()
+            moved[index] = p
+            # In millimetres: metre-sized residuals would meet least_squares' gradient tolerance
+            # a tenth of a millimetre away.
+            return 1e3 * (np.asarray(hand.contact_placement(moved, finger).translation) - point)
+
+        best = None
+        for guess in (np.clip(q[index], low, high), 0.5 * (low + high)):
+            fit = least_squares(residual, guess, bounds=(low, high), **_TIGHT)
+            if best is None or fit.cost < best.cost:
+                best = fit
+        assert best is not None
+        q[index] = best.x
+    return q
 
 
 def read_starts(path: str | os.PathLike[str], hand: Hand) -> list[MeshStart]:
@@ -541,5 +585,5 @@ def read_starts(path: str | os.PathLike[str], hand: Hand) -> list[MeshStart]:
         if len(target.contacts) < 2:
             raise InvalidTargetError(f"{where}: a start needs two or more contacts")
         target.check_fingers([f for f in hand.fingers if f in target.fingers])
-        starts.append(MeshStart(target, _grasp_q(hand, item, where), label))
+        starts.append(MeshStart(target, _grasp_q(hand, item, where, target), label))
     return starts
