@@ -586,11 +586,15 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
         assert chosen.q_world is not None
         again = MeshStart(GraspTarget(f"{name} refined", list(chosen.contacts)), chosen.q_world,
                           f"{best['starts'][0]}, round 2")  # fmt: skip
-        rounds = refine_mesh_grasp(
-            hand, obj, again, optimization, rounds=int(config["rounds"]) - 1, k=int(config["k"]),
-            max_half_width_m=float(config["max_half_width_m"]),
-            tolerance_m=float(config["tolerance_m"]), verifier=verifier,
-        )  # fmt: skip
+        try:
+            rounds = refine_mesh_grasp(
+                hand, obj, again, optimization, rounds=int(config["rounds"]) - 1,
+                k=int(config["k"]), max_half_width_m=float(config["max_half_width_m"]),
+                tolerance_m=float(config["tolerance_m"]), verifier=verifier,
+            )  # fmt: skip
+        except SahGraspError as exc:  # the optimum's contacts have no smooth model: it stands
+            rounds = ()
+            row["round_error"] = str(exc)
         row["rounds"] = [{"charts": r.result.atlas.n_charts, "best_chart": r.best_chart}
                          for r in rounds]  # fmt: skip
         row["charts"] += sum(r.result.atlas.n_charts for r in rounds)
