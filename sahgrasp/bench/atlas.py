@@ -619,11 +619,16 @@ def _mesh_objects_row() -> dict[str, Any]:
     objects = {name: _mesh_object_row(name) for name in mesh_objects()}
     rows = [r for r in objects.values() if "improved" in r]
     improved = sum(r["improved"] and r["verified"] for r in rows)
+    charts = sum(r.get("charts", 0) for r in objects.values())
+    seconds = sum(r.get("atlas_seconds", 0.0) for r in objects.values())
     return {
         "objects": objects,
         "plan": {k: list(v) if isinstance(v, tuple) else v for k, v in MESH_PLAN.items()},
-        "charts": sum(r.get("charts", 0) for r in objects.values()),
-        "seconds": sum(r.get("atlas_seconds", 0.0) for r in objects.values()),
+        "atlas": dict(MESH_ATLAS),
+        "charts": charts,
+        "complete": all(c["complete"] for r in objects.values() for c in r.get("components", [])),
+        "seconds": seconds,
+        "charts_per_second": charts / max(seconds, 1e-9),
         "improved": improved,
         "improved_share": improved / len(objects),
         "improved_target": 0.9,
