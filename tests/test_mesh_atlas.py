@@ -249,3 +249,20 @@ def test_a_plan_without_contact_params_puts_the_contact_frames_on_the_contacts(
     # The wrist and the URDF joints stay as the plan gives them.
     assert np.allclose(read.q[:7], q[:7], atol=1e-12)
     assert hand.joint_values(read.q) == pytest.approx(hand.joint_values(q), abs=1e-12)
+
+
+@pytest.mark.slow
+def test_the_mesh_benchmark_row_starts_from_the_plan_and_verifies_the_optimum() -> None:
+    from sahgrasp.bench.atlas import _mesh_object_row, mesh_objects
+
+    assert mesh_objects()[:6] == ("fork", "cup", "buddha", "coffee_cup", "can", "bottle")
+    assert {"mesh:mug.stl", "mesh:bottle.obj"} <= set(mesh_objects())
+    row = _mesh_object_row("can", starts=1, rounds=2)
+    assert row["start"]["fingers"][0] == "thumb" and len(row["start"]["fingers"]) >= 3
+    (component,) = row["components"]
+    assert component["starts"] == ["rank 1"] or row["skipped_starts"]
+    # Verified by the planner's verifier, scored by the planner's index function as the start.
+    assert row["verified"] and component["verified"]
+    assert component["max_contact_error_mm"] <= 1.5 and component["max_link_depth_mm"] <= 0.5
+    assert row["best_index"] >= component["best_index"]
+    assert row["improved"] == (row["best_index"] > row["start_index"])
