@@ -584,8 +584,8 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
     if int(config["rounds"]) > 1:  # further rounds from the best optimum (refine_mesh_grasp)
         chosen = search.components[components.index(best)]
         assert chosen.q_world is not None
-        again = MeshStart(GraspTarget(f"{name} refined", list(chosen.contacts)), chosen.q_world,
-                          f"{best['starts'][0]}, round 2")  # fmt: skip
+        target = GraspTarget(f"{name} refined", list(chosen.model_contacts))
+        again = MeshStart(target, chosen.q_world, f"{best['starts'][0]}, round 2")
         try:
             rounds = refine_mesh_grasp(
                 hand, obj, again, optimization, rounds=int(config["rounds"]) - 1,

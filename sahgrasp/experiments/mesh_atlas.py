@@ -132,6 +132,8 @@ class MeshComponent:
             (:class:`sahgrasp.planner.verify.GraspVerifier`, as every planned grasp is
             checked), None when no chart passed.
         verified_tries: Valid charts checked, best first, before one passed (or all tried).
+        model_contacts: The best grasp's contacts on the smooth models (world frame), where its
+            contact frames are: a further round anchored there starts exactly at that grasp.
     """
 
     problem: SahGraspManifold
@@ -144,6 +146,7 @@ class MeshComponent:
     verification: Verification | None
     verdict: Verdict | None = None
     verified_tries: int = 0
+    model_contacts: tuple[ContactTarget, ...] = ()
 
     @property
     def best_value(self) -> float:
@@ -296,7 +299,7 @@ def _component(
         verdict = verifier.check(wrist, hand.joint_values(q), [c.to_dict() for c in on_mesh])
         if verdict.ok:
             return MeshComponent(problem, starts, result, start_value, chart, q, on_mesh,
-                                 verification, verdict, tries)  # fmt: skip
+                                 verification, verdict, tries, contacts)  # fmt: skip
     return MeshComponent(problem, starts, result, start_value, None, None, (), None, None, tries)
 
 
@@ -441,10 +444,12 @@ def refine_mesh_grasp(
     One atlas covers the grasps whose contacts stay on regions at most ``2 * max_half_width_m``
     wide around the start's; when its best verified grasp lies away from the start, new regions
     around that grasp's contacts (its points on the true mesh, its model normals) reach further.
-    Each round is a complete atlas and its optimum passes the same verifications; the rounds stop
-    when a round's best verified grasp is its first chart (the start), when no chart passes the
-    verification, or when a round's start cannot be used (its error is not raised: the rounds
-    before it stand).
+    Each round is a complete atlas and its optimum passes the same verifications. A round starts
+    at the last optimum as it is (its regions anchored at that grasp's contact points on the
+    models, within their tolerance of the mesh). The rounds stop when a round's best verified
+    grasp is its first chart (the start), when no chart passes the verification, when a round
+    finds nothing better than the last (that round is dropped), or when a round's start cannot
+    be used (its error is not raised: the rounds before it stand).
 
     Args:
         hand: The hand.
@@ -455,7 +460,8 @@ def refine_mesh_grasp(
         **options: Further arguments of :func:`optimize_mesh_grasps`.
 
     Returns:
-        The component of each round, in order; the last verified one holds the best grasp.
+        The component of each round kept, in order; each better than the last, so the last
+        holds the best grasp (its ``q_world`` is None only when the first round found none).
 
     Raises:
         OptimizationError: The first start cannot be used.
@@ -473,10 +479,14 @@ def refine_mesh_grasp(
                 raise
             break
         component = search.components[0]
+        if done and not component.best_value > done[-1].best_value:
+            break  # nothing better than the last round's optimum (its start)
         done.append(component)
         if component.q_world is None or component.best_chart in (None, 0):
             break
-        target = GraspTarget(start.target.name, list(component.contacts))
+        # Anchored at the model's contact points (within the tolerance of the mesh), the next
+        # round's first chart is this optimum as it is.
+        target = GraspTarget(start.target.name, list(component.model_contacts))
         current = MeshStart(target, component.q_world, f"{start.label}, round {number + 2}")
     return tuple(done)
 
