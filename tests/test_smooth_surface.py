@@ -116,3 +116,29 @@ def test_bad_arguments_are_refused() -> None:
         fit_mesh_patch("thumb", box, [0.0, 0.0, np.nan], [0.0, 0.0, 1.0])
     with pytest.raises(SurfaceModelError, match="min_half_width_m"):
         fit_mesh_patch("thumb", box, [0.0, 0.0, 0.03], [0.0, 0.0, 1.0], min_half_width_m=0.0)
+
+
+@pytest.mark.parametrize(("kind", "mesh"), [("sphere", _sphere(4)), ("cylinder", _cylinder(128))])
+def test_an_anchored_model_passes_through_the_contact_with_its_normal(
+    kind: str, mesh: trimesh.Trimesh
+) -> None:
+    point, _ = _contact(mesh, kind)
+    _, _, face = trimesh.proximity.closest_point(mesh, [point])
+    normal = mesh.face_normals[face[0]]  # a facet's normal, as a planner's contact has
+    free = fit_mesh_patch("thumb", mesh, point, normal)
+    anchored = fit_mesh_patch("thumb", mesh, point, normal, anchored=True)
+    jet = anchored.evaluate((0.0, 0.0))
+    assert np.allclose(jet.point, point, atol=1e-12)
+    assert np.allclose(jet.normal, normal, atol=1e-12)
+    # Still a model of the mesh within the tolerance, as wide as the free fit where both fit.
+    assert anchored.fit_error_m <= 3e-4
+    assert anchored.half_width_m >= 0.75 * free.half_width_m
+    # The free fit does not pass through the contact exactly (it averages the facets).
+    assert np.linalg.norm(free.evaluate((0.0, 0.0)).point - point) > 1e-9
+
+
+def test_the_model_far_outside_its_square_is_finite() -> None:
+    # A diverging Newton step of the atlas's projection asks for such points: no overflow.
+    patch = fit_mesh_patch("thumb", _sphere(4), *_contact(_sphere(4), "sphere"))
+    jet = patch.evaluate((1e300, -1e300))
+    assert np.isfinite(jet.point).all() and np.isfinite(jet.normal).all()

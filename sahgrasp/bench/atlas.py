@@ -28,6 +28,7 @@ import pstats
 import time
 from collections.abc import Callable, Sequence
 from math import gamma, pi
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,7 +44,9 @@ from sahgrasp.optimization.planar import make_planar_problem
 
 __all__ = [
     "BASELINES",
-    "MESH_OBJECTS",
+    "MESH_ATLAS",
+    "MESH_CATALOG",
+    "MESH_PLAN",
     "PAPER_CASES",
     "PAPER_SCALE_CASES",
     "SAH_CASES",
@@ -51,6 +54,7 @@ __all__ = [
     "STAGES",
     "WAVE_BATCH",
     "WAVE_STAGES",
+    "mesh_objects",
     "run",
     "stage_profile",
 ]
@@ -417,79 +421,216 @@ def _paper_row(name: str, k: int, workers: int, target_s: float) -> dict[str, An
     }
 
 
-MESH_OBJECTS = ("can", "bottle", "cup", "coffee_cup", "mesh:mug.stl", "mesh:bottle.obj")
-"""Objects of the ``mesh_objects`` case: catalog objects (their display meshes) and the shipped
-meshes (``examples/meshes``, ``mesh:`` prefix)."""
+MESH_CATALOG = ("fork", "cup", "buddha", "coffee_cup", "can", "bottle")
+"""Catalog objects of the ``mesh_objects`` case (their display meshes)."""
 
-_MESH_SAMPLES = 40  # contact sets drawn per object for a 3-finger start the IK solves
-_MESH_TRIES = 3  # starts tried per object when the atlas cannot use one
+MESH_SUFFIXES = (".stl", ".obj", ".ply")
+
+
+def mesh_objects() -> tuple[str, ...]:
+    """Objects of the ``mesh_objects`` case, catalog objects first.
+
+    Every catalog object (its display mesh) and every shipped mesh (``examples/meshes``, with a
+    ``mesh:`` prefix).
+    """
+    shipped = sorted(p.name for p in _MESH_FOLDER.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+    return MESH_CATALOG + tuple(f"mesh:{name}" for name in shipped)
+
+
+_MESH_FOLDER = Path(__file__).resolve().parents[2] / "examples" / "meshes"
+MESH_PLAN: dict[str, Any] = {"fingers": (3, 4), "candidates": 60, "seed": 0, "index": "volume"}
+"""How the ``mesh_objects`` case plans its start: 3- and 4-finger grasps (two hard fingers have
+no manipulability), the planner's default candidate budget, seed 0, ranked by the index the atlas
+optimizes."""
+
+
+MESH_ATLAS = {
+    "candidate_starts": 10,
+    "starts": 3,
+    "rounds": 4,
+    "k": 2,
+    "radius": 1.0,
+    "epsilon": 0.5,
+    "max_half_width_m": 0.02,
+    "tolerance_m": 3e-4,
+}
+"""The ``mesh_objects`` case's atlas: the first ``starts`` of the planner's best
+``candidate_starts`` grasps whose contacts all have a smooth model, ``rounds`` atlases in
+all from the best optimum (:func:`sahgrasp.experiments.mesh_atlas.refine_mesh_grasp`), R of
+dimension ``k``, chart radius and epsilon in units of 3 mm, the regions' largest half width and
+model tolerance."""
 
 
 def _mesh_object(name: str) -> Any:
-    from pathlib import Path
-
     from sahgrasp.objects import load_mesh, load_object
 
     if not name.startswith("mesh:"):
         return load_object(name)
-    path = Path(__file__).resolve().parents[2] / "examples" / "meshes" / name[5:]
-    return load_mesh(path)
+    return load_mesh(_MESH_FOLDER / name[5:])
+
+
+def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
+    """The mesh atlas on one object from the planner's best grasps, against its best one.
+
+    The starts are the first :data:`MESH_ATLAS` ``starts`` of the planner's best
+    ``candidate_starts`` distinct 3- or 4-finger grasps, ranked by the atlas's index, whose
+    contacts all have a smooth model (a contact on a sharp edge has none); each optimum is the
+    atlas's best chart that passes the planner's independent verifier on the true mesh. Start
+    and optima are scored with
+    the planner's index function (:func:`sahgrasp.planner.plan.manipulability_indices`), one
+    computation for both; the atlas's own value at chart 0 (the start brought onto R) is reported
+    beside. ``improved``: the best verified optimum beats the planner's best grasp (rank 1);
+    ``improved_rank1``: the optimum of rank 1's own component does.
+
+    Args:
+        name: A catalog object or ``mesh:FILE`` of ``examples/meshes``.
+        **atlas: Overrides of :data:`MESH_ATLAS`.
+    """
+    from sahgrasp.experiments.mesh_atlas import (
+        MeshStart,
+        mesh_verifier,
+        optimize_mesh_grasps,
+        refine_mesh_grasp,
+        start_patches,
+    )
+    from sahgrasp.model.contacts import GraspTarget
+    from sahgrasp.model.hand import load_hand
+    from sahgrasp.optimization import OptimizationSettings
+    from sahgrasp.planner import PlanSettings, plan_grasps
+    from sahgrasp.planner.candidates import ObjectFrame
+    from sahgrasp.planner.pieces import planning_object
+    from sahgrasp.planner.plan import manipulability_indices
+
+    config = {**MESH_ATLAS, **atlas}
+    hand = load_hand("sah")
+    index = str(MESH_PLAN["index"])
+    begin = time.perf_counter()
+    obj = planning_object(_mesh_object(name))
+    settings = PlanSettings(
+        fingers=MESH_PLAN["fingers"], candidates=MESH_PLAN["candidates"], seed=MESH_PLAN["seed"],
+        rank=index, grasps=int(config["candidate_starts"]),
+    )  # fmt: skip
+    plan = plan_grasps(hand, obj, settings)
+    planned = time.perf_counter()
+    row: dict[str, Any] = {"plan_seconds": planned - begin, "start": None, "reason": None}
+    if not plan.grasps:
+        row["reason"] = "the planner returned no 3- or 4-finger grasp"
+        return row
+    mesh = obj.mesh().transformed(obj.T_world_object)
+    centroid = ObjectFrame.of(mesh.vertices_m, mesh.faces).centroid_m
+    best_planned = plan.grasps[0]
+    row["start"] = {"fingers": list(best_planned.fingers), "seed": best_planned.seed,
+                    "force_closure": best_planned.force_closure}  # fmt: skip
+    row["start_index"] = float(best_planned.quality[index])
+    row["start_indices"] = [float(g.quality[index]) for g in plan.grasps]
+    verifier = mesh_verifier(hand, obj, settings.d_min_m, settings.link_tolerance_m)
+    # The best planned grasps whose contacts all have a smooth model (cheap to tell: no atlas).
+    starts, skipped = [], []
+    for i, g in enumerate(plan.grasps):
+        target = GraspTarget(f"{name} rank {i + 1}", list(g.contacts))
+        try:
+            start_patches(obj, target, float(config["max_half_width_m"]),
+                          float(config["tolerance_m"]))  # fmt: skip
+        except SahGraspError as exc:
+            skipped.append(f"rank {i + 1}: {exc}")
+            continue
+        starts.append(MeshStart(target, g.q, f"rank {i + 1}"))
+        if len(starts) == int(config["starts"]):
+            break
+    row["skipped_starts"] = skipped
+    if not starts:
+        row["reason"] = f"no smooth model at the contacts of the best {len(plan.grasps)} grasps"
+        return row
+    optimization = OptimizationSettings(float(config["radius"]), float(config["epsilon"]), index)
+    try:
+        search = optimize_mesh_grasps(
+            hand, obj, starts, optimization, k=int(config["k"]),
+            max_half_width_m=float(config["max_half_width_m"]),
+            tolerance_m=float(config["tolerance_m"]), verifier=verifier,
+        )  # fmt: skip
+    except SahGraspError as exc:
+        row["reason"] = str(exc)
+        row["atlas_seconds"] = time.perf_counter() - planned
+        return row
+    row["atlas_seconds"] = time.perf_counter() - planned
+    row["start_errors"] = [e for e in search.start_errors if e is not None]
+    components = []
+    for c in search.components:
+        entry: dict[str, Any] = {
+            "starts": [starts[i].label for i in c.starts], "charts": c.result.atlas.n_charts,
+            "complete": c.result.atlas.complete, "valid": int(c.result.valid.sum()),
+            "atlas_start_value": c.start_value, "verified_tries": c.verified_tries,
+            "half_widths_mm": [round(1e3 * getattr(r.region, "half_width_m", 0.0), 2)
+                               for r in c.problem.system.contacts],
+        }  # fmt: skip
+        if c.q_world is not None and c.verdict is not None:
+            fingers = tuple(t.finger for t in c.contacts)
+            entry.update({
+                "best_index": float(
+                    manipulability_indices(hand, c.q_world, fingers, centroid)[index]),
+                "verified": bool(c.verdict.ok),
+                "max_link_depth_mm": 1e3 * c.verdict.max_link_depth_m,
+                "max_contact_error_mm": 1e3 * max(c.verdict.contact_errors_m),
+            })  # fmt: skip
+        components.append(entry)
+    row["components"] = components
+    row["charts"] = sum(c["charts"] for c in components)
+    found = [c for c in components if c.get("verified")]
+    if not found:
+        row["reason"] = "no valid chart passed the verification on the mesh"
+        return row
+    best = max(found, key=lambda c: c["best_index"])
+    first = next((c for c in found if "rank 1" in c["starts"]), None)
+    if int(config["rounds"]) > 1:  # further rounds from the best optimum (refine_mesh_grasp)
+        chosen = search.components[components.index(best)]
+        assert chosen.q_world is not None
+        target = GraspTarget(f"{name} refined", list(chosen.model_contacts))
+        again = MeshStart(target, chosen.q_world, f"{best['starts'][0]}, round 2")
+        try:
+            rounds = refine_mesh_grasp(
+                hand, obj, again, optimization, rounds=int(config["rounds"]) - 1,
+                k=int(config["k"]), max_half_width_m=float(config["max_half_width_m"]),
+                tolerance_m=float(config["tolerance_m"]), verifier=verifier,
+            )  # fmt: skip
+        except SahGraspError as exc:  # the optimum's contacts have no smooth model: it stands
+            rounds = ()
+            row["round_error"] = str(exc)
+        row["rounds"] = [{"charts": r.result.atlas.n_charts, "best_chart": r.best_chart}
+                         for r in rounds]  # fmt: skip
+        row["charts"] += sum(r.result.atlas.n_charts for r in rounds)
+        for r in rounds:
+            if r.q_world is not None and r.verdict is not None and r.verdict.ok:
+                fingers = tuple(t.finger for t in r.contacts)
+                value = float(manipulability_indices(hand, r.q_world, fingers, centroid)[index])
+                if value > best["best_index"]:
+                    best = {**best, "best_index": value}
+        row["atlas_seconds"] = time.perf_counter() - planned
+    row.update({
+        "best_index": best["best_index"], "best_from": best["starts"][0],
+        "gain": best["best_index"] / row["start_index"] - 1.0,
+        "improved": bool(best["best_index"] > row["start_index"]), "verified": True,
+        "improved_rank1": first is not None and first["best_index"] > row["start_index"],
+    })  # fmt: skip
+    return row
 
 
 def _mesh_objects_row() -> dict[str, Any]:
-    """The mesh atlas per object, from a 3-finger start, against that start.
-
-    The start: the first of the sampled contact sets the IK solves with the object as obstacle.
-    Reported: whether the best verified grasp beats the start on the volume.
-    """
-    from sahgrasp.experiments.mesh_atlas import MeshStart, optimize_mesh_grasps
-    from sahgrasp.ik import solve_ik
-    from sahgrasp.model.contacts import GraspTarget
-    from sahgrasp.model.hand import load_hand
-    from sahgrasp.objects.grasp_sampler import sample_object_grasps
-
-    hand = load_hand("sah")
-    objects: dict[str, Any] = {}
-    for name in MESH_OBJECTS:
-        obj = _mesh_object(name)
-        begin = time.perf_counter()
-        row: dict[str, Any] = {"start": None, "errors": []}
-        search = None
-        for target in sample_object_grasps(obj, _MESH_SAMPLES, 0):
-            three = GraspTarget(target.name, [c for c in target.contacts if c.finger != "ring"])
-            solved = solve_ik(hand, three, free_fingers=("ring",), obstacle=obj)
-            if not solved.success or hand.in_collision(solved.q):
-                continue
-            found = time.perf_counter()
-            try:  # the first start the atlas can use
-                search = optimize_mesh_grasps(hand, obj, [MeshStart(three, solved.q, name)])
-            except SahGraspError as exc:
-                row["errors"].append(str(exc))
-                if len(row["errors"]) == _MESH_TRIES:
-                    break
-                continue
-            row["start"] = three.to_dict()
-            break
-        if search is not None and search.components:
-            c = search.components[0]
-            row.update({
-                "charts": c.result.atlas.n_charts, "complete": c.result.atlas.complete,
-                "valid": int(c.result.valid.sum()), "start_volume": c.start_value,
-                "best_volume": c.best_value, "improved": bool(c.best_value > c.start_value),
-                "verified": c.verification is not None and c.verification.ok,
-                "start_seconds": found - begin, "atlas_seconds": time.perf_counter() - found,
-            })  # fmt: skip
-        objects[name] = row
+    """:func:`_mesh_object_row` on every object of :func:`mesh_objects`."""
+    objects = {name: _mesh_object_row(name) for name in mesh_objects()}
     rows = [r for r in objects.values() if "improved" in r]
     improved = sum(r["improved"] and r["verified"] for r in rows)
+    charts = sum(r.get("charts", 0) for r in objects.values())
+    seconds = sum(r.get("atlas_seconds", 0.0) for r in objects.values())
     return {
         "objects": objects,
-        "charts": sum(r["charts"] for r in rows),
-        "complete": all(r["complete"] for r in rows),
-        "seconds": sum(r["atlas_seconds"] for r in rows),
-        "charts_per_second": sum(r["charts"] for r in rows)
-        / max(sum(r["atlas_seconds"] for r in rows), 1e-9),
-        "improved_share": improved / len(MESH_OBJECTS),
+        "plan": {k: list(v) if isinstance(v, tuple) else v for k, v in MESH_PLAN.items()},
+        "atlas": dict(MESH_ATLAS),
+        "charts": charts,
+        "complete": all(c["complete"] for r in objects.values() for c in r.get("components", [])),
+        "seconds": seconds,
+        "charts_per_second": charts / max(seconds, 1e-9),
+        "improved": improved,
+        "improved_share": improved / len(objects),
         "improved_target": 0.9,
     }
 

@@ -66,6 +66,10 @@ class SurfaceModelError(SahGraspError):
     """
 
 
+_FAR = 1e3
+"""Largest ``|u| / a`` and ``|v| / a`` at which :meth:`MeshPatch.height` evaluates the model."""
+
+
 @functools.cache
 def _exponents(degree: int) -> tuple[tuple[int, int], ...]:
     return tuple((i, total - i) for total in range(degree + 1) for i in range(total, -1, -1))
@@ -121,7 +125,9 @@ class MeshPatch:
     def height(self, u: float, v: float) -> tuple[float, float, float, float, float, float]:
         """``h`` and its derivatives ``h_u, h_v, h_uu, h_uv, h_vv`` at ``(u, v)`` [m]."""
         a = self.half_width_m
-        s, t = u / a, v / a
+        # A diverging Newton step may ask for the model far outside its square, where it means
+        # nothing: the polynomial is held at |s|, |t| <= 1e3 there, never overflowing.
+        s, t = min(max(u / a, -_FAR), _FAR), min(max(v / a, -_FAR), _FAR)
         h = hu = hv = huu = huv = hvv = 0.0
         for c, (i, j) in zip(self.coefficients.tolist(), _exponents(self.degree), strict=True):
             si = s**i
@@ -202,9 +208,19 @@ def _samples(
 
 
 def _fit(
-    P: FloatArray, W: FloatArray, origin: FloatArray, frame: FloatArray, a: float, degree: int
+    P: FloatArray,
+    W: FloatArray,
+    origin: FloatArray,
+    frame: FloatArray,
+    a: float,
+    degree: int,
+    anchored: bool = False,
 ) -> FloatArray | None:
-    """Coefficients of Eq. (M3), or None when the samples do not determine them."""
+    """Coefficients of Eq. (M3), or None when the samples do not determine them.
+
+    ``anchored``: the constant and linear terms are zero (the model passes through ``origin``
+    with the frame's normal there), the others fitted.
+    """
     local = (P - origin) @ frame
     s, t, z = local[:, 0] / a, local[:, 1] / a, local[:, 2]
     exps = _exponents(degree)
@@ -214,9 +230,14 @@ def _fit(
     if len(quadrants) < 4:  # the square must be surrounded by samples, not extrapolated
         return None
     w = np.sqrt(W * np.exp(-(s * s + t * t)))
-    A = np.stack([s**i * t**j for i, j in exps], axis=1) * w[:, None]
-    coefficients, _, rank, _ = np.linalg.lstsq(A, z * w, rcond=None)
-    return None if rank < len(exps) else np.asarray(coefficients, dtype=np.float64)
+    used = [k for k, (i, j) in enumerate(exps) if not anchored or i + j >= 2]
+    A = np.stack([s**i * t**j for i, j in (exps[k] for k in used)], axis=1) * w[:, None]
+    fitted, _, rank, _ = np.linalg.lstsq(A, z * w, rcond=None)
+    if rank < len(used):
+        return None
+    coefficients = np.zeros(len(exps))
+    coefficients[used] = fitted
+    return coefficients
 
 
 def fit_mesh_patch(
@@ -228,6 +249,7 @@ def fit_mesh_patch(
     min_half_width_m: float = 0.002,
     tolerance_m: float = 3e-4,
     degree: int = DEGREE,
+    anchored: bool = False,
 ) -> MeshPatch:
     """The local model (Eqs. (M1)-(M3)) of ``mesh`` around the contact ``point``.
 
@@ -240,6 +262,9 @@ def fit_mesh_patch(
         min_half_width_m: Smallest one [m].
         tolerance_m: Largest distance from the model to the mesh accepted over the patch [m].
         degree: Degree of the height polynomial.
+        anchored: The model passes through ``point`` with the normal ``normal`` there
+            (``h(0, 0) = h_u(0, 0) = h_v(0, 0) = 0``): a grasp whose contact is there, with that
+            normal, is on the model as it is (the atlas's first chart is the starting grasp).
 
     Raises:
         SurfaceModelError: No half width down to ``min_half_width_m`` gives a model within
@@ -264,9 +289,9 @@ def fit_mesh_patch(
     while a >= min_half_width_m * (1 - 1e-9):
         radius = _FIT_RADIUS * a
         P, W = _samples(vertices, faces, face_normals, areas, p0, n0, radius, a / 8)
-        coefficients = _fit(P, W, p0, frame, a, degree)
+        coefficients = _fit(P, W, p0, frame, a, degree, anchored)
         if coefficients is None and degree > 2:
-            coefficients = _fit(P, W, p0, frame, a, 2)
+            coefficients = _fit(P, W, p0, frame, a, 2, anchored)
             used = 2
         else:
             used = degree
