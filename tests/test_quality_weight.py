@@ -82,3 +82,30 @@ def test_bad_friction_and_patch_radius_raise() -> None:
         weight_support(PINCH_POINTS, PINCH_NORMALS, np.zeros(3), mu=-1.0)
     with pytest.raises(WrenchError, match="patch_radius_m"):
         weight_support(PINCH_POINTS, PINCH_NORMALS, np.zeros(3), patch_radius_m=-0.001)
+
+
+def test_the_planner_ranks_by_the_weight_support(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    import trimesh
+
+    from sahgrasp.model.hand import load_hand
+    from sahgrasp.objects import load_mesh
+    from sahgrasp.planner import PlanSettings, plan_grasps
+    from sahgrasp.planner.candidates import ObjectFrame
+
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.07, 0.09)).export(path)
+    obj = load_mesh(path)
+    settings = PlanSettings(candidates=8, grasps=4, seed=4, rank="weight")
+    plan = plan_grasps(load_hand("sah"), obj, settings)
+    assert plan.grasps
+    mesh = obj.mesh()
+    centre = ObjectFrame.of(mesh.vertices_m, mesh.faces).centroid_m
+    for closure in (True, False):
+        values = [g.quality["weight"] for g in plan.grasps if g.force_closure == closure]
+        assert values == sorted(values, reverse=True)
+    for g in plan.grasps:
+        points = np.array([c.point for c in g.contacts])
+        normals = np.array([c.normal for c in g.contacts])
+        expected = weight_support(points, normals, centre, settings.mu).support
+        # The planner scores the contact targets; the returned contacts are those targets.
+        assert g.quality["weight"] == pytest.approx(expected, rel=1e-6, abs=1e-9)
