@@ -28,7 +28,7 @@ pulls of ``m g`` if ``m g <= s F``. ``s = 0`` when some pull cannot be resisted 
 point contacts without torsional friction, or contacts all on one side). ``s`` depends on the
 grasp's geometry and the centre of mass only, not on the object's mass or size, so it ranks the
 grasps of one object by how heavy a version of it they hold, and ``s F / (m g) >= 1`` is a cheap
-necessary test before a simulation.
+screening test before a simulation (:func:`holds_weight`).
 """
 
 from __future__ import annotations
@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy import sparse
 from scipy.optimize import linprog
 
 from sahgrasp.quality.wrench import CONE_EDGES, FRICTION, WrenchError, cone_edges
@@ -148,20 +149,27 @@ def weight_support(
     owner = np.repeat(np.arange(k), G.shape[1] // k)
     n_g = G.shape[1]
     # Variables (g, t): minimise t; each contact's normal force sum_j g_ij <= t.
-    cost = np.zeros(n_g + 1)
-    cost[-1] = 1.0
     A_ub = np.zeros((k, n_g + 1))
     A_ub[owner, np.arange(n_g)] = 1.0
     A_ub[:, -1] = -1.0
     A_eq = np.hstack([G, np.zeros((6, 1))])
-    values = []
-    for _, axis in PULL_DIRECTIONS:
-        b_eq = -np.concatenate([np.asarray(axis), np.zeros(3)])
-        # Eq. (1), HiGHS's dual simplex: a few hundred variables, six equalities.
-        out = linprog(cost, A_ub=A_ub, b_ub=np.zeros(k), A_eq=A_eq, b_eq=b_eq,
-                      bounds=(0, None), method="highs")  # fmt: skip
-        t = float(out.x[-1]) if out.status == 0 else math.inf
-        values.append(1.0 / t if t > 0.0 and math.isfinite(t) else 0.0)
+    pulls = -np.hstack([np.array([axis for _, axis in PULL_DIRECTIONS]), np.zeros((6, 3))])
+    # The six programs of Eq. (1) are independent: one block-diagonal program minimising the sum
+    # of the t_d has the same optimum per block and costs one HiGHS call instead of six.
+    count = len(PULL_DIRECTIONS)
+    cost = np.tile(np.r_[np.zeros(n_g), 1.0], count)
+    out = linprog(cost, A_ub=sparse.block_diag([A_ub] * count, format="csr"),
+                  b_ub=np.zeros(k * count), A_eq=sparse.block_diag([A_eq] * count, format="csr"),
+                  b_eq=pulls.ravel(), bounds=(0, None), method="highs")  # fmt: skip
+    if out.status == 0:
+        ts = [float(t) for t in out.x[n_g :: n_g + 1]]
+    else:  # some pull is not resisted: solve each alone to tell which
+        ts = []
+        for b_eq in pulls:
+            one = linprog(np.r_[np.zeros(n_g), 1.0], A_ub=A_ub, b_ub=np.zeros(k), A_eq=A_eq,
+                          b_eq=b_eq, bounds=(0, None), method="highs")  # fmt: skip
+            ts.append(float(one.x[-1]) if one.status == 0 else math.inf)
+    values = [1.0 / t if t > 0.0 and math.isfinite(t) else 0.0 for t in ts]
     weakest = int(np.argmin(values))
     return WeightSupport(float(values[weakest]), tuple(values), PULL_DIRECTIONS[weakest][0])
 
@@ -171,8 +179,10 @@ def holds_weight(
 ) -> bool:
     """Whether fingers pressing at most ``squeeze_n`` [N] resist the weight of ``mass_kg`` [kg].
 
-    The cheap necessary test before a simulation: ``mass_kg * gravity_m_s2 <= support *
-    squeeze_n`` with ``support`` from :func:`weight_support`.
+    A cheap screening test before a simulation, ``mass_kg * gravity_m_s2 <= support *
+    squeeze_n`` with ``support`` from :func:`weight_support`: it predicts the hold test's
+    verdict without deciding it (loaded servoed fingers press harder than ``squeeze_n``, and
+    the cones are approximated from inside).
     """
     for name, value in (("mass_kg", mass_kg), ("squeeze_n", squeeze_n),
                         ("gravity_m_s2", gravity_m_s2)):  # fmt: skip
