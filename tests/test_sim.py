@@ -109,7 +109,7 @@ def test_bad_settings_are_refused(change: dict[str, object]) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["cup", "buddha", "coffee_cup", "can"])
+@pytest.mark.parametrize("name", ["cup", "buddha", "can"])
 def test_paper_grasps_hold(name: str) -> None:
     result = _tester(name).test(_solved(name))
     assert result.holds, result.detail
@@ -117,10 +117,22 @@ def test_paper_grasps_hold(name: str) -> None:
 
 
 @pytest.mark.slow
+def test_coffee_cup_paper_grasp_holds_when_the_friction_does_not_creep() -> None:
+    # With MuJoCo's no-slip post-solver the grasp holds (the cup turns under a degree); the
+    # default model lets soft friction creep and the cup turns by about the 15 degree limit
+    # over a 1 s pull (docs/physics.md, "Which MuJoCo settings").
+    result = _tester("coffee_cup", noslip_iterations=5).test(_solved("coffee_cup"))
+    assert result.holds, result.detail
+
+
+@pytest.mark.slow
 def test_fork_edge_pinch_holds_with_a_light_squeeze_only() -> None:
     # The fork is pinched on the rounded edge (radius 0.6 mm) of a 5 mm plate: rigid fingertips
-    # pressing hard roll it over, a light squeeze holds it (docs/physics.md).
-    assert _tester("fork", squeeze_n=LIGHT_SQUEEZE_N).test(_solved("fork")).holds
+    # pressing hard roll it over, a light squeeze holds it where friction does not creep
+    # (docs/physics.md).
+    light = _tester("fork", squeeze_n=LIGHT_SQUEEZE_N, noslip_iterations=5)
+    assert light.test(_solved("fork")).holds
+    assert not _tester("fork", noslip_iterations=5).test(_solved("fork")).holds
     assert not _tester("fork").test(_solved("fork")).holds
 
 

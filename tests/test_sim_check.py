@@ -198,3 +198,17 @@ def test_cli_defaults_are_the_library_defaults() -> None:
     assert _settings(args) == HoldSettings()
     light = _parser().parse_args(["check", "t.json", "r.json", "--light"])
     assert _settings(light).squeeze_n == 1.0
+
+
+def test_no_slip_option_runs_the_no_slip_post_solver(
+    capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, files: Path
+) -> None:
+    from sahgrasp.cli import _parser
+    from sahgrasp.cli.check import NOSLIP_ITERATIONS, _settings
+
+    args = _parser().parse_args(["check", "t.json", "r.json", "--no-slip"])
+    assert _settings(args).noslip_iterations == NOSLIP_ITERATIONS > 0
+    done = in_process(capsys, monkeypatch, files, "check", "plan.json", "--no-slip", "--json", "-")
+    assert done.returncode == 0, done.stderr
+    document = json.loads(done.stdout)
+    assert document["settings"]["noslip_iterations"] == NOSLIP_ITERATIONS

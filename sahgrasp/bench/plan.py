@@ -272,6 +272,7 @@ def run(
     candidates: int = 60,
     grasps: int = 10,
     seed: int = 0,
+    rank: str = "epsilon",
     workers: Sequence[int] = (1, 2),
     atlas: bool = True,
     quiet: bool = False,
@@ -288,6 +289,7 @@ def run(
         candidates: The planner's candidate budget per object.
         grasps: Grasps returned per object.
         seed: The plan seed.
+        rank: What the planner ranks grasps by (:data:`sahgrasp.planner.settings.RANKINGS`).
         workers: Worker counts of the folder run (empty: no folder run).
         atlas: Compare with the atlas optimum on the can and the bottle (when among the objects).
         quiet: No progress bar.
@@ -303,7 +305,7 @@ def run(
     from sahgrasp.planner.folder import ObjectJob, object_digest
 
     the_hand = load_hand(hand)
-    settings = PlanSettings(candidates=candidates, grasps=grasps, seed=seed)
+    settings = PlanSettings(candidates=candidates, grasps=grasps, seed=seed, rank=rank)
     names = list(OBJECT_NAMES if objects is None else objects)
     shipped = Path(__file__).resolve().parents[2] / "examples" / "meshes"
     files: dict[str, float] = {}

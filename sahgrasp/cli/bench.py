@@ -187,6 +187,11 @@ def _plan(benches: Any) -> None:
     plan.add_argument("--grasps", type=positive_int, default=10, help="grasps returned per object")
     plan.add_argument("--seed", type=nonnegative_int, default=0, help="plan seed (>= 0)")
     plan.add_argument(
+        "--rank", default="epsilon",
+        choices=("epsilon", "weight", "inverse_condition", "volume", "min_semiaxis"),
+        help="what the planner ranks grasps by (as plan --rank)",
+    )  # fmt: skip
+    plan.add_argument(
         "--workers", type=positive_int, nargs="*", default=[1, 2],
         help="worker counts of the folder throughput run (none: skip it)",
     )  # fmt: skip

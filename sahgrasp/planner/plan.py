@@ -48,6 +48,7 @@ from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
 from sahgrasp.quality.ellipsoids import INDICES, ellipsoid_indices, null_space
+from sahgrasp.quality.weight import weight_support
 from sahgrasp.quality.wrench import epsilon, grasp_quality, primitive_wrenches
 
 __all__ = [
@@ -391,7 +392,11 @@ def _solve(
         "epsilon_l1": None,
         "epsilon_linf": None,
     }
-    if settings.rank != "epsilon":  # ranked by an index: every verified grasp needs it
+    if settings.rank == "weight":  # ranked by the weight support: every verified grasp needs it
+        quality["weight"] = weight_support(
+            candidate.points_m, candidate.normals, frame.centroid_m, settings.mu
+        ).support
+    elif settings.rank != "epsilon":  # ranked by an index: every verified grasp needs it
         quality.update(manipulability_indices(hand, result.q, candidate.fingers, frame.centroid_m))
     return PlannedGrasp(
         fingers=candidate.fingers,

@@ -15,8 +15,9 @@ __all__ = ["FINGER_COUNTS", "RANKINGS", "PlanSettings", "PlanningError"]
 
 FINGER_COUNTS = (2, 3, 4)
 """Grasps the planner draws: 2 (thumb + index), 3 (+ middle), 4 (+ ring) fingers."""
-RANKINGS = ("epsilon", *INDICES)
-"""What grasps are ranked by: the L1 epsilon, or one of the atlas paper's manipulability indices."""
+RANKINGS = ("epsilon", "weight", *INDICES)
+"""What grasps are ranked by: the L1 epsilon, the weight support
+(:mod:`sahgrasp.quality.weight`), or one of the atlas paper's manipulability indices."""
 
 
 class PlanningError(SahGraspError):
@@ -35,7 +36,8 @@ class PlanSettings:
         mu: Coulomb friction coefficient of the quality and of the pre-filter.
         cone_edges: Friction cone edges of the L1 epsilon and of force closure.
         linf_edges: Friction cone edges of the L-infinity epsilon (computed for returned grasps).
-        rank: ``"epsilon"`` (L1) or a manipulability index
+        rank: ``"epsilon"`` (L1), ``"weight"`` (the weight support,
+            :func:`sahgrasp.quality.weight.weight_support`) or a manipulability index
             (:data:`sahgrasp.quality.ellipsoids.INDICES`); force-closure grasps always rank before
             the others.
         time_limit_s: Optional cap on the planning time [s]: a run it cuts depends on the

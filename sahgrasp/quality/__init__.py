@@ -2,7 +2,9 @@
 
 :mod:`~sahgrasp.quality.ellipsoids` evaluates manipulability indices at chart centres;
 :mod:`~sahgrasp.quality.indices` registers the indices without numpy (the parsers list them);
-:mod:`~sahgrasp.quality.wrench` gives force closure and the Ferrari-Canny epsilon. Names are loaded
+:mod:`~sahgrasp.quality.wrench` gives force closure and the Ferrari-Canny epsilon;
+:mod:`~sahgrasp.quality.weight` the weight support, the pull through the centre of mass a grasp
+resists in six directions per newton of finger force. Names are loaded
 on first use, so that importing :mod:`sahgrasp.quality.indices` does not import numpy.
 """
 
@@ -29,6 +31,7 @@ if TYPE_CHECKING:
         register_index,
         semi_axes,
     )
+    from sahgrasp.quality.weight import WeightSupport, holds_weight, weight_support
 
 _EXPORTS = {
     "sahgrasp.quality.ellipsoids": (
@@ -48,6 +51,7 @@ _EXPORTS = {
         "register_index",
         "semi_axes",
     ),
+    "sahgrasp.quality.weight": ("WeightSupport", "holds_weight", "weight_support"),
 }
 _MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
@@ -59,14 +63,17 @@ __all__ = [
     "IndexEvaluation",
     "Manipulability",
     "QualityIndex",
+    "WeightSupport",
     "ellipsoid_indices",
     "evaluate_index",
     "full_rank_null_space",
+    "holds_weight",
     "manipulability",
     "null_space",
     "principal_projection",
     "register_index",
     "semi_axes",
+    "weight_support",
 ]
 
 

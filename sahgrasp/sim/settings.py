@@ -53,7 +53,9 @@ class HoldSettings:
         contact_impedance: MuJoCo's contact impedance beyond 1 mm of penetration (``solimp``
             dmax, in (0, 1): nearer 1, less penetration under a force).
         solver_iterations: Newton iterations of MuJoCo's constraint solver per step.
-        noslip_iterations: Iterations of MuJoCo's no-slip post-solver (0: off).
+        noslip_iterations: Iterations of MuJoCo's no-slip post-solver (0, the default: off,
+            MuJoCo's own default; soft friction then creeps under a load, the strictest of
+            the set-ups in use, docs/physics.md "Which MuJoCo settings").
         impratio: Ratio of the friction to the normal constraint impedance (MuJoCo).
         balance_friction: Share of ``friction`` the squeeze may use to balance its forces.
         directions: The pulls to run, a subset of :data:`DIRECTIONS`' labels (all six by
@@ -81,7 +83,7 @@ class HoldSettings:
     contact_timeconst_s: float = 0.02
     contact_impedance: float = 0.99
     solver_iterations: int = 20
-    noslip_iterations: int = 5
+    noslip_iterations: int = 0
     impratio: float = 1.0
     balance_friction: float = 0.5
     directions: tuple[str, ...] = tuple(label for label, _ in DIRECTIONS)
