@@ -16,7 +16,7 @@ from sahgrasp.ik.compiled import describe_shape
 from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle, checker_of, pieces_of
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, load_mesh, load_object
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import registered_reach, sample_object_grasps
 
 MUG = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
 ALLOWANCE_M = 1.5e-3
@@ -41,7 +41,7 @@ def _configurations(hand: Hand, obj: GraspObject) -> list[np.ndarray]:
     solved with it (clear of it) and moved off it (clear, near and far)."""
     rng = np.random.default_rng(31)
     out = []
-    for target in sample_object_grasps(obj, 6, 9031, SAH_REACH):
+    for target in sample_object_grasps(obj, 6, 9031, registered_reach("sah")):
         q = solve_ik(hand, target).q
         for scale in (0.0, 0.05, 0.15):
             moved = q.copy()

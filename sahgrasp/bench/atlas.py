@@ -39,6 +39,7 @@ from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
 from sahgrasp.experiments.setups import PAPER_SETTINGS, run_experiment
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.optimization.planar import make_planar_problem
 
 __all__ = [
@@ -448,7 +449,7 @@ def _mesh_objects_row() -> dict[str, Any]:
     from sahgrasp.model.hand import load_hand
     from sahgrasp.objects.grasp_sampler import sample_object_grasps
 
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     objects: dict[str, Any] = {}
     for name in MESH_OBJECTS:
         obj = _mesh_object(name)

@@ -24,6 +24,7 @@ from sahgrasp.cli.common import (
     printable,
 )
 from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings, nonnegative_int
+from sahgrasp.model.hands import DEFAULT_HAND
 
 if TYPE_CHECKING:
     from sahgrasp.experiments.ik_examples import SolvedGrasp
@@ -131,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
 
     invalid: list[str] = []
     if args.targets is None:
-        hand = load_hand(args.hand or "sah")
+        hand = load_hand(args.hand or DEFAULT_HAND)
         settings = _settings(args, "sequence")  # the paper's Algorithm 1: the sequence's starts
         names = tqdm(EXAMPLE_NAMES, desc="solving", unit="grasp", disable=None)
         examples = [solve_example(hand, name, settings) for name in names]
