@@ -35,7 +35,7 @@ from sahgrasp.model.contacts import ContactTarget, GraspTarget
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearance
 from sahgrasp.objects.smooth_surface import MeshPatch
-from sahgrasp.optimization.grasp import SahGraspManifold, make_mesh_manifold, mesh_patches
+from sahgrasp.optimization.grasp import HandGraspManifold, make_mesh_manifold, mesh_patches
 from sahgrasp.optimization.optimizer import OptimizationResult, OptimizationSettings, optimize
 
 __all__ = [
@@ -108,7 +108,7 @@ class MeshComponent:
         verification: Its verification (None when no chart passed).
     """
 
-    problem: SahGraspManifold
+    problem: HandGraspManifold
     starts: tuple[int, ...]
     result: OptimizationResult
     start_value: float
@@ -174,7 +174,7 @@ def verify_grasp(
 
 
 def _world_grasp(
-    problem: SahGraspManifold, result: OptimizationResult, chart: int, obj: GraspObject
+    problem: HandGraspManifold, result: OptimizationResult, chart: int, obj: GraspObject
 ) -> tuple[np.ndarray, tuple[ContactTarget, ...]]:
     """The hand and the contacts of ``chart`` in the world frame."""
     system = problem.system
@@ -196,7 +196,7 @@ def _world_grasp(
 def _component(
     hand: Hand,
     obj: GraspObject,
-    problem: SahGraspManifold,
+    problem: HandGraspManifold,
     result: OptimizationResult,
     starts: tuple[int, ...],
 ) -> MeshComponent:
@@ -216,7 +216,7 @@ def _component(
 
 
 def _in_component(
-    problem: SahGraspManifold, result: OptimizationResult, start: MeshStart, obj: GraspObject
+    problem: HandGraspManifold, result: OptimizationResult, start: MeshStart, obj: GraspObject
 ) -> bool:
     """Whether ``start`` lies in the component ``result`` covers (see the module)."""
     system = problem.system
@@ -288,7 +288,7 @@ def optimize_mesh_grasps(
         OptimizationError: No start could be used.
     """
     settings = settings or OptimizationSettings(MESH_DEFAULTS["radius"], MESH_DEFAULTS["epsilon"])
-    built: list[tuple[SahGraspManifold, OptimizationResult, list[int]]] = []
+    built: list[tuple[HandGraspManifold, OptimizationResult, list[int]]] = []
     owners: list[int | None] = []
     errors: list[str | None] = []
     for i, start in enumerate(starts):

@@ -19,7 +19,7 @@ from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
 from sahgrasp.model.hand import load_hand
 from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
-from sahgrasp.optimization.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
+from sahgrasp.optimization.grasp import HandGraspManifold, ik_seeds, make_sah_manifold
 from sahgrasp.optimization.optimizer import (
     ComponentSearch,
     GraspManifold,
@@ -222,7 +222,7 @@ def run_components(
         OptimizationError: ``name`` is not an SAH experiment, or no seed reaches R.
     """
     problem = make_experiment(name, k, motions=motions)
-    if not isinstance(problem, SahGraspManifold):
+    if not isinstance(problem, HandGraspManifold):
         raise OptimizationError(
             f"components are searched for {sorted(SAH_EXPERIMENTS)}, not {name!r}"
         )
