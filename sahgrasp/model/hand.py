@@ -25,7 +25,8 @@ import math
 import os
 import stat
 import sys
-from collections.abc import Callable, Mapping
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from importlib import metadata, resources
@@ -505,6 +506,21 @@ class HandCache:
         if key not in self._values:
             self._values[key] = build()
         return cast(_T, self._values[key])
+
+    def kept(self, kind: str, key: Hashable, build: Callable[[], _T], size: int) -> _T:
+        """The value of ``kind`` for ``key``, built on first request; ``size`` kept per kind.
+
+        For values derived from the hand and another input (an object): the ``size`` most
+        recently requested are kept, the least recently requested is dropped first.
+        """
+        kept: OrderedDict[Hashable, Any] = self.get(kind, OrderedDict)
+        if key in kept:
+            kept.move_to_end(key)
+            return cast(_T, kept[key])
+        value = kept[key] = build()
+        while len(kept) > size:
+            kept.popitem(last=False)
+        return value
 
     def __contains__(self, key: object) -> bool:
         return key in self._values
