@@ -43,7 +43,7 @@ def add_parser(sub: Any) -> None:
     add_ik_arguments(p)
     p.set_defaults(hand=None)  # with --targets, the file's hand unless --hand names one
     hand = next(a for a in p._actions if a.dest == "hand")
-    hand.help = f"{hand.help} (default: sah; with --targets, the file's hand)"
+    hand.help = f"{hand.help} (default: {DEFAULT_HAND}; with --targets, the file's hand)"
     p.add_argument(
         "--init",
         choices=("learned", "sequence", "random"),

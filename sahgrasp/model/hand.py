@@ -56,7 +56,7 @@ from sahgrasp.model.hand_checks import (
     shown,
     shown_path,
 )
-from sahgrasp.model.hands import HANDS
+from sahgrasp.model.hands import HANDS, hand_entry
 
 __all__ = [
     "BUILTIN_HANDS",
@@ -1344,7 +1344,7 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
     if isinstance(hand, HandDescription):
         return Hand(hand)
     text = str(hand)
-    if text in HANDS:
+    if hand_entry(text) is not None:
         return Hand(_registered_description(text))
     path = Path(text)
     if not path.suffix:

@@ -7,6 +7,9 @@ sampler (or none: then it is derived from the model), the sizes of the database 
 builds for it, and its contact-marker colours. ``load_hand(name)``, the command line's ``--hand``
 help, the shipped-data lookups, ``learn``'s defaults, the samplers and the scenes all read this
 registry; adding a hand is one :func:`register_hand` call (docs/hand.md, "Adding another hand").
+An installed package can add hands without being imported by the user: each object it declares
+in the entry-point group ``sahgrasp.hands`` (a :class:`HandEntry`) is registered the first time a
+name is not found (:func:`discover_hands`).
 
 Only the standard library is imported here, so that a parser can list the hands without loading
 Pinocchio: a built-in hand's description is built by a function named ``"module:function"``,
@@ -16,6 +19,7 @@ imported on first use.
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -25,10 +29,12 @@ from sahgrasp.core.registry import Registry
 
 __all__ = [
     "DEFAULT_HAND",
+    "ENTRY_POINT_GROUP",
     "HANDS",
     "HandEntry",
     "LearnDefaults",
     "SamplerReach",
+    "discover_hands",
     "hand_entry",
     "hand_help",
     "register_hand",
@@ -130,9 +136,53 @@ def register_hand(entry: HandEntry) -> HandEntry:
     return HANDS.register(entry.name, entry)
 
 
+ENTRY_POINT_GROUP = "sahgrasp.hands"
+"""The entry-point group in which installed packages declare their :class:`HandEntry` objects."""
+
+_discovered = False
+
+
+def discover_hands() -> None:
+    """Register the hands installed packages declare in :data:`ENTRY_POINT_GROUP`, once.
+
+    Called when a name is not found, so that listing or loading the built-in hands never scans
+    the installed packages.
+
+    Raises:
+        HandModelError: A declared entry does not load, is not a :class:`HandEntry`, or its
+            name differs from the entry point's or is taken.
+    """
+    global _discovered
+    if _discovered:
+        return
+    _discovered = True
+    for point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if point.name in HANDS:
+            continue
+        try:
+            entry = point.load()
+        except Exception as exc:  # a plug-in's own failure: named in one line
+            raise HandModelError(
+                f"hand {point.name!r} declared by {point.value!r} does not load: {exc}"
+            ) from None
+        if not isinstance(entry, HandEntry) or entry.name != point.name:
+            raise HandModelError(
+                f"entry point {point.name!r} ({point.value}) must be a HandEntry named "
+                f"{point.name!r}, got {entry!r:.80}"
+            )
+        register_hand(entry)
+
+
 def hand_entry(name: str) -> HandEntry | None:
-    """The registry's entry of the hand named ``name``, None for a hand it does not list."""
-    return HANDS.get(name) if isinstance(name, str) else None
+    """The registry's entry of the hand named ``name``, None for a hand it does not list.
+
+    A name not registered yet is looked up among the installed plug-ins (:func:`discover_hands`).
+    """
+    if not isinstance(name, str):
+        return None
+    if name not in HANDS:
+        discover_hands()
+    return HANDS.get(name)
 
 
 def hand_help() -> str:
