@@ -17,7 +17,6 @@ import json
 import math
 import os
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -29,7 +28,7 @@ from sahgrasp.core.errors import SequenceFileError
 from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, check_made_for
-from sahgrasp.model.hands import hand_entry
+from sahgrasp.model.hands import data_file, hand_entry
 
 __all__ = [
     "PAPER_TABLE1_LAMBDAS",
@@ -244,7 +243,7 @@ def _default_sequence(hand: Hand) -> Sequence:
     entry = hand_entry(hand.description.name)
     sequence = None
     if entry is not None and entry.sequence is not None:
-        shipped = resources.files("sahgrasp").joinpath(entry.sequence)
+        shipped = data_file(entry.sequence)
         if shipped.is_file():
             data = json.loads(shipped.read_text(encoding="utf-8"))
             candidate = Sequence.from_dict(data, "shipped")

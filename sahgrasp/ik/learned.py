@@ -29,7 +29,6 @@ import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,7 +41,7 @@ from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, check_made_for
-from sahgrasp.model.hands import hand_entry
+from sahgrasp.model.hands import data_file, hand_entry
 
 if TYPE_CHECKING:
     pass
@@ -291,7 +290,7 @@ def _shipped_database(hand: Hand) -> GraspDatabase | None:
     entry = hand_entry(hand.description.name)
     if entry is None or entry.database is None:
         return None
-    shipped = resources.files("sahgrasp").joinpath(entry.database)
+    shipped = data_file(entry.database)
     if not shipped.is_file():
         return None
     with shipped.open("rb") as stream:

@@ -19,9 +19,12 @@ imported on first use.
 from __future__ import annotations
 
 import importlib
-import importlib.metadata
+import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from importlib import resources
+from importlib.resources.abc import Traversable
+from pathlib import Path
 from typing import Any
 
 from sahgrasp.core.errors import HandModelError
@@ -34,6 +37,7 @@ __all__ = [
     "HandEntry",
     "LearnDefaults",
     "SamplerReach",
+    "data_file",
     "discover_hands",
     "hand_entry",
     "hand_help",
@@ -83,10 +87,11 @@ class HandEntry:
             description it builds.
         description: Builds its :class:`~sahgrasp.model.hand.HandDescription`: a function of no
             arguments, or ``"module:function"`` naming one (imported on first use).
-        sequence: The shipped IK sequence, a resource path under ``sahgrasp/`` (None: the paper's
-            Table 1 lambdas on the hand's own principal motions).
-        database: The shipped grasp database of the learned start, a resource path under
-            ``sahgrasp/`` (None: the learned start falls back to the sequence).
+        sequence: The hand's IK sequence file: an absolute path, or one relative to the installed
+            ``sahgrasp`` package (None: the paper's Table 1 lambdas on the hand's own principal
+            motions).
+        database: The hand's grasp database of the learned start, a path as ``sequence``
+            (None: the learned start falls back to the sequence).
         reach: The contact sampler's reach (None: derived from the model).
         learn: What ``sahgrasp learn`` builds by default.
         finger_colors: Contact-marker colour per finger (RGBA in [0, 1]); fingers not named get
@@ -152,6 +157,10 @@ def discover_hands() -> None:
         HandModelError: A declared entry does not load, is not a :class:`HandEntry`, or its
             name differs from the entry point's or is taken.
     """
+    # Imported here: scanning the installed packages is needed only for a name not registered,
+    # and importlib.metadata would slow every `sahgrasp --help`.
+    import importlib.metadata
+
     global _discovered
     if _discovered:
         return
@@ -183,6 +192,13 @@ def hand_entry(name: str) -> HandEntry | None:
     if name not in HANDS:
         discover_hands()
     return HANDS.get(name)
+
+
+def data_file(path: str) -> Traversable:
+    """The file an entry's ``sequence`` or ``database`` names (see :class:`HandEntry`)."""
+    if os.path.isabs(path):
+        return Path(path)
+    return resources.files("sahgrasp").joinpath(path)
 
 
 def hand_help() -> str:
