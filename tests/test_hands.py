@@ -225,3 +225,22 @@ def test_a_hand_plug_in_works_on_the_command_line(tmp_path: Path) -> None:
     # The tripod's targets file: its one-contact problem is refused naming the tripod's fingers.
     assert done.returncode == 1, done.stderr
     assert "at least two of ['thumb', 'index', 'middle']" in done.stdout
+
+
+def test_a_broken_plug_in_is_named_only_when_asked_for(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.metadata
+
+    import sahgrasp.model.hands as hands
+
+    points = [
+        importlib.metadata.EntryPoint("nowhere", "no_such_module:ENTRY", hands.ENTRY_POINT_GROUP),
+        importlib.metadata.EntryPoint("notentry", "os:sep", hands.ENTRY_POINT_GROUP),
+    ]
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group: points)
+    monkeypatch.setattr(hands, "_discovered", False)
+    monkeypatch.setattr(hands, "_broken", {})
+    assert hand_entry("unrelated") is None
+    with pytest.raises(HandModelError, match=r"'nowhere'.*does not load: ModuleNotFoundError"):
+        load_hand("nowhere")
+    with pytest.raises(HandModelError, match=r"'notentry'.*not a HandEntry named 'notentry'"):
+        load_hand("notentry")

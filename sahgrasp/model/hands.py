@@ -145,17 +145,17 @@ ENTRY_POINT_GROUP = "sahgrasp.hands"
 """The entry-point group in which installed packages declare their :class:`HandEntry` objects."""
 
 _discovered = False
+_broken: dict[str, str] = {}
+"""Declared hands that did not load, by name: the reason, raised when that name is asked for."""
 
 
 def discover_hands() -> None:
     """Register the hands installed packages declare in :data:`ENTRY_POINT_GROUP`, once.
 
     Called when a name is not found, so that listing or loading the built-in hands never scans
-    the installed packages.
-
-    Raises:
-        HandModelError: A declared entry does not load, is not a :class:`HandEntry`, or its
-            name differs from the entry point's or is taken.
+    the installed packages. A declared hand that does not load (its module fails, it is not a
+    :class:`HandEntry` of the entry point's name, or the name is taken) is not registered; asking
+    for that name then raises the reason (:func:`hand_entry`), other names are not affected.
     """
     # Imported here: scanning the installed packages is needed only for a name not registered,
     # and importlib.metadata would slow every `sahgrasp --help`.
@@ -170,15 +170,12 @@ def discover_hands() -> None:
             continue
         try:
             entry = point.load()
-        except Exception as exc:  # a plug-in's own failure: named in one line
-            raise HandModelError(
-                f"hand {point.name!r} declared by {point.value!r} does not load: {exc}"
-            ) from None
+        except Exception as exc:  # a plug-in's own failure, whatever it is: kept in one line
+            _broken[point.name] = f"{type(exc).__name__}: {exc}"
+            continue
         if not isinstance(entry, HandEntry) or entry.name != point.name:
-            raise HandModelError(
-                f"entry point {point.name!r} ({point.value}) must be a HandEntry named "
-                f"{point.name!r}, got {entry!r:.80}"
-            )
+            _broken[point.name] = f"it is {entry!r:.80}, not a HandEntry named {point.name!r}"
+            continue
         register_hand(entry)
 
 
@@ -186,11 +183,19 @@ def hand_entry(name: str) -> HandEntry | None:
     """The registry's entry of the hand named ``name``, None for a hand it does not list.
 
     A name not registered yet is looked up among the installed plug-ins (:func:`discover_hands`).
+
+    Raises:
+        HandModelError: ``name`` is declared by an installed package but does not load.
     """
     if not isinstance(name, str):
         return None
     if name not in HANDS:
         discover_hands()
+        if name in _broken:
+            raise HandModelError(
+                f"hand {name!r}, declared in the entry points {ENTRY_POINT_GROUP!r} of an "
+                f"installed package, does not load: {_broken[name]}"
+            )
     return HANDS.get(name)
 
 
