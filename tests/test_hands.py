@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import functools
 import json
 import os
 import re
@@ -155,9 +156,14 @@ def test_each_hand_keeps_its_own_cache() -> None:
     first, second = load_hand(DEFAULT_HAND), load_hand(DEFAULT_HAND)
     assert default_sequence(first) is default_sequence(first)
     assert "default_sequence" in first.cache and "default_sequence" not in second.cache
-    built = []
+    built: list[int] = []
+
+    def build(k: int) -> int:
+        built.append(k)
+        return k
+
     for k in range(10):
-        first.cache.kept("things", k, lambda k=k: built.append(k) or k, 8)
+        first.cache.kept("things", k, functools.partial(build, k), 8)
     assert first.cache.kept("things", 9, lambda: -1, 8) == 9  # kept: not rebuilt
     assert first.cache.kept("things", 0, lambda: -1, 8) == -1  # the oldest was dropped
     assert built == list(range(10))
