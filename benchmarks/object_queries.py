@@ -87,7 +87,7 @@ from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GraspObject, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import registered_reach, sample_object_grasps
 from sahgrasp.objects.mesh_file import MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count
 from sahgrasp.objects.solids import COLLISION_SAGITTA_M, RevolvedSolid, _bands
@@ -103,7 +103,9 @@ def _object(name: str) -> GraspObject:
 
 
 def _sets(obj: GraspObject, count: int) -> list[GraspTarget]:
-    return sample_object_grasps(obj, count, _object_seed(BENCH_SEED, obj.name), SAH_REACH)
+    return sample_object_grasps(
+        obj, count, _object_seed(BENCH_SEED, obj.name), registered_reach("sah")
+    )
 
 
 def _cpu(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> tuple[float, Any]:

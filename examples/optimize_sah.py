@@ -21,7 +21,7 @@ from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argumen
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.report import result_lines
 from sahgrasp.experiments.setups import run_experiment
-from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.optimization.grasp import HandGraspManifold
 from sahgrasp.quality.ellipsoids import SINGULAR_THRESHOLDS
 from sahgrasp.viz import ChartGrasp, Viewer, present, show_atlas_grasps
 
@@ -44,7 +44,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
             max_charts=args.max_charts, progress=progress, workers=args.workers,
         )  # fmt: skip
-    problem = cast(SahGraspManifold, result.problem)  # the SAH experiments' manifold
+    problem = cast(HandGraspManifold, result.problem)  # the SAH experiments' manifold
     atlas, paper = result.atlas, PAPER_ATLAS_REPORT[args.experiment]
     print(f"{args.experiment}: {atlas.n_charts} charts (paper {paper.charts}), "
           f"n = {atlas.ambient_dim} (paper {paper.n}), t = {problem.t} (paper {paper.t}), "

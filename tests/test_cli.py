@@ -245,7 +245,7 @@ def test_bad_output_paths_fail_before_the_work(files: Path, args: list[str], pat
         (b'{"problems": ' + b"[" * 100_000 + b"]" * 100_000 + b"}", r"too deeply"),
         (b"{", r"is not valid JSON"),
         (b"[1, 2]", r"must be an object with 'hand' and a 'problems' list"),
-        (b'{"hand": 5, "problems": []}', r"'hand' must be 'sah', 'allegro' or a hand-desc"),
+        (b'{"hand": 5, "problems": []}', r"'hand' must be one of 'sah', 'allegro' or a hand-desc"),
         (b'{"hand": "nohand", "problems": []}', r"unknown hand 'nohand'"),
     ],
     ids=["missing", "utf16", "binary", "deep", "deep-problems", "truncated", "list", "hand-type",

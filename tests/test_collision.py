@@ -34,9 +34,9 @@ _CUP_SOLVE = """
 from sahgrasp.model.hand import load_hand
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.objects import load_object
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import registered_reach, sample_object_grasps
 cup = load_object("cup")
-targets = sample_object_grasps(cup, 5, 1496828580, SAH_REACH)
+targets = sample_object_grasps(cup, 5, 1496828580, registered_reach("sah"))
 hand = load_hand("sah")
 result = solve_ik(hand, targets[4], IKSettings(), obstacle=cup)
 print(json.dumps([result.iterations, result.q.tobytes().hex()]))

@@ -12,14 +12,17 @@ from sahgrasp.model.hand import Hand
 from sahgrasp.objects import load_object
 from sahgrasp.objects.grasp_sampler import (
     FINGERS,
-    SAH_REACH,
     GraspSamplingError,
     HandReach,
     SamplerSettings,
     SurfaceMesh,
+    registered_reach,
     sample_contact_sets,
     sample_object_grasps,
 )
+
+SAH_REACH = registered_reach("sah")
+"""The SAH's measured reach (the hand registry's)."""
 
 HALF_BOX_M = np.array([0.03, 0.05, 0.04])
 CYLINDER_RADIUS_M, CYLINDER_HEIGHT_M = 0.03, 0.10
@@ -196,3 +199,11 @@ def test_sah_reach_is_where_the_ik_stops_solving(sah: Hand):
     assert solve_ik(sah, _plate_grasp(SAH_REACH.span_m[0], spacing_lo)).success
     assert not solve_ik(sah, _plate_grasp(span_hi + 0.004, spacing_hi)).success
     assert not solve_ik(sah, _plate_grasp(0.06, spacing_lo - 0.002)).success
+
+
+def test_the_old_reach_name_warns_and_is_the_default_hands() -> None:
+    import sahgrasp.objects.grasp_sampler as sampler
+
+    with pytest.warns(DeprecationWarning, match="SAH_REACH is deprecated"):
+        old = sampler.SAH_REACH
+    assert old == SAH_REACH == registered_reach()

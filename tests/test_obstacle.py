@@ -13,10 +13,16 @@ import pytest
 from sahgrasp.ik import solve_ik
 from sahgrasp.ik._lm import Pieces
 from sahgrasp.ik.compiled import describe_shape
-from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle, checker_of, pieces_of
+from sahgrasp.ik.obstacle import (
+    REPAIR_PAIRS_PER_LINK,
+    Obstacle,
+    build_pieces,
+    checker_of,
+    pieces_of,
+)
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, load_mesh, load_object
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import registered_reach, sample_object_grasps
 
 MUG = Path(__file__).resolve().parents[1] / "examples" / "meshes" / "mug.stl"
 ALLOWANCE_M = 1.5e-3
@@ -41,7 +47,7 @@ def _configurations(hand: Hand, obj: GraspObject) -> list[np.ndarray]:
     solved with it (clear of it) and moved off it (clear, near and far)."""
     rng = np.random.default_rng(31)
     out = []
-    for target in sample_object_grasps(obj, 6, 9031, SAH_REACH):
+    for target in sample_object_grasps(obj, 6, 9031, registered_reach("sah")):
         q = solve_ik(hand, target).q
         for scale in (0.0, 0.05, 0.15):
             moved = q.copy()
@@ -100,7 +106,7 @@ def test_pieces_of_unknown_kinds_leave_the_checks_to_coal(
     assert describe_shape(coal.Cone(0.01, 0.02)) is None
     checker = checker_of(sah, load_object("can"))
     monkeypatch.setattr("sahgrasp.ik.obstacle.describe_shape", lambda geometry: None)
-    assert pieces_of.__wrapped__(checker) is None
+    assert build_pieces(checker) is None
 
 
 def test_pieces_refuse_inconsistent_arrays() -> None:

@@ -15,7 +15,7 @@ from sahgrasp.model.hand import Hand
 from sahgrasp.objects import can_patches, load_object
 from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.optimization.grasp import (
-    SahGraspManifold,
+    HandGraspManifold,
     coordinate_scales,
     ik_seeds,
     make_sah_manifold,
@@ -35,17 +35,17 @@ SAH = OptimizationSettings(radius=0.15, epsilon=0.5)
 
 
 @pytest.fixture(scope="module")
-def can_problem(sah: Hand) -> SahGraspManifold:
+def can_problem(sah: Hand) -> HandGraspManifold:
     return make_sah_manifold(sah, can_patches(), k=2, obj=load_object("can"))
 
 
 @pytest.fixture(scope="module")
-def can(can_problem: SahGraspManifold) -> OptimizationResult:
+def can(can_problem: HandGraspManifold) -> OptimizationResult:
     return optimize(can_problem, SAH)
 
 
-def sah_problem(result: OptimizationResult) -> SahGraspManifold:
-    assert isinstance(result.problem, SahGraspManifold)
+def sah_problem(result: OptimizationResult) -> HandGraspManifold:
+    assert isinstance(result.problem, HandGraspManifold)
     return result.problem
 
 
@@ -108,7 +108,7 @@ def test_summary_is_json(can: OptimizationResult) -> None:
     assert out["indices"]["volume"]["best"]["chart"] == can.best
 
 
-def test_user_index(can_problem: SahGraspManifold) -> None:
+def test_user_index(can_problem: HandGraspManifold) -> None:
     column = can_problem.system.contacts[1].params.start  # the index finger's angle on the can
 
     def spread(centres: np.ndarray) -> np.ndarray:
@@ -128,13 +128,13 @@ def test_user_index(can_problem: SahGraspManifold) -> None:
         optimize(can_problem, OptimizationSettings(0.3, 0.5, index_fn=lambda X: X[:1, 0]))
 
 
-def test_unknown_names_raise(sah: Hand, can_problem: SahGraspManifold) -> None:
+def test_unknown_names_raise(sah: Hand, can_problem: HandGraspManifold) -> None:
     with pytest.raises(OptimizationError, match="unknown index 'dexterity'"):
         OptimizationSettings(radius=0.1, epsilon=0.5, index="dexterity")
     with pytest.raises(OptimizationError, match="unknown experiment 'cup'; valid: planar, can"):
         run_experiment("cup")
     with pytest.raises(GraspSystemError, match="k must"):
-        SahGraspManifold(can_problem.system, can_problem.motions, 12, can_problem.start)
+        HandGraspManifold(can_problem.system, can_problem.motions, 12, can_problem.start)
 
 
 def test_bottle_atlas_moves_the_hand() -> None:
@@ -197,7 +197,7 @@ def test_one_atlas_per_component_met_by_the_seeds() -> None:
 
 
 def test_ik_seeds_of_the_can_fall_in_the_first_grasps_component(
-    can_problem: SahGraspManifold, can: OptimizationResult
+    can_problem: HandGraspManifold, can: OptimizationResult
 ) -> None:
     system = can_problem.system
     assert np.allclose(system.point(system.q_first), system.x_first)
@@ -211,11 +211,11 @@ def test_ik_seeds_of_the_can_fall_in_the_first_grasps_component(
 
 
 def test_scaled_coordinates_cover_the_same_grasps(
-    can_problem: SahGraspManifold, can: OptimizationResult
+    can_problem: HandGraspManifold, can: OptimizationResult
 ) -> None:
     system = can_problem.system
     scales = coordinate_scales(system, 0.1)
-    scaled = SahGraspManifold(system, can_problem.motions, 2, can_problem.x_of(can_problem.start),
+    scaled = HandGraspManifold(system, can_problem.motions, 2, can_problem.x_of(can_problem.start),
                               can_problem.obj, scales)  # fmt: skip
     assert np.allclose(scaled.x_of(scaled.start), can_problem.start)
     result = optimize(scaled, SAH)
@@ -224,4 +224,12 @@ def test_scaled_coordinates_cover_the_same_grasps(
     assert np.all((x >= system.lower - 1e-12) & (x <= system.upper + 1e-12))
     assert result.all_values[result.best] == pytest.approx(can.all_values[can.best], rel=0.1)
     with pytest.raises(GraspSystemError, match="scales must be"):
-        SahGraspManifold(system, can_problem.motions, 2, can_problem.start, scales=-scales)
+        HandGraspManifold(system, can_problem.motions, 2, can_problem.start, scales=-scales)
+
+
+def test_the_old_manifold_name_warns_and_is_the_new_class() -> None:
+    import sahgrasp.optimization.grasp as grasp
+
+    with pytest.warns(DeprecationWarning, match="SahGraspManifold is deprecated"):
+        old = grasp.SahGraspManifold
+    assert old is HandGraspManifold

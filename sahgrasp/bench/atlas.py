@@ -40,6 +40,7 @@ from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.reference import PAPER_ATLAS_RUNS
 from sahgrasp.experiments.setups import PAPER_SETTINGS, run_experiment
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.optimization.planar import make_planar_problem
 
 __all__ = [
@@ -502,7 +503,7 @@ def _mesh_object_row(name: str, **atlas: Any) -> dict[str, Any]:
     from sahgrasp.planner.plan import manipulability_indices
 
     config = {**MESH_ATLAS, **atlas}
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     index = str(MESH_PLAN["index"])
     begin = time.perf_counter()
     obj = planning_object(_mesh_object(name))

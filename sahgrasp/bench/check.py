@@ -22,8 +22,10 @@ from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import default_sequence, solve_ik
 from sahgrasp.model.hand import load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import GRASP_NAMES, OBJECT_NAMES, load_object, paper_grasp
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import sample_object_grasps
+from sahgrasp.objects.reach import sampler_reach
 from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldResult, HoldSettings, HoldTester
 
 __all__ = ["format_table", "run"]
@@ -69,7 +71,7 @@ def run(
     """
     if problems_per_object < 1:
         raise InvalidSettingsError(f"problems_per_object must be >= 1, got {problems_per_object}")
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     default_sequence(hand)
     settings = HoldSettings()
     light = dataclasses.replace(settings, squeeze_n=LIGHT_SQUEEZE_N)
@@ -79,7 +81,7 @@ def run(
             obj = load_object(name)
             stage = f"bench check {name}"
             targets = sample_object_grasps(obj, problems_per_object, _object_seed(seed, name),
-                                           SAH_REACH)  # fmt: skip
+                                           sampler_reach(hand))  # fmt: skip
             if name in GRASP_NAMES:
                 targets = [paper_grasp(name), *targets]
             solved = []

@@ -34,9 +34,11 @@ from sahgrasp.core.frames import transform_points
 from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_ik, worker_hand
 from sahgrasp.model.contacts import GraspTarget, save_targets
 from sahgrasp.model.hand import Hand, HandDescription, load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
-from sahgrasp.objects.grasp_sampler import SAH_REACH, sample_object_grasps
+from sahgrasp.objects.grasp_sampler import sample_object_grasps
 from sahgrasp.objects.mesh_file import load_mesh
+from sahgrasp.objects.reach import sampler_reach
 
 __all__ = [
     "BENCH_SEED",
@@ -280,7 +282,9 @@ def _bench_object(
     with tqdm(total=count, unit="set", disable=not progress, file=sys.stderr) as bar:
         bar.set_description(f"bench grasps {obj.name}: sample")
         start = time.perf_counter()
-        targets = sample_object_grasps(obj, count, object_seed, SAH_REACH, on_set=bar.update)
+        targets = sample_object_grasps(
+            obj, count, object_seed, sampler_reach(hand), on_set=bar.update
+        )
         sampling_s = time.perf_counter() - start
         bar.reset()
         bar.set_description(f"bench grasps {obj.name}: solve")
@@ -381,7 +385,7 @@ def run(
         raise InvalidSettingsError(
             f"problems_per_object and workers must be >= 1, got {problems_per_object}, {workers}"
         )
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     default_sequence(hand)  # loaded before any problem is timed
     bench_objects = [load_object(name) for name in objects]
     bench_objects += [load_mesh(path, name=f"mesh:{Path(path).name}") for path in meshes]
@@ -401,8 +405,8 @@ def run(
         "workers": workers,
         "penetration_tolerance_mm": PENETRATION_TOLERANCE_M * 1e3,
         "reach": {
-            "finger_spacing_mm": [1e3 * v for v in SAH_REACH.finger_spacing_m],
-            "span_mm": [1e3 * v for v in SAH_REACH.span_m],
+            "finger_spacing_mm": [1e3 * v for v in sampler_reach(hand).finger_spacing_m],
+            "span_mm": [1e3 * v for v in sampler_reach(hand).span_m],
         },
         "objects": rows,
         "created_unix_s": time.time(),

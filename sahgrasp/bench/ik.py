@@ -40,6 +40,7 @@ from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, targ
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
 from sahgrasp.model.contacts import load_targets
 from sahgrasp.model.hand import Hand, load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["run", "summarize"]
 
@@ -153,7 +154,7 @@ def _solvers(hand: Hand, seed: int, peers: Sequence[str]) -> dict[str, Any]:
 
 
 def run(
-    hand: str = "sah",
+    hand: str = DEFAULT_HAND,
     problems: int = 1000,
     seed: int = 0,
     targets: str | None = None,

@@ -22,6 +22,7 @@ from sahgrasp.bench.report import progress_reporter
 from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.model.hand import Hand, load_hand
+from sahgrasp.model.hands import HANDS
 
 __all__ = ["run"]
 
@@ -90,7 +91,7 @@ def _hand_rows(hand: Hand, calls: int, seed: int) -> dict[str, Any]:
 
 
 def run(
-    hands: tuple[str, ...] = ("sah", "allegro"),
+    hands: tuple[str, ...] = tuple(HANDS),
     calls: int = 20_000,
     seed: int = 0,
     quiet: bool = False,

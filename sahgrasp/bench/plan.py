@@ -27,6 +27,8 @@ from pathlib import Path
 from statistics import median
 from typing import Any
 
+from sahgrasp.model.hands import DEFAULT_HAND
+
 __all__ = ["TEST_MESHES", "format_table", "run", "write_test_meshes"]
 
 SHIPPED_MESHES = ("mug.stl", "bottle.obj")
@@ -264,7 +266,7 @@ def warm_worker(description: Any) -> tuple[int, float]:
 
 
 def run(
-    hand: str = "sah",
+    hand: str = DEFAULT_HAND,
     objects: Sequence[str] | None = None,
     meshes: Sequence[str] = (),
     folder: str | None = None,

@@ -21,6 +21,7 @@ from typing import Any
 from sahgrasp.ik import IKSettings, worker_hand
 from sahgrasp.ik.solver import Method
 from sahgrasp.model.hand import HandDescription, load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.sequence import SearchSettings, open_executor, search_sequence
 
 __all__ = ["extrapolate", "run"]
@@ -66,7 +67,7 @@ def extrapolate(
 
 
 def run(
-    hand: str = "sah",
+    hand: str = DEFAULT_HAND,
     grid: int = 5,
     problems: int = 60,
     rounds: int = 2,

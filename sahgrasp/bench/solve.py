@@ -32,6 +32,7 @@ from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import random_problems
 from sahgrasp.model.hand import load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["run"]
 
@@ -46,10 +47,10 @@ _INVALID_LINE = '{"name": "bad", "contacts": [{"finger": "thumb", "point": [0, 0
 
 def _write_problems(path: Path, count: int, seed: int, every: int = 1) -> None:
     """``count`` lines: random SAH problems, or one in ``every`` of them and invalid lines."""
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     valid = random_problems(hand, max(1, count // every), seed)
     with path.open("w", encoding="utf-8") as out:
-        out.write(json.dumps({"hand": "sah"}) + "\n")
+        out.write(json.dumps({"hand": DEFAULT_HAND}) + "\n")
         for i in range(count):
             if i % every == 0 and i // every < len(valid):
                 out.write(json.dumps(valid[i // every].to_dict()) + "\n")

@@ -22,6 +22,7 @@ from sahgrasp.cli.common import (
     output_file,
 )
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS, add_atlas_arguments, atlas_geometry
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["add_parser", "run"]
 
@@ -125,7 +126,7 @@ def _summary(
     if args.checkpoint:
         key = {
             "experiment": args.experiment, "k": args.k, "radius": radius, "epsilon": epsilon,
-            "length_scale_m": length, "unit_m": unit, "hand": "sah", "motions": "random",
+            "length_scale_m": length, "unit_m": unit, "hand": DEFAULT_HAND, "motions": "random",
         }  # fmt: skip
         checkpoint = AtlasCheckpoint(
             args.checkpoint, key=json.dumps(key, sort_keys=True), resume=args.resume
@@ -210,7 +211,7 @@ def _mesh_report(args: argparse.Namespace) -> int:
     from sahgrasp.objects.smooth_surface import MeshPatch
     from sahgrasp.optimization.optimizer import OptimizationSettings
 
-    hand = load_hand("sah")
+    hand = load_hand(DEFAULT_HAND)
     obj = load_mesh(args.mesh)
     starts = read_starts(args.start, hand)
     settings = OptimizationSettings(

@@ -22,6 +22,7 @@ from sahgrasp.cli.common import (
     output_file,
     positive_int,
 )
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["add_parser", "run"]
 
@@ -42,7 +43,7 @@ def _kinematics(benches: Any) -> None:
 
 def _ik(benches: Any) -> None:
     ik = add_command(benches, "ik", "Algorithm 1: success and time vs initial poses, with peers")
-    ik.add_argument("--hand", default="sah", help=HAND_HELP)
+    ik.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     ik.add_argument("--problems", type=positive_int, default=1000, help="random feasible problems")
     ik.add_argument("--seed", type=nonnegative_int, default=0, help="seed of the problems (>= 0)")
     ik.add_argument("--targets", default=None, help="targets file instead of random problems")
@@ -81,7 +82,7 @@ def _atlas(benches: Any) -> None:
 
 def _sequence(benches: Any) -> None:
     seq = add_command(benches, "sequence", "offline search: 1 vs 2 workers, cluster estimate")
-    seq.add_argument("--hand", default="sah", help=HAND_HELP)
+    seq.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     seq.add_argument("--grid", type=positive_int, default=5, help="N values per lambda (>= 2)")
     seq.add_argument("--problems", type=positive_int, default=60, help="M problems per round")
     seq.add_argument("--rounds", type=positive_int, default=2, help="rounds of the search")
@@ -170,7 +171,7 @@ def _plan(benches: Any) -> None:
     plan = add_command(
         benches, "plan", "the grasp planner on catalog objects, shipped and test meshes"
     )
-    plan.add_argument("--hand", default="sah", help=HAND_HELP)
+    plan.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     plan.add_argument(
         "--objects", nargs="*", default=None, metavar="NAME", help="catalog objects (all)"
     )

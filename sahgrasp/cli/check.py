@@ -22,6 +22,7 @@ from sahgrasp.cli.common import (
     positive_int,
     printable,
 )
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["add_parser", "run"]
 
@@ -99,7 +100,7 @@ def _hand_name(args: argparse.Namespace, targets: Path | None) -> str:
     if args.hand is not None:
         return str(args.hand)
     if targets is None:
-        return "sah"
+        return DEFAULT_HAND
     from sahgrasp.model.contacts import read_problems
 
     return read_problems(targets)[0]

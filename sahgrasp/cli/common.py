@@ -37,6 +37,7 @@ from sahgrasp.experiments.arguments import (
     positive_float,
     positive_int,
 )
+from sahgrasp.model.hands import HANDS
 
 __all__ = [
     "HAND_HELP",
@@ -218,8 +219,8 @@ def _refuse_urdf(hand: str) -> None:
         return  # left to the loader, which names the file and the reason
     if Path(hand).suffix.lower() == ".urdf" or start.startswith(b"<"):
         raise HandModelError(
-            f'{hand} is a URDF, but a hand (--hand, a targets file\'s "hand") is sah, allegro or a '
-            "hand-description JSON, which "
+            f'{hand} is a URDF, but a hand (--hand, a targets file\'s "hand") is '
+            f"{', '.join(HANDS)} or a hand-description JSON, which "
             "names the URDF and says which links are the fingertips and palm; write one as "
             "docs/hand.md ('Adding another hand') shows"
         )

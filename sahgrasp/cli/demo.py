@@ -24,6 +24,7 @@ from sahgrasp.cli.common import (
     printable,
 )
 from sahgrasp.experiments.arguments import add_ik_arguments, ik_settings, nonnegative_int
+from sahgrasp.model.hands import DEFAULT_HAND
 
 if TYPE_CHECKING:
     from sahgrasp.experiments.ik_examples import SolvedGrasp
@@ -42,7 +43,7 @@ def add_parser(sub: Any) -> None:
     add_ik_arguments(p)
     p.set_defaults(hand=None)  # with --targets, the file's hand unless --hand names one
     hand = next(a for a in p._actions if a.dest == "hand")
-    hand.help = f"{hand.help} (default: sah; with --targets, the file's hand)"
+    hand.help = f"{hand.help} (default: {DEFAULT_HAND}; with --targets, the file's hand)"
     p.add_argument(
         "--init",
         choices=("learned", "sequence", "random"),
@@ -131,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
 
     invalid: list[str] = []
     if args.targets is None:
-        hand = load_hand(args.hand or "sah")
+        hand = load_hand(args.hand or DEFAULT_HAND)
         settings = _settings(args, "sequence")  # the paper's Algorithm 1: the sequence's starts
         names = tqdm(EXAMPLE_NAMES, desc="solving", unit="grasp", disable=None)
         examples = [solve_example(hand, name, settings) for name in names]

@@ -14,6 +14,7 @@ from sahgrasp.cli.common import (
     emit_json,
     printable,
 )
+from sahgrasp.model.hands import DEFAULT_HAND
 
 if TYPE_CHECKING:
     from sahgrasp.model.hand import Hand
@@ -24,7 +25,7 @@ __all__ = ["add_parser", "describe", "run"]
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
     p = add_command(sub, "info", "describe a hand model")
-    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     p.add_argument(
         "--json",
         nargs="?",

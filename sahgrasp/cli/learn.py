@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -15,35 +16,51 @@ from sahgrasp.cli.common import (
     positive_int,
     scheduler_address,
 )
+from sahgrasp.model.hands import DEFAULT_HAND, HANDS, LearnDefaults, hand_entry
 
 __all__ = ["LEARN_DEFAULTS", "add_parser", "run"]
 
-LEARN_DEFAULTS = {"samples": 2_500, "grasp_sets": 1_600, "seed": 61803398}
-"""The shipped SAH database's sizes and seed, spelled out so that ``--help`` need not import the
-IK (the Allegro hand's has no grasp entries: its reach is not known)."""
+LEARN_DEFAULTS = dataclasses.asdict(HANDS[DEFAULT_HAND].learn)
+"""The default hand's database sizes and seed (its registry entry's), read without importing the
+IK so that ``--help`` stays fast. Each hand's own are in its entry
+(:class:`sahgrasp.model.hands.LearnDefaults`); a hand the registry does not list gets
+``LearnDefaults()`` (no grasp entries: its reach is not measured)."""
+
+
+def _learn_defaults(hand: str) -> LearnDefaults:
+    entry = hand_entry(hand)
+    return LearnDefaults() if entry is None else entry.learn
+
+
+def _per_hand(field: str) -> str:
+    """``field`` of every registered hand's defaults, for the help (``sah: 1600, ...``)."""
+    return ", ".join(f"{name} {getattr(entry.learn, field)}" for name, entry in HANDS.items())
 
 
 def add_parser(sub: Any) -> None:
     """Register the subcommand."""
-    d = LEARN_DEFAULTS
     p = add_command(
         sub, "learn", "build the grasp database of the learned IK start",
         "Build a database of solved grasps keyed by the contacts' rigid-invariant features. "
         "Finished chunks are kept in FILE.parts, so an interrupted build continues when rerun; "
         "FILE is locked while it is built (FILE.lock), a second build of it is refused.",
     )  # fmt: skip
-    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     p.add_argument(
-        "--samples", type=positive_int, default=d["samples"],
-        help="random entries (collision-free configurations)",
+        "--samples", type=positive_int, default=None,
+        help=f"random entries (collision-free configurations; default per hand: "
+        f"{_per_hand('samples')})",
     )  # fmt: skip
     p.add_argument(
         "--grasps", type=nonnegative_int, default=None, metavar="SETS",
         help=f"contact sets to draw on random primitive solids (5 per solid) and solve: the "
-        f"grasp entries (default: {d['grasp_sets']} for the SAH, 0 for a hand whose reach is "
-        "not known)",
+        f"grasp entries (default per hand: {_per_hand('grasp_sets')}; 0 for a hand whose reach "
+        "is not measured)",
     )  # fmt: skip
-    p.add_argument("--seed", type=nonnegative_int, default=d["seed"], help="seed (>= 0)")
+    p.add_argument(
+        "--seed", type=nonnegative_int, default=None,
+        help=f"seed (>= 0; default per hand: {_per_hand('seed')})",
+    )  # fmt: skip
     p.add_argument("--out", required=True, metavar="FILE", help="the .npz file to write")
     where = p.add_mutually_exclusive_group()
     where.add_argument(
@@ -76,14 +93,15 @@ def run(args: argparse.Namespace) -> int:
         check_workers(args.workers)
     hand = load_hand(args.hand)
     check_output_path(args.out, hand_inputs(args.hand, hand), side=side)
-    grasp_sets = args.grasps
-    if grasp_sets is None:
-        grasp_sets = LEARN_DEFAULTS["grasp_sets"] if hand.description.name == "sah" else 0
+    defaults = _learn_defaults(hand.description.name)
+    grasp_sets = defaults.grasp_sets if args.grasps is None else args.grasps
+    samples = defaults.samples if args.samples is None else args.samples
+    seed = defaults.seed if args.seed is None else args.seed
     solids = sum(primitive_chunks(grasp_sets))
     start = time.perf_counter()
     with StderrProgress() as bar, open_executor(args.scheduler, args.workers) as executor:
         db = build_database(
-            hand, args.samples, args.out, args.seed, executor,
+            hand, samples, args.out, seed, executor,
             lambda done, total: bar("learn: chunks", done, total), grasp_sets,
         )  # fmt: skip
     size_mb = Path(args.out).stat().st_size / 1e6

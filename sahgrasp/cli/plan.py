@@ -23,6 +23,7 @@ from sahgrasp.cli.common import (
     printable,
 )
 from sahgrasp.cli.solve import resume_hint
+from sahgrasp.model.hands import DEFAULT_HAND
 
 __all__ = ["add_parser", "run"]
 
@@ -82,7 +83,7 @@ def add_parser(sub: Any) -> None:
         "ranked, verified grasps of an object (a mesh file, a catalog object, a folder)",
     )
     p.add_argument("object", help=OBJECT_HELP)
-    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     p.add_argument(
         "--fingers",
         type=_fingers,

@@ -16,6 +16,7 @@ from sahgrasp.cli.common import (
     scheduler_address,
 )
 from sahgrasp.core.fileio import check_output_path
+from sahgrasp.model.hands import DEFAULT_HAND
 
 if TYPE_CHECKING:
     from sahgrasp.sequence import Progress, SearchResult
@@ -43,7 +44,7 @@ def add_parser(sub: Any) -> None:
     """Register the subcommand."""
     d = SEARCH_DEFAULTS
     p = add_command(sub, "sequence", "search the sequence of initial hand poses", DESCRIPTION)
-    p.add_argument("--hand", default="sah", help=HAND_HELP)
+    p.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     p.add_argument(
         "--grid", type=int_at_least(2), default=d["grid"], help="N values per lambda (N^2 cells)"
     )

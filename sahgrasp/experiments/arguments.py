@@ -11,6 +11,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
+from sahgrasp.model.hands import DEFAULT_HAND, hand_help
 from sahgrasp.quality.indices import QUALITY_INDICES
 
 if TYPE_CHECKING:
@@ -42,7 +43,8 @@ __all__ = [
 MAX_INITS = 1000
 """Largest ``--inits`` accepted: the initial configurations are built before the first solve."""
 
-HAND_HELP = "sah, allegro, or the path of a hand-description JSON (not a URDF)"
+HAND_HELP = hand_help()
+"""The ``--hand`` help: the registered hands' names, or a description JSON."""
 METHOD_HELP = "IK inner loop: the paper's (paper) or the Levenberg-Marquardt default (auto)"
 INITS_HELP = f"i_max, initial configurations per problem (1..{MAX_INITS})"
 
@@ -105,7 +107,7 @@ def add_ik_arguments(parser: argparse.ArgumentParser) -> None:
 
     :func:`ik_settings` turns them into the IK's settings.
     """
-    parser.add_argument("--hand", default="sah", help=HAND_HELP)
+    parser.add_argument("--hand", default=DEFAULT_HAND, help=HAND_HELP)
     parser.add_argument("--method", choices=("auto", "paper"), default="auto", help=METHOD_HELP)
     parser.add_argument("--inits", type=int_in_range(1, MAX_INITS), default=12, help=INITS_HELP)
     parser.add_argument(

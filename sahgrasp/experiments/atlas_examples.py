@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.core.errors import OptimizationError
 from sahgrasp.objects import load_object
-from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.optimization.grasp import HandGraspManifold
 from sahgrasp.optimization.optimizer import OptimizationResult
 from sahgrasp.optimization.planar import PlanarGraspProblem, PlanarHand
 from sahgrasp.quality.ellipsoids import SINGULAR_THRESHOLDS
@@ -59,7 +59,7 @@ def _show_planar(
     )  # fmt: skip
 
 
-def _show_sah(viewer: Viewer, result: OptimizationResult, problem: SahGraspManifold) -> AtlasPlot:
+def _show_sah(viewer: Viewer, result: OptimizationResult, problem: HandGraspManifold) -> AtlasPlot:
     system = problem.system
 
     def grasp(chart: int) -> ChartGrasp:
@@ -88,6 +88,6 @@ def show_optimization(viewer: Viewer, result: OptimizationResult) -> AtlasPlot:
     problem = result.problem
     if isinstance(problem, PlanarGraspProblem):
         return _show_planar(viewer, result, problem)
-    if isinstance(problem, SahGraspManifold):
+    if isinstance(problem, HandGraspManifold):
         return _show_sah(viewer, result, problem)
     raise OptimizationError(f"no drawing for a {type(problem).__name__}")

@@ -32,6 +32,7 @@ from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
 from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.ik import IKSettings
 from sahgrasp.model.hand import load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import PAPER_IK_REPORT
 from sahgrasp.objects.smooth_surface import fit_mesh_patch
 
@@ -68,7 +69,7 @@ def _solved(method: Literal["auto", "paper"]) -> dict[str, tuple[bool, int, int]
     settings = IKSettings(method=method, init="sequence")  # as grasp_paper_object.py runs it
     out = {}
     for name in EXAMPLE_NAMES:
-        result = solve_example(load_hand("sah"), name, settings).result
+        result = solve_example(load_hand(DEFAULT_HAND), name, settings).result
         out[name] = (result.success, result.inits_used, result.iterations)
     return out
 

@@ -45,7 +45,7 @@ from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearan
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
 from sahgrasp.objects.smooth_surface import MeshPatch, fit_mesh_patch
 from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
-from sahgrasp.optimization.grasp import SahGraspManifold, make_mesh_manifold
+from sahgrasp.optimization.grasp import HandGraspManifold, make_mesh_manifold
 from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.verify import LINK_TOLERANCE_M, GraspVerifier, Verdict
 
@@ -136,7 +136,7 @@ class MeshComponent:
             contact frames are: a further round anchored there starts exactly at that grasp.
     """
 
-    problem: SahGraspManifold
+    problem: HandGraspManifold
     starts: tuple[int, ...]
     result: OptimizationResult
     start_value: float
@@ -205,7 +205,7 @@ def verify_grasp(
 
 
 def _world_grasp(
-    problem: SahGraspManifold, result: OptimizationResult, chart: int, obj: GraspObject
+    problem: HandGraspManifold, result: OptimizationResult, chart: int, obj: GraspObject
 ) -> tuple[np.ndarray, tuple[ContactTarget, ...]]:
     """The hand and the contacts of ``chart`` in the world frame."""
     system = problem.system
@@ -270,7 +270,7 @@ def _on_mesh(
 def _component(
     hand: Hand,
     obj: GraspObject,
-    problem: SahGraspManifold,
+    problem: HandGraspManifold,
     result: OptimizationResult,
     starts: tuple[int, ...],
     verifier: GraspVerifier,
@@ -315,7 +315,7 @@ def mesh_verifier(
 
 
 def _in_component(
-    problem: SahGraspManifold, result: OptimizationResult, start: MeshStart, obj: GraspObject
+    problem: HandGraspManifold, result: OptimizationResult, start: MeshStart, obj: GraspObject
 ) -> bool:
     """Whether ``start`` lies in the component ``result`` covers (see the module)."""
     system = problem.system
@@ -396,7 +396,7 @@ def optimize_mesh_grasps(
     # The collision checks at the chart centres use the planner's pieces (the triangles' prisms,
     # unjoined): the same solid as the joined pieces, built in a fraction of the time.
     obj = planning_object(obj)
-    built: list[tuple[SahGraspManifold, OptimizationResult, list[int]]] = []
+    built: list[tuple[HandGraspManifold, OptimizationResult, list[int]]] = []
     owners: list[int | None] = []
     errors: list[str | None] = []
     for i, start in enumerate(starts):

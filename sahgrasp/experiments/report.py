@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from sahgrasp.optimization.grasp import SahGraspManifold
+from sahgrasp.optimization.grasp import HandGraspManifold
 from sahgrasp.optimization.optimizer import OptimizationResult
 from sahgrasp.optimization.planar import PlanarGraspProblem
 from sahgrasp.quality.ellipsoids import QUALITY_INDICES, SINGULAR_THRESHOLDS
@@ -39,7 +39,7 @@ def describe_grasp(result: OptimizationResult, chart: int) -> dict[str, Any]:
             "object_angle_rad": float(np.arctan2(x[14], x[15])),
             "contact_params_rad": x[16:19].tolist(),
         }
-    elif isinstance(problem, SahGraspManifold):
+    elif isinstance(problem, HandGraspManifold):
         out["joints"] = problem.system.hand.joint_values(result.configurations[chart])
         out["x"] = problem.x_of(x).tolist()
     return out
@@ -76,7 +76,7 @@ def summary(name: str, result: OptimizationResult) -> dict[str, Any]:
         "worst": describe_grasp(result, result.worst),
         "best_overall": describe_grasp(result, result.best_overall),
     }
-    if isinstance(problem, SahGraspManifold):
+    if isinstance(problem, HandGraspManifold):
         out["retained_variance"] = problem.retained_variance
     if result.quality is not None:
         out["indices"] = {name: _index_summary(result, name) for name in QUALITY_INDICES}

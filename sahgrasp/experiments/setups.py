@@ -17,8 +17,9 @@ from sahgrasp.core.errors import OptimizationError
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.experiments.arguments import ATLAS_DEFAULTS
 from sahgrasp.model.hand import load_hand
+from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import GraspObject, GraspPatches, bottle_patches, can_patches, load_object
-from sahgrasp.optimization.grasp import SahGraspManifold, ik_seeds, make_sah_manifold
+from sahgrasp.optimization.grasp import HandGraspManifold, ik_seeds, make_sah_manifold
 from sahgrasp.optimization.optimizer import (
     ComponentSearch,
     GraspManifold,
@@ -112,7 +113,7 @@ _MOTION_SAMPLES = {"random": 2000, "grasps": 200}
 def make_experiment(
     name: str,
     k: int = 2,
-    hand: str = "sah",
+    hand: str = DEFAULT_HAND,
     motions: str = "random",
     length_scale_m: float | None = None,
     unit_m: float | None = None,
@@ -184,7 +185,7 @@ def run_experiment(
     index: str = "volume",
     max_charts: int = 20_000,
     progress: ProgressCallback | None = None,
-    hand: str = "sah",
+    hand: str = DEFAULT_HAND,
     motions: str = "random",
     length_scale_m: float | None = None,
     workers: int = 0,
@@ -221,7 +222,7 @@ def run_components(
         OptimizationError: ``name`` is not an SAH experiment, or no seed reaches R.
     """
     problem = make_experiment(name, k, motions=motions)
-    if not isinstance(problem, SahGraspManifold):
+    if not isinstance(problem, HandGraspManifold):
         raise OptimizationError(
             f"components are searched for {sorted(SAH_EXPERIMENTS)}, not {name!r}"
         )

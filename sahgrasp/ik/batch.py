@@ -46,7 +46,8 @@ from sahgrasp.ik.learned import GraspDatabase
 from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
 from sahgrasp.model.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
-from sahgrasp.model.hand import BUILTIN_HANDS, Hand, HandDescription, load_hand
+from sahgrasp.model.hand import Hand, HandDescription, load_hand
+from sahgrasp.model.hands import hand_entry
 
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
@@ -109,7 +110,7 @@ def worker_hand(description: HandDescription, digest: str) -> Hand:
     hand = _CACHE.hands.get(digest)
     if hand is None:
         local = description
-        if not description.urdf_path.is_file() and description.name in BUILTIN_HANDS:
+        if not description.urdf_path.is_file() and hand_entry(description.name) is not None:
             local = load_hand(description.name).description
         hand = load_hand(local)
         found = hand.description.digest()

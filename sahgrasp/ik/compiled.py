@@ -11,7 +11,6 @@ integration against :class:`~sahgrasp.model.hand.Hand` (Pinocchio) and finite di
 
 from __future__ import annotations
 
-import weakref
 from typing import Any, Final
 
 import coal
@@ -73,20 +72,14 @@ def tree_joint(pinocchio_joint: int) -> int:
     return _lm.FIXED_JOINT + pinocchio_joint
 
 
-_TREES: weakref.WeakKeyDictionary[Hand, Tree] = weakref.WeakKeyDictionary()
-
-
 def compiled_tree(hand: Hand) -> Tree:
-    """The compiled tree of ``hand``, built on first use and kept while the hand lives.
+    """The compiled tree of ``hand``, built on first use and kept in ``hand.cache``.
 
     Raises:
         HandModelError: The hand has a joint other than the free-flyer wrist and 1-DoF revolute
             or prismatic joints (the URDF checks admit no other).
     """
-    tree = _TREES.get(hand)
-    if tree is None:
-        tree = _TREES[hand] = _export(hand)
-    return tree
+    return hand.cache.get("compiled_tree", lambda: _export(hand))
 
 
 def self_collides(hand: Hand, q: NDArray[np.float64]) -> bool:

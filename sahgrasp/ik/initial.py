@@ -17,7 +17,6 @@ import json
 import math
 import os
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +28,7 @@ from sahgrasp.core.errors import SequenceFileError
 from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, check_made_for
+from sahgrasp.model.hands import data_file, hand_entry
 
 __all__ = [
     "PAPER_TABLE1_LAMBDAS",
@@ -228,32 +228,31 @@ class Sequence:
 
 
 def default_sequence(hand: Hand) -> Sequence:
-    """The sequence the IK uses by default for ``hand``.
+    """The sequence the IK uses by default for ``hand``, built once per hand (``hand.cache``).
 
-    The package ships sequences computed by the offline search in ``sahgrasp/data/sequences``;
-    for a hand without one (or whose shipped file was made for another version of the hand), the
-    paper's Table 1 lambdas are applied to this hand's own PCA basis.
+    The package ships sequences computed by the offline search in ``sahgrasp/data/sequences``,
+    named by the hand's registry entry (:data:`sahgrasp.model.hands.HANDS`); for a hand without
+    one (or whose shipped file was made for another version of the hand), the paper's Table 1
+    lambdas are applied to this hand's own PCA basis.
     """
-    return _default_sequence(hand.description.digest(), hand)
+    return hand.cache.get("default_sequence", lambda: _default_sequence(hand))
 
 
-_DEFAULTS: dict[str, Sequence] = {}
-
-
-def _default_sequence(digest: str, hand: Hand) -> Sequence:
-    if digest in _DEFAULTS:
-        return _DEFAULTS[digest]
-    shipped = resources.files("sahgrasp") / "data" / "sequences" / f"{hand.description.name}.json"
+def _default_sequence(hand: Hand) -> Sequence:
+    digest = hand.description.digest()
+    entry = hand_entry(hand.description.name)
     sequence = None
-    if shipped.is_file():
-        candidate = Sequence.from_dict(json.loads(shipped.read_text(encoding="utf-8")), "shipped")
-        if candidate.hand_digest == digest:
-            sequence = candidate
+    if entry is not None and entry.sequence is not None:
+        shipped = data_file(entry.sequence)
+        if shipped.is_file():
+            data = json.loads(shipped.read_text(encoding="utf-8"))
+            candidate = Sequence.from_dict(data, "shipped")
+            if candidate.hand_digest == digest:
+                sequence = candidate
     if sequence is None:
         sequence = Sequence(
             hand.description.name, digest, pose_basis(hand), PAPER_TABLE1_LAMBDAS, "paper-table1"
         )
-    _DEFAULTS[digest] = sequence
     return sequence
 
 

@@ -29,7 +29,6 @@ import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from functools import cached_property
-from importlib import resources
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -42,6 +41,7 @@ from sahgrasp.ik._lm import rigid_key
 from sahgrasp.ik.compiled import compiled_tree
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, check_made_for
+from sahgrasp.model.hands import data_file, hand_entry
 
 if TYPE_CHECKING:
     pass
@@ -273,25 +273,26 @@ class GraspDatabase:
             )
 
 
-_DEFAULTS: dict[str, GraspDatabase | None] = {}
-
-
 def default_database(hand: Hand) -> GraspDatabase | None:
-    """The shipped database of ``hand`` (``sahgrasp/data/grasps/<name>.npz``), None if none.
+    """The shipped database of ``hand``, None if none; read once per hand (``hand.cache``).
 
-    A shipped file made for another version of the hand is not used (None): the learned start
-    then falls back to the sequence.
+    The file is the one the hand's registry entry names (:data:`sahgrasp.model.hands.HANDS`,
+    under ``sahgrasp/data/grasps``). A shipped file made for another version of the hand is not
+    used (None): the learned start then falls back to the sequence.
 
     Raises:
         GraspDatabaseError: The shipped file is corrupt.
     """
-    digest = hand.description.digest()
-    if digest not in _DEFAULTS:
-        shipped = resources.files("sahgrasp") / "data" / "grasps" / f"{hand.description.name}.npz"
-        db = None
-        if shipped.is_file():
-            with shipped.open("rb") as stream:
-                db = GraspDatabase.load(io.BytesIO(stream.read()))
-            db = db if db.hand_digest == digest else None
-        _DEFAULTS[digest] = db
-    return _DEFAULTS[digest]
+    return hand.cache.get("default_database", lambda: _shipped_database(hand))
+
+
+def _shipped_database(hand: Hand) -> GraspDatabase | None:
+    entry = hand_entry(hand.description.name)
+    if entry is None or entry.database is None:
+        return None
+    shipped = data_file(entry.database)
+    if not shipped.is_file():
+        return None
+    with shipped.open("rb") as stream:
+        db = GraspDatabase.load(io.BytesIO(stream.read()))
+    return db if db.hand_digest == hand.description.digest() else None

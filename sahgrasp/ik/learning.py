@@ -33,8 +33,13 @@ from sahgrasp.ik.learned import (
 from sahgrasp.ik.solver import IKSettings, solve_ik
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, HandDescription
+from sahgrasp.model.hands import hand_entry
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.grasp_sampler import SAH_REACH, GraspSamplingError, sample_contact_sets
+from sahgrasp.objects.grasp_sampler import (
+    GraspSamplingError,
+    registered_reach,
+    sample_contact_sets,
+)
 from sahgrasp.objects.mesh_file import MeshSolid
 
 __all__ = [
@@ -159,15 +164,21 @@ def grasp_chunk(
 def hand_reach(hand: Hand) -> Any:
     """The grasp sampler's :class:`~sahgrasp.objects.grasp_sampler.HandReach` of ``hand``.
 
+    The reach measured with the IK that the hand's registry entry gives
+    (:class:`sahgrasp.model.hands.SamplerReach`): grasp entries are solved contact sets, and a
+    reach only bounded from the model draws many sets the hand cannot reach.
+
     Raises:
-        GraspDatabaseError: Not known for this hand (the SAH's only).
+        GraspDatabaseError: The hand's entry gives no reach (or the hand is not registered).
     """
-    if hand.description.name != "sah":
+    entry = hand_entry(hand.description.name)
+    if entry is None or entry.reach is None:
         raise GraspDatabaseError(
-            f"grasp entries need the hand's reach, known for the SAH only, not for "
-            f"{hand.description.name!r}; build with grasps=0 (`--grasps 0`)"
+            f"grasp entries need the hand's measured reach, which the hand registry does not give "
+            f"for {hand.description.name!r}; build with grasps=0 (`--grasps 0`) or register the "
+            "hand with its reach (docs/hand.md)"
         )
-    return SAH_REACH
+    return registered_reach(entry.name)
 
 
 def build_database(

@@ -23,7 +23,14 @@ from sahgrasp.model.hand import Hand
 from sahgrasp.objects.body import GraspObject
 from sahgrasp.objects.clearance import Clearance, HandObjectClearance
 
-__all__ = ["REPAIR_PAIRS_PER_LINK", "Obstacle", "check_obstacle", "checker_of", "pieces_of"]
+__all__ = [
+    "REPAIR_PAIRS_PER_LINK",
+    "Obstacle",
+    "build_pieces",
+    "check_obstacle",
+    "checker_of",
+    "pieces_of",
+]
 
 REPAIR_PAIRS_PER_LINK = 1
 """Most (link, piece) pairs one link adds to a collision-repair step.
@@ -38,20 +45,31 @@ way, and makes the repair query several times cheaper on the finely cut objects.
 """
 
 
-@functools.lru_cache(maxsize=8)
+_KEPT_OBJECTS = 8
+"""Objects per hand whose clearance checker and compiled pieces the hand's cache keeps."""
+
+
 def checker_of(hand: Hand, obj: GraspObject | None) -> HandObjectClearance:
-    """One clearance checker per (hand, object) pair, by identity (None: no object).
+    """One clearance checker per (hand, object) pair (None: no object), kept in ``hand.cache``.
+
+    The hand keeps those of its :data:`_KEPT_OBJECTS` most recently used objects.
 
     Building one (about 0.7 ms without an object, for placing free fingers) builds the piece
     tree (up to 0.04 s for the catalog objects) and, on the object's first use, its convex pieces
     (0.01 s for the can, 0.15 s for the coffee cup, 1.6-2.2 s for the shipped meshes, whose
     triangle prisms are merged): too much to repeat for every problem.
     """
-    return HandObjectClearance(hand, obj)
+    build = functools.partial(HandObjectClearance, hand, obj)
+    return hand.cache.kept("clearance_checkers", obj, build, _KEPT_OBJECTS)
 
 
-@functools.lru_cache(maxsize=8)
 def pieces_of(checker: HandObjectClearance) -> Pieces | None:
+    """:func:`build_pieces` of ``checker``, kept in its hand's cache (as :func:`checker_of`)."""
+    build = functools.partial(build_pieces, checker)
+    return checker.hand.cache.kept("object_pieces", checker, build, _KEPT_OBJECTS)
+
+
+def build_pieces(checker: HandObjectClearance) -> Pieces | None:
     """The checker's object pieces for the compiled verdicts, None if they cannot be compiled.
 
     The compiled verdicts (``Tree.object_clearance``, ``Tree.shapes_near``: GJK in

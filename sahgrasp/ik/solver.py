@@ -36,6 +36,7 @@ from sahgrasp.ik.obstacle import Obstacle, checker_of
 from sahgrasp.ik.starts import initial_lambdas
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import ContactState, Hand
+from sahgrasp.model.hands import DEFAULT_HAND
 
 if TYPE_CHECKING:
     from sahgrasp.collision.hand_self import Penetration
@@ -697,7 +698,7 @@ def _check_arguments(
     """
     if not isinstance(hand, Hand):
         raise InvalidSettingsError(
-            f"hand must be a Hand (sahgrasp.load_hand('sah')), got {type(hand).__name__}"
+            f"hand must be a Hand (sahgrasp.load_hand({DEFAULT_HAND!r})), got {type(hand).__name__}"
         )
     if not isinstance(target, GraspTarget):
         raise InvalidTargetError(

@@ -81,7 +81,7 @@ class Targets:
     """A targets file opened for reading.
 
     Attributes:
-        hand: The hand (``"sah"``, ``"allegro"`` or a description path).
+        hand: The hand (a registered hand's name or a description path).
         total: Number of problems (lines after the header for JSON Lines), None when the file is
             not a regular file (a pipe is read once, as the problems are consumed).
         problems: The problems in file order, read as they are consumed.

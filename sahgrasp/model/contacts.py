@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.core.fileio import read_json, write_json_atomic
+from sahgrasp.model.hands import DEFAULT_HAND, HANDS
 
 __all__ = [
     "MAX_PATH_CHARS",
@@ -698,7 +699,7 @@ def read_problems(
             ``..``, a link leading out); by default such a problem is invalid.
 
     Returns:
-        The hand (``"sah"``, ``"allegro"`` or a description path) and the problems in file order.
+        The hand (a registered hand's name or a description path) and the problems in file order.
 
     Raises:
         InvalidTargetError: The file is missing, a folder, not UTF-8 JSON, nested too deeply,
@@ -727,10 +728,11 @@ def targets_hand(data: dict[str, Any], path: Path) -> str:
     Raises:
         InvalidTargetError: ``hand`` is not a non-empty string.
     """
-    hand = data.get("hand", "sah")
+    hand = data.get("hand", DEFAULT_HAND)
     if not isinstance(hand, str) or not hand:
         raise InvalidTargetError(
-            f"targets file {path}: 'hand' must be 'sah', 'allegro' or a hand-description path, "
+            f"targets file {path}: 'hand' must be one of {', '.join(map(repr, HANDS))} or a "
+            "hand-description path, "
             f"got {_preview(hand)}"
         )
     if Path(hand).suffix and not Path(hand).is_absolute():

@@ -25,12 +25,13 @@ import math
 import os
 import stat
 import sys
-from collections.abc import Mapping
+from collections import OrderedDict
+from collections.abc import Callable, Hashable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property, lru_cache
 from importlib import metadata, resources
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar, cast
 
 import numpy as np
 import pinocchio as pin
@@ -55,6 +56,7 @@ from sahgrasp.model.hand_checks import (
     shown,
     shown_path,
 )
+from sahgrasp.model.hands import HANDS, hand_entry
 
 __all__ = [
     "BUILTIN_HANDS",
@@ -62,6 +64,7 @@ __all__ = [
     "ContactState",
     "FingerSpec",
     "Hand",
+    "HandCache",
     "HandDescription",
     "HandState",
     "allegro_description",
@@ -70,9 +73,11 @@ __all__ = [
     "sah_description",
 ]
 
-BUILTIN_HANDS = ("sah", "allegro")
-"""Hand names that ``load_hand`` knows without a description file."""
+BUILTIN_HANDS = HANDS.names()
+"""Hand names that ``load_hand`` knows without a description file (a live view of the registry
+:data:`sahgrasp.model.hands.HANDS`)."""
 
+_T = TypeVar("_T")
 _DEG = math.pi / 180.0
 _FINITE_WEIGHT = 1e-10
 """Weight of each coordinate in the finiteness test: sum(q_i 1e-10) cannot overflow for finite
@@ -483,6 +488,48 @@ class _Layout:
     mask: NDArray[np.float64]
 
 
+class HandCache:
+    """Values derived from one hand model, built on first use and kept while the hand lives.
+
+    Each :class:`Hand` owns one (``hand.cache``): the compiled kinematic tree, the default IK
+    sequence and grasp database, the samplers' reach. Owned by the hand, they are freed with it
+    and never shared between two hand objects, so no module-level table keeps a hand alive.
+    """
+
+    __slots__ = ("_values",)
+
+    def __init__(self) -> None:
+        self._values: dict[str, Any] = {}
+
+    def get(self, key: str, build: Callable[[], _T]) -> _T:
+        """The value kept as ``key``, built by ``build()`` on the first request."""
+        if key not in self._values:
+            self._values[key] = build()
+        return cast(_T, self._values[key])
+
+    def kept(self, kind: str, key: Hashable, build: Callable[[], _T], size: int) -> _T:
+        """The value of ``kind`` for ``key``, built on first request; ``size`` kept per kind.
+
+        For values derived from the hand and another input (an object): the ``size`` most
+        recently requested are kept, the least recently requested is dropped first.
+        """
+        kept: OrderedDict[Hashable, Any] = self.get(kind, OrderedDict)
+        if key in kept:
+            kept.move_to_end(key)
+            return cast(_T, kept[key])
+        value = kept[key] = build()
+        while len(kept) > size:
+            kept.popitem(last=False)
+        return value
+
+    def __contains__(self, key: object) -> bool:
+        return key in self._values
+
+    def clear(self) -> None:
+        """Forget every value (they are rebuilt on the next request)."""
+        self._values.clear()
+
+
 class Hand:
     """A hand: Pinocchio model/data, coal self-collision, and the contact queries of the papers.
 
@@ -494,6 +541,7 @@ class Hand:
     def __init__(self, description: HandDescription) -> None:
         urdf = _read_urdf(description)
         self.description = description._loaded_from(urdf)
+        self.cache = HandCache()
         model, geometry = _build_models(description, check_urdf(urdf, shown(description.urdf_path)))
         self.fingers = description.finger_names
         self.radius_m = description.fingertip_radius_m
@@ -1286,7 +1334,8 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
     """Build a :class:`Hand` from a built-in name, a hand-description JSON path, or a description.
 
     Args:
-        hand: ``"sah"``, ``"allegro"``, a path to a description JSON, or a HandDescription.
+        hand: A registered hand's name (:data:`sahgrasp.model.hands.HANDS`: ``"sah"``,
+            ``"allegro"`` and any added), a path to a description JSON, or a HandDescription.
 
     Raises:
         HandModelError: Unknown name, missing, unreachable (a loop of links, a name too long) or
@@ -1295,10 +1344,8 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
     if isinstance(hand, HandDescription):
         return Hand(hand)
     text = str(hand)
-    if text == "sah":
-        return Hand(sah_description())
-    if text == "allegro":
-        return Hand(allegro_description())
+    if hand_entry(text) is not None:
+        return Hand(_registered_description(text))
     path = Path(text)
     if not path.suffix:
         raise HandModelError(
@@ -1312,6 +1359,22 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
             "(its fingers, tip links and fingertip radius: see docs/hand.md)"
         )
     return Hand(HandDescription.from_json(path))
+
+
+def _registered_description(name: str) -> HandDescription:
+    """The description the registry's entry ``name`` builds, checked to be one."""
+    description = HANDS.lookup(name).build()
+    if not isinstance(description, HandDescription):
+        raise HandModelError(
+            f"hand {name!r}: its registered builder returned {type(description).__name__}, "
+            "not a HandDescription"
+        )
+    if description.name != name:
+        raise HandModelError(
+            f"hand {name!r}: its registered builder returned a description named "
+            f"{description.name!r}; the names must agree (the shipped data is found by name)"
+        )
+    return description
 
 
 def _check_reachable(path: Path) -> None:

@@ -16,6 +16,7 @@ from solids) are fine: a point of one shell inside another is not offered as a c
 from __future__ import annotations
 
 import math
+import warnings
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -25,18 +26,19 @@ import numpy as np
 import trimesh.triangles
 from numpy.typing import ArrayLike, NDArray
 
-from sahgrasp.core.errors import SahGraspError
+from sahgrasp.core.errors import HandModelError, SahGraspError
 from sahgrasp.model.contacts import ContactTarget, GraspTarget
+from sahgrasp.model.hands import DEFAULT_HAND, HANDS
 from sahgrasp.objects.body import GraspObject
 
 __all__ = [
     "FINGERS",
-    "SAH_REACH",
     "GraspSamplingError",
     "HandReach",
     "SamplerSettings",
     "SurfaceMesh",
     "as_surface",
+    "registered_reach",
     "sample_contact_sets",
     "sample_object_grasps",
 ]
@@ -82,17 +84,37 @@ class HandReach:
             raise GraspSamplingError("fingertip_radius_m must be > 0")
 
 
-SAH_REACH = HandReach(
-    finger_spacing_m=(0.028, 0.040), span_m=(0.001, 0.146), fingertip_radius_m=0.01
-)
-"""The SAH's reach, measured with ``solve_ik`` on flat antipodal grasps (docs/benchmarks.md).
+def registered_reach(name: str | None = None) -> HandReach:
+    """The measured reach of the registered hand ``name`` (default: the default hand).
 
-Thumb on one face of a plate, index, middle and ring in a line on the other, all normals along the
-plate's normal, fingers 40 mm apart (the spacing of the finger bases): solved for every thickness
-from 0.5 to 146 mm and unsolved from 148 mm on (with the sequence shipped before the compiled IK
-loop: up to 148 mm); solved for finger spacings from 28 mm up (26 mm puts neighbouring fingers,
-26 mm wide, into each other).
-"""
+    The reach is the hand registry's (:class:`sahgrasp.model.hands.SamplerReach`); the default
+    hand's was measured with ``solve_ik`` on flat antipodal grasps (docs/sequence.md).
+
+    Raises:
+        HandModelError: ``name`` is not registered or its entry gives no reach.
+    """
+    name = DEFAULT_HAND if name is None else name
+    entry = HANDS.lookup(name)
+    if entry.reach is None:
+        raise HandModelError(
+            f"hand {name!r} has no measured reach; sahgrasp.objects.reach.sampler_reach(hand) "
+            "derives one from its model"
+        )
+    r = entry.reach
+    return HandReach(r.finger_spacing_m, r.span_m, r.fingertip_radius_m)
+
+
+def __getattr__(name: str) -> Any:
+    # SAH_REACH, the default hand's measured reach, kept for one release.
+    if name == "SAH_REACH":
+        warnings.warn(
+            "sahgrasp.objects.grasp_sampler.SAH_REACH is deprecated; use registered_reach() "
+            "(the default hand's) or sahgrasp.objects.reach.sampler_reach(hand)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return registered_reach()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
@@ -279,7 +301,7 @@ def sample_contact_sets(
     mesh: Any,
     count: int,
     seed: int,
-    reach: HandReach = SAH_REACH,
+    reach: HandReach | None = None,
     settings: SamplerSettings | None = None,
     name: str = "grasp",
     on_set: Callable[[], object] | None = None,
@@ -293,7 +315,8 @@ def sample_contact_sets(
         mesh: The surface, in the world frame (anything :func:`as_surface` accepts).
         count: Number of contact sets.
         seed: Seed of the ``numpy`` generator that draws everything.
-        reach: The hand's spacing, span and fingertip radius.
+        reach: The hand's spacing, span and fingertip radius (default: the default hand's,
+            :func:`registered_reach`).
         settings: Opposition and fit tolerances; defaults if None.
         name: Problem names are ``f"{name}-{i}"``.
         on_set: Called after each set is found (progress reporting).
@@ -307,6 +330,7 @@ def sample_contact_sets(
         raise GraspSamplingError(f"count must be an integer >= 0, got {count!r}")
     surface = as_surface(mesh)
     settings = settings or SamplerSettings()
+    reach = registered_reach() if reach is None else reach
     rng = np.random.default_rng(seed)
     draw = _ContactSetDraw(surface, reach, settings)
     sets: list[GraspTarget] = []
@@ -335,7 +359,7 @@ def sample_object_grasps(
     obj: GraspObject,
     count: int,
     seed: int,
-    reach: HandReach = SAH_REACH,
+    reach: HandReach | None = None,
     settings: SamplerSettings | None = None,
     on_set: Callable[[], object] | None = None,
 ) -> list[GraspTarget]:

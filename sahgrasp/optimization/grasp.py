@@ -23,7 +23,7 @@ rank, first derivatives only; the sign is kept by continuity from the first gras
 
 Dimension reduction (Section III): the PCA of sampled hand configurations gives ``E``; the ``s``
 directions of least variance, through the first grasp ``x_1``, add ``E_s^T (x_h - x_1h) = 0``
-(Eq. (13)), with ``s = t - k`` (Eq. (12)). :class:`SahGraspManifold` is that reduced set R as a
+(Eq. (13)), with ``s = t - k`` (Eq. (12)). :class:`HandGraspManifold` is that reduced set R as a
 :class:`~sahgrasp.optimization.optimizer.GraspManifold`, with the collision checks of its chart
 centres: at each, the fingers without a contact region are first placed where they touch nothing
 (``HandObjectClearance.place_free_fingers``: the nearest configuration of their own joints clear of
@@ -34,6 +34,7 @@ collision (any link inside the object, the contact fingertip spheres excepted up
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from concurrent.futures import Executor
 from dataclasses import dataclass
@@ -60,7 +61,7 @@ from sahgrasp.quality.ellipsoids import Manipulability, ellipsoid_indices, null_
 __all__ = [
     "MOTION_SOURCES",
     "GraspSystem",
-    "SahGraspManifold",
+    "HandGraspManifold",
     "coordinate_scales",
     "first_grasp_system",
     "free_fingers",
@@ -75,6 +76,18 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+def __getattr__(name: str) -> Any:
+    # SahGraspManifold, the old name of HandGraspManifold (it takes any hand), for one release.
+    if name == "SahGraspManifold":
+        warnings.warn(
+            "sahgrasp.optimization.grasp.SahGraspManifold is deprecated; use HandGraspManifold",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        return HandGraspManifold
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _skew(v: FloatArray) -> FloatArray:
@@ -400,9 +413,13 @@ def reduced_system(
     return R, JR
 
 
-# ----- the SAH grasp system as a grasp manifold -------------------------------------------------
-class SahGraspManifold:
-    """R of Eq. (11) for a sahgrasp hand: the grasp system F plus its principal-motion constraints.
+# ----- a hand's grasp system as a grasp manifold -------------------------------------------------
+class HandGraspManifold:
+    """R of Eq. (11) for any hand: the grasp system F plus its principal-motion constraints.
+
+    It implements the :class:`~sahgrasp.optimization.optimizer.GraspManifold` protocol, whose
+    name it cannot share. ``SahGraspManifold``, its name before, still imports for one release
+    with a DeprecationWarning.
 
     The atlas works in scaled coordinates ``y`` with ``x = scales * y`` (:meth:`x_of`): with
     :func:`coordinate_scales`, a unit of ``y`` in any direction moves the hand, the object or a
@@ -696,7 +713,7 @@ def make_sah_manifold(
     motion_source: str = "random",
     length_scale_m: float | None = None,
     unit_m: float | None = None,
-) -> SahGraspManifold:
+) -> HandGraspManifold:
     """R for ``hand`` and the object's contact ``patches``, from the IK's first grasp.
 
     Args:
@@ -706,7 +723,7 @@ def make_sah_manifold(
         free_object: Let the object pose vary (else it is fixed in the palm).
         symmetry_axis: Axis (object frame) about which every contact region is revolved: the
             object's spin about it, which changes nothing but the parametrisation, is left out.
-        obj: The object, in the frame of ``patches`` (see :class:`SahGraspManifold`).
+        obj: The object, in the frame of ``patches`` (see :class:`HandGraspManifold`).
         motion_samples: Hand configurations sampled for the principal motions.
         seed: Seed of those samples.
         motion_source: Where they come from, one of :data:`MOTION_SOURCES` (see
@@ -725,10 +742,10 @@ def make_sah_manifold(
     motions = hand_motions(hand, system, motion_samples, seed, motion_source)
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
     scales = None if length_scale_m is None else coordinate_scales(system, length_scale_m, unit_m)
-    return SahGraspManifold(system, motions, k, x1, obj, scales)
+    return HandGraspManifold(system, motions, k, x1, obj, scales)
 
 
-def ik_seeds(problem: SahGraspManifold, count: int) -> FloatArray:
+def ik_seeds(problem: HandGraspManifold, count: int) -> FloatArray:
     """Seed grasps for :func:`~sahgrasp.optimization.optimizer.optimize_components`, (S, n).
 
     In the atlas's coordinates ``y``: ``x_1`` first, then the IK's solutions of the same contacts
@@ -826,7 +843,7 @@ def make_mesh_manifold(
     length_scale_m: float = 0.1,
     unit_m: float = 0.003,
     patches: GraspPatches | None = None,
-) -> SahGraspManifold:
+) -> HandGraspManifold:
     """R (Eq. (11)) of a grasp of a mesh object, around a starting grasp.
 
     Each contact of ``target`` gets a smooth local model of the mesh (:func:`mesh_patches`); the
@@ -863,4 +880,4 @@ def make_mesh_manifold(
     motions = hand_motions(hand, system, motion_samples, seed, "random")
     x1 = _start_inside(system.F, system.J, system.x_first, system.lower, system.upper)
     scales = coordinate_scales(system, length_scale_m, unit_m)
-    return SahGraspManifold(system, motions, k, x1, at_origin, scales)
+    return HandGraspManifold(system, motions, k, x1, at_origin, scales)

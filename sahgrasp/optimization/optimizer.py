@@ -9,7 +9,7 @@ One protocol, :class:`GraspManifold`, says what the optimization needs of a prob
 ``J`` of ``R``, its box bounds, the start point, the dimension ``k``, the manipulability ellipsoid
 at chart centres and the collision checks of chart centres. The planar hand
 (:class:`sahgrasp.optimization.planar.PlanarGraspProblem`) and the SAH grasp system with its
-principal motions (:class:`sahgrasp.optimization.grasp.SahGraspManifold`) implement it;
+principal motions (:class:`sahgrasp.optimization.grasp.HandGraspManifold`) implement it;
 :func:`optimize` runs Algorithm 1 on either and returns one :class:`OptimizationResult`.
 
 Collisions (Section IV: "collisions could be considered as well ... returning the best collision
@@ -64,7 +64,7 @@ IndexFunction = Callable[[FloatArray], ArrayLike]
 """A user quality index: chart centres (N, n) -> N values, larger is better (NaN: undefined).
 
 The centres are in the problem's coordinates (a scaled
-:class:`~sahgrasp.optimization.grasp.SahGraspManifold` maps them back with ``x_of``)."""
+:class:`~sahgrasp.optimization.grasp.HandGraspManifold` maps them back with ``x_of``)."""
 
 
 @dataclass(frozen=True)

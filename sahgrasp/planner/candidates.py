@@ -23,17 +23,15 @@ since nothing resists a torque about that line).
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.model.hand import Hand
 from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
+from sahgrasp.objects.reach import derive_reach, finger_set, hand_reach
 from sahgrasp.quality.wrench import CONE_EDGES, force_closure, primitive_wrenches
 
 __all__ = [
@@ -53,10 +51,6 @@ _SPACING_ITERATIONS = 4
 _RAY_EPS_M = 1e-7
 """Ray crossings this near the origin are its own face (as in :meth:`SurfaceMesh.ray_hits`)."""
 _OFF_SURFACE_M = 1e-6
-_REACH_SAMPLES = 1000
-"""Random configurations whose fingertip distances bound a hand's span."""
-_FACING_COS = math.cos(math.radians(45.0))
-"""Thumb and finger pads within 45 degrees of facing each other count for the span."""
 
 
 @dataclass(frozen=True)
@@ -102,86 +96,6 @@ class Candidate:
     normals: FloatArray
     seed: int
     force_closure: bool = False
-
-
-def finger_set(hand: Hand, count: int) -> tuple[str, ...]:
-    """The fingers of a ``count``-finger grasp: the thumb, then the others in the hand's order.
-
-    Raises:
-        ValueError: The hand has fewer than ``count`` fingers.
-    """
-    names = list(hand.fingers)
-    if count > len(names) or count < 2:
-        raise ValueError(f"a {count}-finger grasp needs 2..{len(names)} fingers on this hand")
-    thumb = "thumb" if "thumb" in names else names[0]
-    others = [f for f in names if f != thumb]
-    return (thumb, *others[: count - 1])
-
-
-def hand_reach(hand: Hand) -> HandReach:
-    """A hand's reach for the draw (:func:`derive_reach`), computed once per hand model."""
-    digest = hand.description.digest()
-    if digest not in _REACH:
-        _REACH[digest] = derive_reach(hand)
-    return _REACH[digest]
-
-
-_REACH: dict[str, HandReach] = {}
-
-
-def derive_reach(hand: Hand) -> HandReach:
-    """A hand's spacing, span and fingertip radius, derived from its model.
-
-    Finger spacing: from 0.7 to 1.0 times the mean distance between the bases of neighbouring
-    non-thumb fingers (for the SAH, 28-40 mm, as measured with the IK). Span: up to the largest
-    thumb-to-finger contact distance (fingertip centres, less two radii) over random
-    configurations whose thumb and finger pads face each other within 45 degrees (a bound for
-    the draw: the IK decides).
-    """
-    model, data = hand.model, hand.model.createData()
-    pin.forwardKinematics(model, data, hand.configuration())
-    thumb = finger_set(hand, 2)[0]
-    bases = []
-    for finger in hand.fingers:
-        if finger == thumb:
-            continue
-        first = int(hand.finger_coordinates[finger][0])
-        joint = model.getJointId(hand.coordinate_names[first])
-        bases.append(np.array(data.oMi[joint].translation))
-    gaps = [float(np.linalg.norm(a - b)) for a, b in itertools.pairwise(bases)]
-    spacing = float(np.mean(gaps)) if gaps else 0.04
-    rng = np.random.default_rng(0)
-    specs = dict(zip(hand.fingers, hand.description.fingers, strict=True))
-    frames = {f: model.getFrameId(s.tip_link) for f, s in specs.items()}
-    others = [f for f in hand.fingers if f != thumb]
-    # The same draws as hand.random_configuration(rng, identity) one after the other (a
-    # Generator fills an array in order), assembled at once: q = identity wrist + coordinates.
-    coordinates = rng.uniform(hand.lower, hand.upper, size=(_REACH_SAMPLES, len(hand.lower)))
-    q = np.zeros((_REACH_SAMPLES, model.nq))
-    q[:, 6] = 1.0
-    q[:, 7:] = coordinates
-    positions = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
-    pads = {f: np.empty((_REACH_SAMPLES, 3)) for f in hand.fingers}
-    for k in range(_REACH_SAMPLES):
-        pin.framesForwardKinematics(model, data, q[k])
-        for f in hand.fingers:
-            placement = data.oMf[frames[f]]
-            positions[f][k] = placement.translation
-            pads[f][k] = placement.rotation @ np.array(specs[f].pad_axis)
-    span = 0.0
-    for f in others:
-        gap = positions[f] - positions[thumb]
-        facing = np.einsum("ij,ij->i", pads[thumb], pads[f])
-        # Pads facing each other (an opposition grasp), the finger in front of the thumb pad.
-        ok = (facing < -_FACING_COS) & (np.einsum("ij,ij->i", gap, pads[thumb]) > 0.0)
-        if ok.any():
-            span = max(span, float(np.linalg.norm(gap[ok], axis=1).max()))
-    span = span - 2.0 * hand.radius_m if span > 2.0 * hand.radius_m else 0.15
-    return HandReach(
-        finger_spacing_m=(0.7 * spacing, spacing),
-        span_m=(1e-3, span),
-        fingertip_radius_m=hand.radius_m,
-    )
 
 
 class CandidateDraw:

@@ -22,6 +22,7 @@ from sahgrasp.viz.colors import (
     FINGER_COLORS,
     MARKER_COLOR,
     QUALITY_COLORMAP,
+    finger_colors,
     hex_color,
     quality_colors,
 )
@@ -46,6 +47,7 @@ __all__ = [
     "Viewer",
     "ViewerError",
     "display_points",
+    "finger_colors",
     "frame_grasp",
     "grasp_points",
     "hex_color",

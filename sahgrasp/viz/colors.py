@@ -8,7 +8,16 @@ import numpy as np
 from matplotlib import colormaps
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["FINGER_COLORS", "MARKER_COLOR", "QUALITY_COLORMAP", "hex_color", "quality_colors"]
+from sahgrasp.model.hands import hand_entry
+
+__all__ = [
+    "FINGER_COLORS",
+    "MARKER_COLOR",
+    "QUALITY_COLORMAP",
+    "finger_colors",
+    "hex_color",
+    "quality_colors",
+]
 
 FINGER_COLORS = {
     "thumb": (0.85, 0.15, 0.15, 1.0),
@@ -16,13 +25,23 @@ FINGER_COLORS = {
     "middle": (0.95, 0.6, 0.05, 1.0),
     "ring": (0.6, 0.2, 0.75, 1.0),
 }
-"""Contact-marker colour of each finger (RGBA in [0, 1])."""
+"""Contact-marker colour of each finger by name (RGBA in [0, 1]), unless its hand gives its own."""
 
 MARKER_COLOR = (0.9, 0.1, 0.6, 1.0)
 """Contact-marker colour of a finger without its own colour."""
 
 QUALITY_COLORMAP = "RdYlGn"
 """Matplotlib colour map of quality values: red (low) to green (high), as in the atlas paper."""
+
+
+def finger_colors(hand_name: str) -> dict[str, tuple[float, float, float, float]]:
+    """Contact-marker colours of the fingers of hand ``hand_name``.
+
+    :data:`FINGER_COLORS`, overridden by the colours the hand's registry entry gives
+    (:attr:`sahgrasp.model.hands.HandEntry.finger_colors`).
+    """
+    entry = hand_entry(hand_name)
+    return {**FINGER_COLORS, **(entry.finger_colors if entry is not None else {})}
 
 
 def hex_color(rgba: Sequence[float]) -> int:

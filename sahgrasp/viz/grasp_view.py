@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, transform_points
+from sahgrasp.viz.colors import finger_colors
 from sahgrasp.viz.hand_view import HandView, visual_corners
 from sahgrasp.viz.markers import show_contacts, show_object
 from sahgrasp.viz.viewer import Viewer
@@ -52,7 +53,8 @@ def show_grasp(
     if obj is not None:
         show_object(viewer, f"{path}/object", obj)
     if target is not None:
-        show_contacts(viewer, f"{path}/contacts", target)
+        colors = finger_colors(hand.description.name)
+        show_contacts(viewer, f"{path}/contacts", target, colors=colors)
     view = HandView(viewer, hand, f"{path}/hand", q)
     if history:
         view.animate(history)

@@ -7,7 +7,7 @@ on it at ``R`` from the point).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import meshcat.geometry as mg
 import numpy as np
@@ -72,6 +72,7 @@ def show_contacts(
     target: GraspTarget,
     disk_radius_m: float = 0.006,
     normal_length_m: float = 0.02,
+    colors: Mapping[str, Sequence[float]] | None = None,
 ) -> None:
     """Draw each contact as a disk at its point with a cylinder along its outward normal.
 
@@ -81,10 +82,13 @@ def show_contacts(
         target: The contacts (world frame).
         disk_radius_m: Radius of the disks [m].
         normal_length_m: Length of the normal cylinders [m].
+        colors: RGBA colour per finger (default :data:`~sahgrasp.viz.colors.FINGER_COLORS`;
+            a hand's own: :func:`~sahgrasp.viz.colors.finger_colors`).
     """
+    colors = FINGER_COLORS if colors is None else colors
     thickness = 0.08 * disk_radius_m
     for c in target.contacts:
-        material = _material(FINGER_COLORS.get(c.finger, MARKER_COLOR))
+        material = _material(colors.get(c.finger, MARKER_COLOR))
         disk = viewer.meshcat[f"{path}/{c.finger}/disk"]
         disk.set_object(mg.Cylinder(thickness, disk_radius_m), material)
         disk.set_transform(_along(c.normal, c.point))
