@@ -6,10 +6,10 @@ stays fast: Pinocchio and coal are imported only when a hand is needed.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 from sahgrasp import _moved
+from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from sahgrasp.core.errors import (
@@ -41,7 +41,6 @@ _EXPORTS = {
 }
 _moved.install()  # old module paths import for one release, with a DeprecationWarning
 
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "AtlasError",
@@ -67,14 +66,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module 'sahgrasp' has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

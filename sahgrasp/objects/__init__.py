@@ -14,8 +14,9 @@ The names are loaded on first use: importing one module of the package (the IK i
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from sahgrasp.collision.shapes import (
@@ -153,7 +154,6 @@ _EXPORTS = {
         "SurfaceJet",
     ),
 }
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "CATALOG",
@@ -204,14 +204,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)

@@ -10,8 +10,9 @@ on first use, so that importing :mod:`sahgrasp.quality.indices` does not import 
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from sahgrasp.quality.ellipsoids import (
@@ -53,7 +54,6 @@ _EXPORTS = {
     ),
     "sahgrasp.quality.weight": ("WeightSupport", "holds_weight", "weight_support"),
 }
-_MODULE_OF = {name: module for module, names in _EXPORTS.items() for name in names}
 
 __all__ = [
     "INDICES",
@@ -77,15 +77,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # Loaded on first use: importing one submodule does not load its siblings' dependencies.
-    module = _MODULE_OF.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(module), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(__all__))
+__getattr__, __dir__ = lazy_exports(__name__, globals(), _EXPORTS)
