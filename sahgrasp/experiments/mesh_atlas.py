@@ -42,10 +42,10 @@ from sahgrasp.experiments.arguments import MESH_DEFAULTS
 from sahgrasp.model.contacts import ContactTarget, GraspTarget
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearance
-from sahgrasp.objects.patches import ContactRegion, GraspPatches
-from sahgrasp.objects.smooth_surface import MeshPatch, fit_mesh_patch
+from sahgrasp.objects.patches import GraspPatches
+from sahgrasp.objects.smooth_surface import MeshPatch
 from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
-from sahgrasp.optimization.grasp import HandGraspManifold, make_mesh_manifold
+from sahgrasp.optimization.grasp import HandGraspManifold, make_mesh_manifold, mesh_patches
 from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.verify import LINK_TOLERANCE_M, GraspVerifier, Verdict
 
@@ -240,20 +240,7 @@ def start_patches(
     Raises:
         SurfaceModelError: No smooth model of the mesh fits around a contact.
     """
-    import trimesh
-
-    mesh = obj.mesh()
-    tm = trimesh.Trimesh(mesh.vertices_m, mesh.faces, process=False)
-    T_object_world = np.linalg.inv(obj.T_world_object)
-    regions: dict[str, ContactRegion] = {}
-    for c in target.contacts:
-        point = T_object_world[:3, :3] @ c.point + T_object_world[:3, 3]
-        normal = T_object_world[:3, :3] @ c.normal
-        regions[c.finger] = fit_mesh_patch(
-            c.finger, tm, point, normal, max_half_width_m=max_half_width_m,
-            tolerance_m=tolerance_m, anchored=True,
-        )  # fmt: skip
-    return GraspPatches(target.name, regions)
+    return mesh_patches(obj, target, max_half_width_m, tolerance_m, anchored=True)
 
 
 def _on_mesh(

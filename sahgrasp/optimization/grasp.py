@@ -800,6 +800,7 @@ def mesh_patches(
     target: GraspTarget,
     max_half_width_m: float = 0.02,
     tolerance_m: float = 3e-4,
+    anchored: bool = False,
 ) -> GraspPatches:
     """Contact regions on a mesh object: the smooth local model around each contact.
 
@@ -809,6 +810,8 @@ def mesh_patches(
         max_half_width_m: Largest half width of a region [m]
             (:func:`sahgrasp.objects.smooth_surface.fit_mesh_patch`).
         tolerance_m: Largest distance from a region's model to the mesh [m].
+        anchored: Each model passes through its contact point with the contact's normal
+            (``fit_mesh_patch(..., anchored=True)``), so a grasp reaching the contacts is on F.
 
     Returns:
         The regions, in the object frame.
@@ -827,7 +830,7 @@ def mesh_patches(
         normal = T_object_world[:3, :3] @ c.normal
         regions[c.finger] = fit_mesh_patch(
             c.finger, tm, point, normal, max_half_width_m=max_half_width_m,
-            tolerance_m=tolerance_m,
+            tolerance_m=tolerance_m, anchored=anchored,
         )  # fmt: skip
     return GraspPatches(target.name, regions)
 
