@@ -38,6 +38,7 @@ __all__ = [
     "SamplerSettings",
     "SurfaceMesh",
     "as_surface",
+    "ray_exit",
     "registered_reach",
     "sample_contact_sets",
     "sample_object_grasps",
@@ -422,14 +423,8 @@ class _ContactSetDraw:
         """Where a ray into the object from the thumb leaves it within the span, at random."""
         point, normal = thumb
         direction = _in_cone(rng, -normal, self.cone_cos)
-        distances, faces = self.surface.ray_hits(point, direction)
-        lo, hi = self.reach.span_m
-        exits = (self.surface.normals[faces] @ direction > 0.0) & (distances >= lo)
-        exits &= distances <= hi
-        if not exits.any():
-            return None
-        k = int(rng.choice(np.flatnonzero(exits)))
-        return point + distances[k] * direction, self.surface.normals[faces[k]]
+        hits = self.surface.ray_hits(point, direction)
+        return ray_exit(rng, point, direction, hits, self.surface.normals, self.reach.span_m)
 
     def _neighbour(
         self, start: FloatArray, direction: FloatArray, spacing_m: float
@@ -469,6 +464,38 @@ class _ContactSetDraw:
         """Each fingertip sphere, resting on its contact, stays out of the object."""
         radius = self.reach.fingertip_radius_m
         return all(self.surface.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
+
+
+def ray_exit(
+    rng: np.random.Generator,
+    point_m: FloatArray,
+    direction: FloatArray,
+    hits: tuple[FloatArray, NDArray[np.intp]],
+    face_normals: FloatArray,
+    span_m: tuple[float, float],
+) -> Contact | None:
+    """Where a ray from ``point_m`` into the object leaves it within ``span_m``, one at random.
+
+    Args:
+        rng: Picks among the exits.
+        point_m: The ray's origin on the surface [m].
+        direction: The ray's unit direction, into the object.
+        hits: The ray's crossings: distances [m] and faces, as ``SurfaceMesh.ray_hits`` gives.
+        face_normals: Outward unit normals of the mesh's faces.
+        span_m: Range of the distance from the origin to the exit [m].
+
+    Returns:
+        The exit point and its face's outward normal; None when no crossing leaving the object
+        (the face turned along the ray) is within the span.
+    """
+    distances, faces = hits
+    lo, hi = span_m
+    exits = (face_normals[faces] @ direction > 0.0) & (distances >= lo)
+    exits &= distances <= hi
+    if not exits.any():
+        return None
+    k = int(rng.choice(np.flatnonzero(exits)))
+    return point_m + distances[k] * direction, face_normals[faces[k]]
 
 
 def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:

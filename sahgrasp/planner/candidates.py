@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh
+from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh, ray_exit
 from sahgrasp.objects.reach import derive_reach, finger_set, hand_reach
 from sahgrasp.quality.wrench import CONE_EDGES, force_closure, primitive_wrenches
 
@@ -202,14 +202,8 @@ class CandidateDraw:
     def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
         point, normal = thumb
         direction = _in_cone(rng, -normal, self.cone_cos)
-        distances, faces = self.nearest.ray_hits(point, direction)
-        lo, hi = self.reach.span_m
-        exits = (self.surface.normals[faces] @ direction > 0.0) & (distances >= lo)
-        exits &= distances <= hi
-        if not exits.any():
-            return None
-        k = int(rng.choice(np.flatnonzero(exits)))
-        return point + distances[k] * direction, self.surface.normals[faces[k]]
+        hits = self.nearest.ray_hits(point, direction)
+        return ray_exit(rng, point, direction, hits, self.surface.normals, self.reach.span_m)
 
     def _neighbour(
         self, start: FloatArray, direction: FloatArray, step_m: float, half: bool
