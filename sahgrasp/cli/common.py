@@ -66,6 +66,7 @@ __all__ = [
     "positive_int",
     "printable",
     "scheduler_address",
+    "work_executor",
     "write_stdout",
 ]
 
@@ -295,3 +296,20 @@ def emit_json(data: Any, out: str | None) -> None:
         return
     write_bytes_atomic(out, text.encode("utf-8"))
     print(f"wrote {out}")
+
+
+def work_executor(args: argparse.Namespace) -> Any:
+    """Where a command's work runs, from ``--scheduler`` and ``--workers``.
+
+    A context manager giving None (this process: one worker), a local process pool, or a Dask
+    cluster's executor.
+    """
+    if args.scheduler is not None:
+        from sahgrasp.core.executors import open_executor
+
+        return open_executor(args.scheduler)
+    if args.workers <= 1:
+        return contextlib.nullcontext(None)
+    from sahgrasp.core.parallel import process_pool
+
+    return process_pool(args.workers)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
 import sys
 import time
@@ -21,6 +20,7 @@ from sahgrasp.cli.common import (
     positive_float,
     positive_int,
     printable,
+    work_executor,
 )
 from sahgrasp.cli.solve import resume_hint
 from sahgrasp.model.hands import DEFAULT_HAND
@@ -380,7 +380,10 @@ def _run_folder(args: argparse.Namespace) -> int:
     todo = [j for j in jobs if j.digest not in done]
     complete = False
     try:
-        with _executor(args) as pool, _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar:
+        with (
+            work_executor(args) as pool,
+            _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar,
+        ):
             for doc in plan_jobs(
                 hand.description, todo, settings, pool, 2 * max(args.workers, 1), make_check
             ):
@@ -435,18 +438,6 @@ def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
 
     hold = _hold_settings(args)
     return {} if hold is None else {"verify": {"physics": dataclasses.asdict(hold)}}
-
-
-def _executor(args: argparse.Namespace) -> Any:
-    if args.scheduler is not None:
-        from sahgrasp.core.executors import open_executor
-
-        return open_executor(args.scheduler)
-    if args.workers <= 1:
-        return contextlib.nullcontext(None)
-    from sahgrasp.core.parallel import process_pool
-
-    return process_pool(args.workers)
 
 
 def _bar(args: argparse.Namespace, total: int, unit: str, done: int = 0) -> Any:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import math
 import shlex
 import sys
@@ -28,6 +27,7 @@ from sahgrasp.cli.common import (
     positive_int,
     printable,
     scheduler_address,
+    work_executor,
 )
 
 if TYPE_CHECKING:
@@ -228,19 +228,6 @@ def _skip_finished(
     return itertools.chain([changed], problems)
 
 
-def _executor(args: argparse.Namespace) -> Any:
-    """Where the chunks run: None (this process), local workers, or a Dask cluster."""
-    if args.scheduler is not None:
-        from sahgrasp.core.executors import open_executor
-
-        return open_executor(args.scheduler)
-    if args.workers <= 1:
-        return contextlib.nullcontext(None)
-    from sahgrasp.core.parallel import process_pool
-
-    return process_pool(args.workers)
-
-
 def _chunking(args: argparse.Namespace, total: int | None) -> tuple[int, int]:
     """Problems per chunk and chunks in flight: all workers busy, scheduling cost under 1%."""
     from sahgrasp.ik.batch import CHUNK_SIZE, CHUNKS_IN_FLIGHT, CLUSTER_CHUNK_SIZE
@@ -389,7 +376,7 @@ def run(args: argparse.Namespace) -> int:
         items = solve_items(problems, outputs, named, digests)
         total = None if targets.total is None else targets.total - summary.resumed
         size, in_flight = _chunking(args, total)
-        with _executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
+        with work_executor(args) as pool, _bar(args, targets.total, summary.resumed) as bar:
             for chunk in solve_chunks(
                 hand, items, settings, sequence, pool, "entry", size, in_flight, database
             ):
