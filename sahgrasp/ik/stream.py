@@ -34,7 +34,6 @@ from sahgrasp.core.fileio import (
     file_digest,
     json_safe,
     lock_output,
-    read_json,
     side_files,
     write_error,
 )
@@ -44,7 +43,7 @@ from sahgrasp.model.contacts import (
     ObjectSpec,
     object_spec,
     problem_from_line,
-    read_problems,
+    read_targets_document,
     targets_hand,
 )
 
@@ -111,9 +110,10 @@ def open_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = Fa
     """
     path = Path(path)
     if not is_jsonl(path):
-        hand, problems = read_problems(path, allow_outside_paths=allow_outside_paths)
+        hand, default, problems = read_targets_document(
+            path, allow_outside_paths=allow_outside_paths
+        )
         meshes = {Path(m) for p in problems if (m := _mesh_of(p)) is not None}
-        default = _document_default(path, allow_outside_paths)
         return Targets(
             hand, len(problems), iter(problems), targets_digest(hand, default), tuple(meshes)
         )
@@ -142,12 +142,6 @@ def open_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = Fa
 def _mesh_of(problem: GraspTarget | InvalidProblem) -> str | None:
     spec = getattr(problem, "object_spec", None)
     return None if spec is None else spec.mesh
-
-
-def _document_default(path: Path, allow_outside_paths: bool = False) -> ObjectSpec | None:
-    """The default object of a JSON targets document (already read and checked whole)."""
-    data = read_json(path, "targets file", InvalidTargetError)
-    return object_spec(data.get("object"), path.parent, allow_outside_paths=allow_outside_paths)
 
 
 def targets_digest(hand: str, default: ObjectSpec | None) -> str:

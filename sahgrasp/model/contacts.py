@@ -53,6 +53,7 @@ __all__ = [
     "problem_from_json",
     "problem_from_line",
     "read_problems",
+    "read_targets_document",
     "save_targets",
     "targets_hand",
 ]
@@ -683,9 +684,9 @@ def problem_from_line(
     return problem_from_json(raw, index, folder, default, allow_outside_paths=allow_outside_paths)
 
 
-def read_problems(
+def read_targets_document(
     path: str | os.PathLike[str], *, allow_outside_paths: bool = False
-) -> tuple[str, list[GraspTarget | InvalidProblem]]:
+) -> tuple[str, ObjectSpec | None, list[GraspTarget | InvalidProblem]]:
     """Read a targets file; a problem that fails validation is kept as an :class:`InvalidProblem`.
 
     A problem without a name is called ``problem-<index>`` (from 0, in file order). A relative
@@ -699,7 +700,8 @@ def read_problems(
             ``..``, a link leading out); by default such a problem is invalid.
 
     Returns:
-        The hand (a registered hand's name or a description path) and the problems in file order.
+        The hand (a registered hand's name or a description path), the file's default object
+        (None: none) and the problems in file order.
 
     Raises:
         InvalidTargetError: The file is missing, a folder, not UTF-8 JSON, nested too deeply,
@@ -716,10 +718,26 @@ def read_problems(
     hand = targets_hand(data, path)
     folder = path.parent
     default = object_spec(data.get("object"), folder, allow_outside_paths=allow_outside_paths)
-    return hand, [
-        problem_from_json(raw, i, folder, default, allow_outside_paths=allow_outside_paths)
-        for i, raw in enumerate(data["problems"])
-    ]
+    return (
+        hand,
+        default,
+        [
+            problem_from_json(raw, i, folder, default, allow_outside_paths=allow_outside_paths)
+            for i, raw in enumerate(data["problems"])
+        ],
+    )
+
+
+def read_problems(
+    path: str | os.PathLike[str], *, allow_outside_paths: bool = False
+) -> tuple[str, list[GraspTarget | InvalidProblem]]:
+    """Read a targets file: its hand and its problems, as :func:`read_targets_document` does.
+
+    Raises:
+        InvalidTargetError: As :func:`read_targets_document`.
+    """
+    hand, _, problems = read_targets_document(path, allow_outside_paths=allow_outside_paths)
+    return hand, problems
 
 
 def targets_hand(data: dict[str, Any], path: Path) -> str:
@@ -746,11 +764,11 @@ def load_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = Fa
     Args:
         path: The targets file.
         allow_outside_paths: Accept object meshes outside the file's folder (see
-            :func:`read_problems`).
+            :func:`read_targets_document`).
 
     Raises:
-        InvalidTargetError: The file cannot be read (see :func:`read_problems`) or holds an invalid
-            problem.
+        InvalidTargetError: The file cannot be read (see :func:`read_targets_document`) or holds
+            an invalid problem.
     """
     hand, problems = read_problems(path, allow_outside_paths=allow_outside_paths)
     valid = []
