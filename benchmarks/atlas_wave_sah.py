@@ -1,4 +1,4 @@
-"""One-chart against wave-front atlas on an SAH experiment (docs/results.md, docs/atlas.md).
+"""One-chart against wave-front atlas on an SAH experiment (docs/results.md, docs/methods/atlas.md).
 
 Builds the atlas of one SAH experiment with ``batch = 1`` and with ``batch = --batch``,
 alternating, and prints the chart count and CPU time of each build. The defaults are the oil

@@ -1,4 +1,4 @@
-"""How many grasp entries would pass through their own solid if solved without it (docs/ik.md).
+"""How many grasp entries pass through their own solid if solved without it (docs/methods/ik.md).
 
 Draws the contact sets of the shipped SAH database's grasp entries (``sahgrasp learn``'s default
 seed and size: the same solids and sets, :func:`sahgrasp.ik.learning.primitive_grasp_sets`),

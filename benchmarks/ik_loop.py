@@ -1,4 +1,4 @@
-"""CPU time of the compiled Levenberg-Marquardt loop alone (docs/ik.md, "Compiled loop").
+"""CPU time of the compiled Levenberg-Marquardt loop alone (docs/methods/ik.md, "Compiled loop").
 
 Each seeded random SAH problem starts from the thumb-hung mid-range configuration; the loop runs
 every start once per repeat and the least total CPU time is kept. Prints microseconds per start

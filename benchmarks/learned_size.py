@@ -1,4 +1,4 @@
-"""How the learned start's database size trades start quality for lookup cost (docs/ik.md).
+"""How the learned start's database size trades start quality for lookup cost (docs/methods/ik.md).
 
 Takes a large SAH database (``sahgrasp learn --hand sah --samples 10000 --grasps 10000 --out
 BIG``) and cuts databases of ``R + G`` entries from it: its first R random entries and first G

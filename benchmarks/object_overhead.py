@@ -1,6 +1,7 @@
 """The cost of the object in the IK on the paper grasps: CPU time with / without ``obstacle=``.
 
-Prints a Markdown table (docs/ik.md): per paper grasp (and the can's three-finger grasp with the
+Prints a Markdown table (docs/methods/ik.md): per paper grasp (and the can's three-finger grasp
+with the
 ring finger free), the CPU time of one solve without and with the object (best of ``--repeats``
 rounds of ``--calls`` solves each, both runs interleaved per round so that a change of machine
 load affects both alike), their ratio, and the clearance and closest link the IK reports.

@@ -1,4 +1,4 @@
-"""Where the IK's time with an object goes, query by query (docs/objects.md, "Where a solve's ...").
+"""Where the IK's time with an object goes, query by query (docs/methods/meshes.md).
 
 Draws the first ``--sets`` contact sets of the grasp benchmark per object (``sample_object_grasps``
 with the benchmark's per-object seed), solves each without and then with the object, and
@@ -193,7 +193,7 @@ def _queries(
     HandObjectClearance.penetrations = logged_penetrations  # type: ignore[method-assign]
     HandObjectClearance.clearance = logged("clearance", False)  # type: ignore[method-assign]
     HandObjectClearance.clearance_if_clear = logged("clearance_if_clear", True)  # type: ignore[method-assign]
-    # The IK asks the compiled verdicts when it can (docs/ik.md): without them it asks every
+    # The IK asks the compiled verdicts when it can (docs/methods/ik.md): without them it asks every
     # query of these, and makes the same solves.
     compiled = obstacle_module.pieces_of
     obstacle_module.pieces_of = lambda checker: None  # type: ignore[assignment]
@@ -213,7 +213,7 @@ def _ask_all(pairs: list[tuple[Callable[[], Any], Callable[[], Any]]], side: int
 
 
 def compiled(hand: Hand, obj: GraspObject, targets: list[GraspTarget], repeats: int) -> None:
-    """The IK's queries answered by coal alone and by the compiled verdicts (docs/ik.md)."""
+    """The IK's queries answered by coal alone and by the compiled verdicts (docs/methods/ik.md)."""
     checker = HandObjectClearance(hand, obj)
     obstacles: dict[tuple[str, ...], Obstacle] = {}
     rows: dict[str, list[tuple[Callable[[], Any], Callable[[], Any]]]] = defaultdict(list)

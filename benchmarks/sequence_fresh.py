@@ -1,4 +1,4 @@
-"""Share of fresh problems a shipped sequence solves within i initial poses (docs/sequence.md).
+"""Share of fresh problems a shipped sequence solves within i poses (docs/results.md).
 
 Solves problems ``0 .. M-1`` of the stream ``--seed`` (not the search's) with ``init="sequence"``
 and the default solver, once with the hand's shipped sequence and once with the lambdas of the

@@ -484,7 +484,7 @@ def test_json_to_a_reader_that_closes_early_exits_141(tmp_path: Path, unbuffered
             r"sequence file deep\.json is nested too deeply",
         ),
         (["solve", "one.json", "--sequence", "u16.json"], r"sequence file u16\.json is not UTF"),
-        (["info", "--hand", "h.urdf"], r"h\.urdf is a URDF, but a hand .* docs/hand\.md"),
+        (["info", "--hand", "h.urdf"], r"h\.urdf is a URDF, .*docs/how-to/add-a-hand\.md"),
         (["solve", "one.json", "--hand", "h.xml"], r"h\.xml is a URDF, .*hand-description JSON"),
     ],
 )

@@ -1,7 +1,8 @@
 """The registry of hands: a hand is a plug-in, generic code names none.
 
 A test hand, ``tripod`` (the SAH's thumb, index and middle finger: a three-finger hand with its
-own description), is registered the way docs/hand.md says, in one place, and then works with
+own description), is registered the way docs/how-to/add-a-hand.md says, in one place, and then
+works with
 ``load_hand``, the command line's ``--hand`` (as an installed plug-in), the planner and the IK.
 """
 

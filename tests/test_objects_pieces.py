@@ -1,4 +1,4 @@
-"""The joined collision pieces: revolved slabs and merged mesh prisms (docs/objects.md).
+"""The joined collision pieces: revolved slabs and merged mesh prisms (docs/methods/objects.md).
 
 Each check compares the joined pieces with the pieces they replace (one per band sector, one
 prism per triangle): every point inside the old pieces is inside the new ones, and the new ones

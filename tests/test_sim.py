@@ -120,7 +120,7 @@ def test_paper_grasps_hold(name: str) -> None:
 def test_coffee_cup_paper_grasp_holds_when_the_friction_does_not_creep() -> None:
     # With MuJoCo's no-slip post-solver the grasp holds (the cup turns under a degree); the
     # default model lets soft friction creep and the cup turns by about the 15 degree limit
-    # over a 1 s pull (docs/physics.md, "Which MuJoCo settings").
+    # over a 1 s pull (docs/methods/physics.md, "Which MuJoCo settings").
     result = _tester("coffee_cup", noslip_iterations=5).test(_solved("coffee_cup"))
     assert result.holds, result.detail
 
@@ -129,7 +129,7 @@ def test_coffee_cup_paper_grasp_holds_when_the_friction_does_not_creep() -> None
 def test_fork_edge_pinch_holds_with_a_light_squeeze_only() -> None:
     # The fork is pinched on the rounded edge (radius 0.6 mm) of a 5 mm plate: rigid fingertips
     # pressing hard roll it over, a light squeeze holds it where friction does not creep
-    # (docs/physics.md).
+    # (docs/methods/physics.md).
     light = _tester("fork", squeeze_n=LIGHT_SQUEEZE_N, noslip_iterations=5)
     assert light.test(_solved("fork")).holds
     assert not _tester("fork", noslip_iterations=5).test(_solved("fork")).holds

@@ -47,7 +47,8 @@ def _analytic_errors(patch, kind: str) -> tuple[float, float]:  # type: ignore[n
     return max(distances), max(angles)
 
 
-# Stated tolerances (docs/atlas.md, "The atlas on a mesh"): a coarse mesh (sphere of 320 faces,
+# Stated tolerances (docs/methods/atlas.md, "The atlas on a mesh"): a coarse mesh (sphere of 320
+# faces,
 # edges about 12 mm on a 40 mm radius; cylinder of 24 sections) is itself up to 0.45 mm inside the
 # surface between its vertices, and the model lies between facets and vertices; a fine one (5120
 # faces, 128 sections) is followed to within 0.1 mm and 1.5 degrees over a patch of +-20 mm.

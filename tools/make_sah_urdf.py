@@ -1,11 +1,11 @@
-"""Write ``urdf/sah_right.urdf`` from the public fact sheet of the SAH (see docs/hand.md).
+"""Write ``urdf/sah_right.urdf`` from the SAH's public fact sheet (docs/methods/hand-model.md).
 
 The fact sheet gives millimetres and degrees in a modified-DH description; this script is the single
 place where those numbers become the URDF (metres, radians). Run it from the repository root:
 ``python tools/make_sah_urdf.py``. Collision shapes are boxes, cylinders and spheres (URDF
 primitives that Pinocchio, coal and yourdfpy all read), sized so that the open hand and the hand
 closed without abduction are collision-free while neighbouring fingers abducted towards each other
-collide (see docs/hand.md).
+collide (see docs/methods/hand-model.md).
 """
 
 from __future__ import annotations

@@ -2,9 +2,11 @@
 
 Every top-level module and package of ``sahgrasp/`` except the entry points (``cli``, ``bench``)
 and private names gets a page ``api/<module>.md`` holding ``::: sahgrasp.<module>``, listed under
-the nav's "API reference" after the hand-written ``api/sahgrasp.md``. A guide ``docs/*.md`` that
-mkdocs.yml does not list is appended to "Guides" under its own first heading. So a module or a
-guide added by a change is published without editing mkdocs.yml. Loaded by mkdocs.yml
+the nav's "API reference" after the hand-written ``api/sahgrasp.md``. A page that mkdocs.yml does
+not list is appended to the nav section of its folder (``docs/tutorials/`` to "Tutorials",
+``docs/how-to/`` to "How-to", ``docs/methods/`` to "Methods", ``docs/*.md`` to "Develop") under its
+own first heading. So a module or a page added by a change is published without editing
+mkdocs.yml. Loaded by mkdocs.yml
 (``hooks:``).
 """
 
@@ -18,7 +20,8 @@ from mkdocs.structure.files import File, Files
 PACKAGE = Path(__file__).resolve().parents[1] / "sahgrasp"
 ENTRY_POINTS = frozenset({"cli", "bench"})
 SECTION = "API reference"
-GUIDES = "Guides"
+SECTIONS = {"tutorials": "Tutorials", "how-to": "How-to", "methods": "Methods", "": "Develop"}
+"""The nav section of each docs folder (``""``: the docs folder itself) for unlisted pages."""
 
 
 def library_modules() -> list[str]:
@@ -48,14 +51,15 @@ def _listed(nav: object) -> set[str]:
 
 
 def on_config(config: MkDocsConfig) -> MkDocsConfig:
-    """Fill the API reference with one page per module; append unlisted guides."""
+    """Fill the API reference with one page per module; append unlisted pages to their section."""
     api = _section(config, SECTION)
     api[:] = [{"sahgrasp": "api/sahgrasp.md"}]
     api += [{module: f"api/{module}.md"} for module in library_modules()]
     listed = _listed(config.nav)
     docs = Path(config.docs_dir)
-    guides = _section(config, GUIDES)
-    guides += sorted(p.name for p in docs.glob("*.md") if p.name not in listed)
+    for folder, title in SECTIONS.items():
+        pages = sorted(p.relative_to(docs).as_posix() for p in (docs / folder).glob("*.md"))
+        _section(config, title).extend(page for page in pages if page not in listed)
     return config
 
 

@@ -2,7 +2,7 @@
 
 The polytope itself is compiled (``_polytope.c``): a chart's polytope has a handful of vertices
 and a build cuts polytopes hundreds of thousands of times, one plane at a time, so that the cost
-in Python was the interpreter's per call, not the arithmetic (docs/atlas.md, "Compiled
+in Python was the interpreter's per call, not the arithmetic (docs/methods/atlas.md, "Compiled
 polytopes"). Vertex/face incidence is kept as bit masks; for k = 2 the vertices go round the
 polygon counter-clockwise, so that a cut is a clip of consecutive vertices, and a polytope is
 built from all its planes at once through the dual polygon (Andrew's monotone chain); for other

@@ -33,7 +33,7 @@ _DESCRIPTION = (
     "less than 15 deg every time (BODex's 50 mm / 15 deg verdict is reported too). Give the "
     "targets file and the results of 'sahgrasp solve', or a planner's results (which name their "
     "object) alone. Exit status 0: every grasp holds; 1: some do not, or some were not solved; "
-    "2: bad input. docs/physics.md describes the model and every setting."
+    "2: bad input. docs/methods/physics.md describes the model and every setting."
 )
 
 
@@ -72,7 +72,7 @@ def add_parser(sub: Any) -> None:
                       help="object density [kg/m^3]")  # fmt: skip
     p.add_argument("--no-slip", action="store_true",
                    help="run MuJoCo's no-slip post-solver (5 iterations): contacts do not creep, "
-                   "a less strict verdict than the default (docs/physics.md)")  # fmt: skip
+                   "a less strict verdict than the default (docs/methods/physics.md)")  # fmt: skip
     add_mesh_path_argument(p)
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
     add_json_argument(p, "every grasp's verdicts, per-direction motion and the summary")

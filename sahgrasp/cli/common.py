@@ -223,7 +223,7 @@ def _refuse_urdf(hand: str) -> None:
             f'{hand} is a URDF, but a hand (--hand, a targets file\'s "hand") is '
             f"{', '.join(HANDS)} or a hand-description JSON, which "
             "names the URDF and says which links are the fingertips and palm; write one as "
-            "docs/hand.md ('Adding another hand') shows"
+            "docs/how-to/add-a-hand.md shows"
         )
 
 

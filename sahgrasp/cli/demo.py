@@ -1,7 +1,8 @@
 """``sahgrasp demo``: solve grasps and write them side by side into one scene.
 
 Without ``--targets``, the paper's example grasps, compared with the paper. With ``--targets
-FILE``, every problem of a targets file (``docs/formats.md``), each with the object it names
+FILE``, every problem of a targets file (``docs/how-to/file-formats.md``), each with the object it
+names
 (``"object"``, per problem or the file's default) as the IK's obstacle, drawn at its placement
 beside the hand. The problems are solved as ``sahgrasp solve`` solves them (the same starts,
 ``--init learned`` by default, and the same solutions); a problem that is invalid is reported

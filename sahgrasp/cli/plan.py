@@ -169,7 +169,7 @@ def add_parser(sub: Any) -> None:
 
 
 def _add_verify_arguments(p: Any) -> None:
-    """``--verify physics`` and the hold test's settings (docs/physics.md)."""
+    """``--verify physics`` and the hold test's settings (docs/methods/physics.md)."""
     p.add_argument(
         "--verify",
         choices=("physics",),

@@ -132,7 +132,7 @@ def _line(entry: dict[str, Any]) -> str:
 
 
 def results_document(hand_name: str, entries: list[dict[str, Any]]) -> dict[str, Any]:
-    """The results file (``docs/formats.md``) from the results entries, in problem order.
+    """The results file (docs/how-to/file-formats.md) from the results entries, in problem order.
 
     The summary's times are of the solves alone; the set-up (loading objects, building their
     collision pieces) is summed apart in ``setup_ms``.

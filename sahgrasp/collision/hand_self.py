@@ -146,7 +146,7 @@ class SelfCollision:
         self.data = model.createData()
         # The yes/no query goes through coal's sweep-and-prune broad phase: on a collision-free
         # hand (the IK's converged starts) it skips the pairs whose bounding boxes are apart,
-        # about half the time of querying all pairs (docs/ik.md). Its own GeometryData: the
+        # about half the time of querying all pairs (docs/methods/ik.md). Its own GeometryData: the
         # manager keeps the shapes' boxes there between queries.
         self._broadphase = pin.BroadPhaseManager_SSaPCollisionManager(
             model, geometry_model, stateless_requests(pin.GeometryData(geometry_model))

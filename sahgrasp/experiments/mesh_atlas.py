@@ -2,7 +2,7 @@
 
 Rosales, Porta and Ros (RSS 2011) optimise over the grasps whose contacts stay on given contact
 regions of an analytic object. On a mesh the regions are smooth local models of the mesh around
-each start's contacts, anchored there (:func:`start_patches`; docs/atlas.md "The atlas on a
+each start's contacts, anchored there (:func:`start_patches`; docs/methods/atlas.md "The atlas on a
 mesh", Eqs. (M1)-(M4)): the start is the atlas's first chart. :func:`optimize_mesh_grasps`
 builds the atlas of R (Eq. (11)) from each start, checks collisions at every chart centre as for
 the can (self-collision, and every link against the object's collision pieces with the contact

@@ -104,7 +104,7 @@ The paper states no unit for the SAH's r = 1. Our F differs from the paper's (t 
 the can: rolling fingertips, the coupled distal joints, a free object), so no unit makes the two
 atlases the same set; the unit here is the one at which our atlas has the paper's number of
 charts, about 1 mm of contact or object motion (1.5 mm can, 0.88 mm bottle, 1.01 mm bottle with
-k = 3), i.e. r = 1 in millimetres. docs/atlas.md, "The paper's sizes", explains."""
+k = 3), i.e. r = 1 in millimetres. docs/methods/atlas.md, "The paper's sizes", explains."""
 
 _MOTION_SAMPLES = {"random": 2000, "grasps": 200}
 """Configurations sampled for the principal motions per source (an IK solve each for grasps)."""

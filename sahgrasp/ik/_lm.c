@@ -1,4 +1,4 @@
-/* The auto method's Levenberg-Marquardt loop in one native call (docs/ik.md, "The compiled loop").
+/* The auto method's Levenberg-Marquardt loop in one native call (docs/methods/ik.md, "The compiled loop").
  *
  * A Tree holds a hand's kinematic tree as exported from its Pinocchio model by sahgrasp/ik/compiled.py:
  * a free-flyer root (the wrist) and 1-DoF revolute or prismatic joints, mimic joints included
@@ -6,7 +6,7 @@
  * the IK, its Jacobian with respect to v, Pinocchio's integration q (+) v, and the whole loop of
  * sahgrasp/ik/solver.py's `_lm_loop`. In Python on Pinocchio the unavoidable calls of one
  * iteration alone cost several times the whole compiled iteration, which is a few microseconds
- * of arithmetic (docs/ik.md, "The compiled loop").
+ * of arithmetic (docs/methods/ik.md, "The compiled loop").
  *
  * Rotations are row-major 3 x 3. Buffers are C-contiguous float64 (int64 for finger indices).
  */

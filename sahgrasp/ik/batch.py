@@ -159,7 +159,7 @@ def invalid_result(hand: Hand, name: str) -> IKResult:
 
 
 def invalid_entry(name: str, detail: str) -> dict[str, Any]:
-    """The results entry (docs/formats.md) of a problem refused as invalid input."""
+    """The results entry (docs/how-to/file-formats.md) of a problem refused as invalid input."""
     return {"name": name, **INVALID_ENTRY, "detail": detail}
 
 

@@ -1,6 +1,7 @@
 """A hand's kinematic tree for the compiled Levenberg-Marquardt loop (``sahgrasp/ik/_lm.c``).
 
-The auto method's inner loop runs in one native call per start (docs/ik.md, "The compiled loop"):
+The auto method's inner loop runs in one native call per start (docs/methods/ik.md, "The compiled
+loop"):
 in Python, the unavoidable calls of one iteration alone cost several times the compiled iteration.
 The tree is read from the hand's Pinocchio model, which stays the reference: each joint's
 placement, parent, configuration and velocity index, and its axis taken from Pinocchio's own
@@ -88,10 +89,10 @@ def self_collides(hand: Hand, q: NDArray[np.float64]) -> bool:
     Compiled (GJK in ``sahgrasp/collision/_gjk.h``, the shapes placed by the tree's own kinematics)
     when every collision shape is a sphere, box, cylinder, capsule or ellipsoid, as in the shipped
     hands: one native call instead of Pinocchio's and coal's broad phase through Python
-    (docs/ik.md, "Compiled collision verdicts"). :meth:`Hand.in_collision` answers for other
+    (docs/methods/ik.md, "Compiled collision verdicts"). :meth:`Hand.in_collision` answers for other
     shapes (meshes). It can differ from this verdict for pairs within GJK's tolerance of
     touching, and where Pinocchio's collision request calls clear a pair that coal's distance
-    finds overlapping (docs/ik.md).
+    finds overlapping (docs/methods/ik.md).
     """
     tree = compiled_tree(hand)
     if not tree.shape_count:

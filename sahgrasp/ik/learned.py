@@ -17,7 +17,8 @@ primitive solids -- cylinders, boxes, ellipsoids and capsules of graspable sizes
 catalog object -- each solved by the IK from the searched sequence, the solid as the obstacle
 (no link passes through it): a planner's contact sets lie
 far from every random entry's key, and nearest random entries started no better there than the
-sequence (docs/ik.md, "The learned start"). Grasp entries need the hand's reach, known for the
+sequence (docs/methods/ik.md, "The learned start"). Grasp entries need the hand's reach, known for
+the
 SAH only. The seeds (:data:`LEARN_SEED`) are used nowhere else.
 """
 
@@ -77,7 +78,7 @@ QUERY_EPS = 1.0
 """Approximation of the neighbour search (``cKDTree.query``'s ``eps``): the k-th neighbour found
 is within ``1 + eps`` times the true k-th nearest distance. In the 18-dimensional feature space an
 exact search visits most leaves (about 0.4 ms a query); with eps = 1 it is 3x faster and finds
-99% of the exact two nearest (docs/ik.md, "Cost")."""
+99% of the exact two nearest (docs/methods/ik.md, "Cost")."""
 
 
 class GraspDatabaseError(SequenceFileError):

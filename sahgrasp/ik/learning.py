@@ -154,7 +154,7 @@ def grasp_chunk(
     solved = []
     for mesh, targets in primitive_grasp_sets(hand, seed, chunk, primitives):
         # With the solid as obstacle: a start that passes through its own solid leads the IK
-        # into the user's object as well (docs/ik.md, "The learned start").
+        # into the user's object as well (docs/methods/ik.md, "The learned start").
         solid = primitive_object(mesh)
         results = (solve_ik(hand, t, settings, obstacle=solid) for t in targets)
         solved += [r.q for r in results if r.success]
@@ -176,7 +176,7 @@ def hand_reach(hand: Hand) -> Any:
         raise GraspDatabaseError(
             f"grasp entries need the hand's measured reach, which the hand registry does not give "
             f"for {hand.description.name!r}; build with grasps=0 (`--grasps 0`) or register the "
-            "hand with its reach (docs/hand.md)"
+            "hand with its reach (docs/methods/hand-model.md)"
         )
     return registered_reach(entry.name)
 

@@ -79,7 +79,7 @@ solver's ``int``."""
 
 @dataclass(frozen=True)
 class IKSettings:
-    """Parameters of Algorithm 1 (defaults: the paper's, plus measured choices; docs/ik.md).
+    """Parameters of Algorithm 1 (defaults: the paper's, plus measured choices; docs/methods/ik.md).
 
     Attributes:
         method: ``"auto"`` (default) or ``"paper"``.
@@ -205,7 +205,7 @@ class IKResult:
         return Hand.wrist_pose(self.q)
 
     def to_dict(self, hand: Hand) -> dict[str, Any]:
-        """The results-file entry (docs/formats.md); the object clearance only with an obstacle."""
+        """The results-file entry (docs/how-to/file-formats.md); clearance only with an obstacle."""
         entry = {
             "name": self.name,
             "success": self.success,
@@ -447,7 +447,8 @@ def _lm_loop(
 ) -> Attempt:
     """Levenberg-Marquardt on all contacts with a free wrist; bounds as an active set.
 
-    The hot loop of the IK, compiled (``sahgrasp/ik/_lm.c``, docs/ik.md "Compiled loop"): from
+    The hot loop of the IK, compiled (``sahgrasp/ik/_lm.c``, docs/methods/ik.md "Compiled loop"):
+    from
     the damping 1e-3, each iteration solves ``(J_F^T J_F + mu I) dx = J_F^T e`` on the free
     coordinates ``F`` (a coordinate at a bound that the gradient pushes outwards is fixed),
     integrates, clamps the joints to their limits, and accepts the step if the cost ``|e|^2``
@@ -495,7 +496,7 @@ def _separate(
     an active set; compiled, ``Tree.repair``). A link in the obstacle is such a
     pair whose first body is the object (fixed). With an obstacle, a repair whose summed and
     deepest penetration set no new low for :data:`REPAIR_PATIENCE` steps is given up: such
-    repairs rarely end clear, and each step costs a hand-object query (docs/ik.md, item 5).
+    repairs rarely end clear, and each step costs a hand-object query (docs/methods/ik.md, item 5).
     """
     # Only with an obstacle: without one, giving up early saved no time and cost starts.
     patience = REPAIR_PATIENCE if problem.obstacle is not None else s.repair_iterations
@@ -596,7 +597,7 @@ def solve_ik(
         free_fingers: Fingers left without a contact, named explicitly (optional: every finger
             without a contact in ``target`` is free).
         obstacle: The object being grasped, placed in the world: a solution must not put any
-            link into it, except each contact fingertip sphere up to ``d_min`` (docs/ik.md).
+            link into it, except each contact fingertip sphere up to ``d_min`` (docs/methods/ik.md).
             Its collision pieces are built once per (hand, object) and kept for the next solves.
         database: Grasp database of ``init="learned"`` (default: the hand's shipped one; the
             sequence alone if it has none).

@@ -13,7 +13,8 @@ refused, and the output stays where it was. Each result carries the :func:`probl
 problem: a resumed run keeps the results whose problems are unchanged, in order, and solves the
 rest again from the first changed one. The output is locked while it is written
 (:func:`sahgrasp.core.fileio.lock_output`), so a second run writing it is refused at once. A targets
-file may be a pipe: it is read once, as it comes. The format is documented in docs/formats.md.
+file may be a pipe: it is read once, as it comes. The format is documented in
+docs/how-to/file-formats.md.
 """
 
 from __future__ import annotations

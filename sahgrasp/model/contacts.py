@@ -4,7 +4,8 @@ A fingertip of radius ``R`` satisfies a target when the contact point on the fin
 the target point and the sphere centre equals ``point + R * normal``. Targets are given in the
 ``world`` frame. A grasp gives contacts for a subset of the hand's fingers (at least two, the
 thumb among them when the hand has one); the fingers without a contact are free. This module
-validates targets and reads/writes the targets JSON format (``docs/formats.md``), including the
+validates targets and reads/writes the targets JSON format (``docs/how-to/file-formats.md``),
+including the
 object a problem grasps (:class:`ObjectSpec`, built once per source by :class:`ObjectCache`).
 
 A mesh path inside a targets file is confined to the file's folder and below: it is resolved
@@ -175,7 +176,7 @@ class ContactTarget:
         return self.point + radius_m * self.normal
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of ``docs/formats.md``."""
+        """Return the JSON form of ``docs/how-to/file-formats.md``."""
         return {"finger": self.finger, "point": self.point.tolist(), "normal": self.normal.tolist()}
 
     def __eq__(self, other: object) -> bool:
@@ -221,7 +222,7 @@ class ObjectSpec:
         return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
     def to_dict(self, relative_to: str | os.PathLike[str] | None = None) -> dict[str, Any]:
-        """Return the JSON form of ``docs/formats.md``.
+        """Return the JSON form of ``docs/how-to/file-formats.md``.
 
         Args:
             relative_to: The folder of the file the form goes into: a mesh in it (or below) is
@@ -336,7 +337,7 @@ _OBJECT_KEYS = ("name", "mesh", "scale", "xyz", "quat")
 def object_spec(
     data: Any, folder: str | os.PathLike[str], *, allow_outside_paths: bool = False
 ) -> ObjectSpec | None:
-    """Parse a targets file's ``object`` (``docs/formats.md``); ``null`` means no object.
+    """Parse a targets file's ``object`` (docs/how-to/file-formats.md); ``null`` means no object.
 
     Args:
         data: The JSON value.
@@ -550,7 +551,7 @@ class GraspTarget:
         return tuple(f for f in valid if f not in self.fingers)
 
     def to_dict(self) -> dict[str, Any]:
-        """Return the JSON form of ``docs/formats.md``."""
+        """Return the JSON form of ``docs/how-to/file-formats.md``."""
         data: dict[str, Any] = {"name": self.name, "contacts": [c.to_dict() for c in self.contacts]}
         if self.object_spec is not None:
             data["object"] = self.object_spec.to_dict()
@@ -565,7 +566,7 @@ class GraspTarget:
         *,
         allow_outside_paths: bool = False,
     ) -> GraspTarget:
-        """Build from the JSON form of ``docs/formats.md``, raising :class:`InvalidTargetError`.
+        """Build from the JSON form (docs/how-to/file-formats.md), or raise InvalidTargetError.
 
         Args:
             data: The JSON value.
@@ -759,7 +760,7 @@ def targets_hand(data: dict[str, Any], path: Path) -> str:
 
 
 def load_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = False) -> TargetsFile:
-    """Read a targets file (``docs/formats.md``, "Targets"), every problem valid.
+    """Read a targets file (``docs/how-to/file-formats.md``, "Targets"), every problem valid.
 
     Args:
         path: The targets file.

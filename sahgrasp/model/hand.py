@@ -182,7 +182,7 @@ class HandDescription:
 
         Raises:
             HandModelError: Unreadable, not UTF-8 JSON, a key missing or unknown, or a value
-                invalid (see ``docs/hand.md``).
+                invalid (see ``docs/methods/hand-model.md``).
         """
         path = Path(path)
         data = read_json(path, "hand description")
@@ -269,7 +269,7 @@ def _unit3(what: str, values: object) -> tuple[float, float, float]:
 
 
 def _check_description(d: HandDescription) -> None:
-    """The rules of ``docs/hand.md`` on a description, however it was built."""
+    """The rules of ``docs/methods/hand-model.md`` on a description, however it was built."""
     what = f"hand description {d.name!r}"
     check_name("hand description name", d.name)
     if not d.fingers:
@@ -1356,7 +1356,7 @@ def load_hand(hand: str | os.PathLike[str] | HandDescription) -> Hand:
     if path.suffix.lower() == ".urdf":
         raise HandModelError(
             f"{shown(path)} is a URDF; give the path of a hand description JSON that names it "
-            "(its fingers, tip links and fingertip radius: see docs/hand.md)"
+            "(its fingers, tip links and fingertip radius: see docs/how-to/add-a-hand.md)"
         )
     return Hand(HandDescription.from_json(path))
 

@@ -6,7 +6,7 @@ ships for it (the IK's sequence, the learned start's grasp database), its reach 
 sampler (or none: then it is derived from the model), the sizes of the database ``sahgrasp learn``
 builds for it, and its contact-marker colours. ``load_hand(name)``, the command line's ``--hand``
 help, the shipped-data lookups, ``learn``'s defaults, the samplers and the scenes all read this
-registry; adding a hand is one :func:`register_hand` call (docs/hand.md, "Adding another hand").
+registry; adding a hand is one :func:`register_hand` call (docs/how-to/add-a-hand.md).
 An installed package can add hands without being imported by the user: each object it declares
 in the entry-point group ``sahgrasp.hands`` (a :class:`HandEntry`) is registered the first time a
 name is not found (:func:`discover_hands`).
@@ -212,7 +212,8 @@ def hand_help() -> str:
 
 
 # The built-in hands. Their descriptions are in sahgrasp.model.hand; the SAH's reach was measured
-# with solve_ik on flat antipodal grasps (docs/sequence.md): thumb on one face of a plate, index,
+# with solve_ik on flat antipodal grasps (docs/results.md, "The SAH's reach"): thumb on one face of
+# a plate, index,
 # middle and ring in a line on the other, all solved for every thickness from 0.5 to 146 mm, and
 # for finger spacings from 28 mm up (26 mm puts neighbouring fingers, 26 mm wide, into each other).
 register_hand(

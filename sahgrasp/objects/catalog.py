@@ -2,14 +2,15 @@
 
 Objects of Claret & Suárez (Figs. 6-8: fork, cup, Buddha statuette, cup of coffee with saucer,
 can) and of Rosales, Porta & Ros (Section V: the can, a Marquina oil drizzler). The figures give
-no dimensions: docs/objects.md lists the sizes chosen and why. Every object stands on the world
+no dimensions: docs/methods/objects.md lists the sizes chosen and why. Every object stands on the
+world
 ``xy`` plane with its axis along ``z`` (the fork lies flat along ``x``) unless a placement
 ``T_world_object`` is given; grasps and patches follow the placement.
 
 Paper grasps put the thumb on one side and index, middle and ring on the other, the thumb opposite
 the middle finger. Neighbouring finger contacts are 26-34 mm apart: the SAH's fingers are 26-30 mm
 wide, so closer contacts make neighbouring fingers collide. Contacts are computed on the exact
-surfaces; every paper grasp is solved by ``sahgrasp.ik.solve_ik`` (docs/objects.md).
+surfaces; every paper grasp is solved by ``sahgrasp.ik.solve_ik`` (docs/methods/objects.md).
 """
 
 from __future__ import annotations

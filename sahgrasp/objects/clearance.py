@@ -24,7 +24,8 @@ A remaining link's pieces are taken by increasing lower bound (the link's shape 
 piece's ball, and their boxes) and measured with bare ``coal.distance`` calls (GJK/EPA, about
 2 us each); up to :data:`_FEW_PIECES` candidates are measured directly, more are bounded first
 and the piece tree (C++, object frame, built once) is asked whether any is closer at all. The
-results are those of measuring every pair (docs/objects.md, "Cost of the hand-object queries").
+results are those of measuring every pair (docs/methods/meshes.md, "What a hand–object query
+costs").
 The IK's acceptance test (:meth:`HandObjectClearance.clearance_if_clear`) and repair query
 (:meth:`HandObjectClearance.penetrations` with ``per_link=1``) go to the piece tree's C++ queries
 instead: collision tests and one broad-phase distance, whatever the number of links.

@@ -89,7 +89,8 @@ def registered_reach(name: str | None = None) -> HandReach:
     """The measured reach of the registered hand ``name`` (default: the default hand).
 
     The reach is the hand registry's (:class:`sahgrasp.model.hands.SamplerReach`); the default
-    hand's was measured with ``solve_ik`` on flat antipodal grasps (docs/sequence.md).
+    hand's was measured with ``solve_ik`` on flat antipodal grasps (docs/results.md, "The SAH's
+    reach").
 
     Raises:
         HandModelError: ``name`` is not registered or its entry gives no reach.

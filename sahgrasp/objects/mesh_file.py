@@ -212,7 +212,7 @@ class _PrismMerger:
     tolerance would mean that the hull reaches outside the surface (across a cavity, a
     handle's gap, a concave edge); the hull's erosion by the tolerance, which no triangle
     meets, lies inside the solid, so the hull leaves the solid by about the tolerance at most
-    (measured: docs/objects.md). Every piece holds the prisms it joined, so the union of the
+    (docs/methods/meshes.md). Every piece holds the prisms it joined, so the union of the
     pieces holds the union of the prisms. After :data:`MERGE_BUDGET` triangle tests the
     remaining prisms stay single pieces, which bounds the build for large meshes.
     """

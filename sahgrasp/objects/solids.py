@@ -236,7 +236,7 @@ def _slabs(bands: list[FloatArray]) -> list[FloatArray]:
     profile piece. Bands on the axis (``r_in = 0``) are joined only with bands on the axis, so
     that a slab either touches the axis all along or not at all. The slabs' union is the
     bands' union: a slab's sector hull holds its bands' sector hulls and, its polygon being
-    convex, lies within the same sagitta of the exact solid (docs/objects.md).
+    convex, lies within the same sagitta of the exact solid (docs/methods/objects.md).
     """
     slabs: list[FloatArray] = []
     for band in bands:

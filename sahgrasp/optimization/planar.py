@@ -344,7 +344,7 @@ class PlanarGraspProblem:
         """The layout ``constant`` with the variable entries put at ``where``, (..., rows, 19).
 
         Compiled (``atlas._planar.jacobian``): the atlas asks for J at a few points at a time, where
-        numpy's 20 array operations cost far more than the arithmetic (docs/atlas.md).
+        numpy's 20 array operations cost far more than the arithmetic (docs/methods/atlas.md).
         """
         x = np.ascontiguousarray(x, dtype=np.float64)
         rows = 16 + rates.shape[0]

@@ -112,7 +112,7 @@ class PlannedGrasp:
         return {"xyz": self.q[:3].tolist(), "quat": self.q[3:7].tolist()}
 
     def to_dict(self, rank: int) -> dict[str, Any]:
-        """The JSON form of docs/formats.md ("Planned grasps")."""
+        """The JSON form of docs/how-to/file-formats.md ("Planned grasps")."""
         return {
             "rank": rank,
             "fingers": list(self.fingers),
@@ -187,7 +187,7 @@ class GraspPlan:
     repairs: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        """The plan document of docs/formats.md ("Planned grasps")."""
+        """The plan document of docs/how-to/file-formats.md ("Planned grasps")."""
         obj = dict(self.object)
         if self.repairs:
             obj["repairs"] = list(self.repairs)
@@ -255,7 +255,7 @@ def plan_grasps(
     started: float | None = None,
     on_candidate: Callable[[], object] | None = None,
 ) -> GraspPlan:
-    """Plan ranked, verified grasps of ``obj`` (module docstring, docs/planning.md).
+    """Plan ranked, verified grasps of ``obj`` (module docstring, docs/methods/planner.md).
 
     Args:
         hand: The hand, or its name / description file.

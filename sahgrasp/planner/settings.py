@@ -26,7 +26,7 @@ class PlanningError(SahGraspError):
 
 @dataclass(frozen=True)
 class PlanSettings:
-    """How :func:`sahgrasp.plan_grasps` plans (docs/planning.md).
+    """How :func:`sahgrasp.plan_grasps` plans (docs/methods/planner.md).
 
     Attributes:
         fingers: Finger counts to draw (any of 2, 3, 4), in the order their draws interleave.

@@ -116,7 +116,7 @@ def full_rank_null_space(jac: ArrayLike) -> FloatArray:
     at a small part of the SVD's cost on a stack of chart centres. numpy factorises; only the
     columns wanted are then formed from the reflectors (compiled,
     ``atlas._quality.orthogonal_tail``: numpy would form all of Q, which took most of the time;
-    docs/atlas.md, "Benchmarks").
+    docs/results.md, "The atlas engine and the atlas paper's experiments").
     A rank-deficient ``J`` gives a meaningless basis: use :func:`null_space` there.
     """
     jac = np.asarray(jac, dtype=np.float64)

@@ -3,7 +3,8 @@
 The Ferrari-Canny epsilon (:mod:`~sahgrasp.quality.wrench`) is the smallest wrench a grasp
 resists in *any* direction, with torques scaled by the object's size; an object's weight is a
 force through its centre of mass, and the grasps that fail a physics hold test mostly turn
-under that force's moment about their contacts (docs/physics.md). This module asks the question
+under that force's moment about their contacts (docs/methods/physics.md). This module asks the
+question
 the hold test asks, as a linear program per pull direction.
 
 Contact model. At contact ``i`` (point ``p_i``, outward unit normal ``n_i``) a soft finger

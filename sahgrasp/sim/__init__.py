@@ -2,7 +2,7 @@
 
 :func:`hold_test` squeezes a grasp and pulls the object in six directions, DexGraspNet's and
 BODex's benchmark way; :class:`HoldTester` tests many grasps of one object with one compiled
-model. docs/physics.md describes the model, its parameters and the criterion.
+model. docs/methods/physics.md describes the model, its parameters and the criterion.
 """
 
 try:

@@ -114,7 +114,7 @@ def _lines(path: Path) -> Iterator[tuple[int, Any]]:
             if not raw.strip():
                 continue
             if not raw.endswith(b"\n"):
-                break  # a line cut by a stopped run (docs/formats.md)
+                break  # a line cut by a stopped run (docs/how-to/file-formats.md)
             try:
                 yield number, json.loads(raw.decode("utf-8"))
             except (UnicodeDecodeError, ValueError, RecursionError):

@@ -6,7 +6,7 @@ a balanced set of forces, then a force of ``mass x 9.81 N`` pulls the object for
 each of +-x, +-y, +-z (world axes), each pull from the same settled state. The grasp holds if
 the object's centre of mass moves less than ``max_displacement_m`` and the object turns less
 than ``max_rotation_deg`` during every pull (and while settling); BODex's verdict uses its own
-thresholds (50 mm, 15 deg). docs/physics.md gives the model and every parameter.
+thresholds (50 mm, 15 deg). docs/methods/physics.md gives the model and every parameter.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ class DirectionResult:
     simulated_s: float
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON entry (docs/physics.md)."""
+        """JSON entry (docs/methods/physics.md)."""
         return {
             "direction": self.direction,
             "displacement_m": self.displacement_m,
@@ -165,7 +165,7 @@ class HoldResult:
     time_s: float = field(compare=False)
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON entry of ``sahgrasp check`` (docs/physics.md), SI units."""
+        """JSON entry of ``sahgrasp check`` (docs/methods/physics.md), SI units."""
         return {
             "name": self.name,
             "holds": self.holds,

@@ -25,7 +25,7 @@ LIGHT_SQUEEZE_N = 1.0
 
 @dataclass(frozen=True)
 class HoldSettings:
-    """Parameters of the hold test (docs/physics.md gives the reason for each default).
+    """Parameters of the hold test (docs/methods/physics.md gives the reason for each default).
 
     Attributes:
         friction: Coulomb friction coefficient of every hand-object contact.
@@ -55,7 +55,7 @@ class HoldSettings:
         solver_iterations: Newton iterations of MuJoCo's constraint solver per step.
         noslip_iterations: Iterations of MuJoCo's no-slip post-solver (0, the default: off,
             MuJoCo's own default; soft friction then creeps under a load, the strictest of
-            the set-ups in use, docs/physics.md "Which MuJoCo settings").
+            the set-ups in use, docs/methods/physics.md "Which MuJoCo settings").
         impratio: Ratio of the friction to the normal constraint impedance (MuJoCo).
         balance_friction: Share of ``friction`` the squeeze may use to balance its forces.
         directions: The pulls to run, a subset of :data:`DIRECTIONS`' labels (all six by

@@ -43,7 +43,7 @@ def hold_margin(result: HoldResult, settings: HoldSettings) -> float:
 
 
 def hold_verdict(result: HoldResult, settings: HoldSettings) -> dict[str, Any]:
-    """The hold test's verdict as a planned grasp's JSON holds it (docs/physics.md), SI units."""
+    """The hold test's verdict as a planned grasp's JSON holds it (docs/methods/physics.md, SI)."""
     worst = max(result.directions, key=lambda d: d.displacement_m, default=None)
     turned = max(result.directions, key=lambda d: d.rotation_deg, default=None)
     return {
