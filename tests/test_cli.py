@@ -20,8 +20,8 @@ import psutil
 import pytest
 
 from sahgrasp.ik import IKSettings, random_problems
-from sahgrasp.model.contacts import save_targets
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import save_targets
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("numpy", "pinocchio", "coal", "scipy", "matplotlib", "meshcat", "dask", "trimesh", "tqdm")
@@ -708,7 +708,7 @@ def test_resume_matches_results_by_problem_not_by_name(files: Path, tmp_path: Pa
     assert done.returncode in (0, 1) and _resumed(done) == 1, done.stdout + done.stderr
     assert "differs from the one" in done.stdout
     from sahgrasp.ik.stream import problem_digest
-    from sahgrasp.model.contacts import problem_from_json
+    from sahgrasp.objects.targets import problem_from_json
 
     lines = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()[1:]]
     assert [e["problem_digest"] for e in lines] == [

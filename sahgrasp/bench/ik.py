@@ -38,9 +38,9 @@ from sahgrasp.ik import (
 )
 from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, target_key
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
-from sahgrasp.model.contacts import load_targets
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.model.hands import DEFAULT_HAND
+from sahgrasp.objects.targets import load_targets
 
 __all__ = ["run", "summarize"]
 

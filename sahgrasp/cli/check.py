@@ -101,7 +101,7 @@ def _hand_name(args: argparse.Namespace, targets: Path | None) -> str:
         return str(args.hand)
     if targets is None:
         return DEFAULT_HAND
-    from sahgrasp.model.contacts import read_problems
+    from sahgrasp.objects.targets import read_problems
 
     return read_problems(targets)[0]
 
@@ -132,7 +132,7 @@ def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> st
 def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]:
     """The mesh files the targets file or a planner's results name: inputs too."""
     from sahgrasp.core.errors import SahGraspError
-    from sahgrasp.model.contacts import object_spec, read_problems
+    from sahgrasp.objects.targets import object_spec, read_problems
     from sahgrasp.sim.batch import ResultsFileError, read_documents
 
     specs = []

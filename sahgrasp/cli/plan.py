@@ -228,7 +228,7 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def _placement(args: argparse.Namespace) -> Any:
-    from sahgrasp.model.contacts import object_spec
+    from sahgrasp.objects.targets import object_spec
 
     data: dict[str, Any] = {"name": "can"}
     if args.xyz is not None:

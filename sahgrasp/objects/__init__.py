@@ -5,7 +5,8 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
 collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
-:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
+:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object;
+:mod:`~sahgrasp.objects.targets` reads and writes targets files and builds the objects they name.
 Lengths in metres, angles in radians.
 
 The names are loaded on first use: importing one module of the package (the IK imports
@@ -86,6 +87,23 @@ if TYPE_CHECKING:
         Surface,
         SurfaceJet,
     )
+    from sahgrasp.objects.targets import (
+        MAX_PATH_CHARS,
+        QUATERNION_TOLERANCE,
+        InvalidProblem,
+        ObjectCache,
+        TargetsFile,
+        build_object,
+        load_targets,
+        object_spec,
+        problem_from_dict,
+        problem_from_json,
+        problem_from_line,
+        read_problems,
+        read_targets_document,
+        save_targets,
+        targets_hand,
+    )
 
 _EXPORTS = {
     "sahgrasp.collision.shapes": (
@@ -153,14 +171,33 @@ _EXPORTS = {
         "Surface",
         "SurfaceJet",
     ),
+    "sahgrasp.objects.targets": (
+        "MAX_PATH_CHARS",
+        "QUATERNION_TOLERANCE",
+        "InvalidProblem",
+        "ObjectCache",
+        "TargetsFile",
+        "build_object",
+        "load_targets",
+        "object_spec",
+        "problem_from_dict",
+        "problem_from_json",
+        "problem_from_line",
+        "read_problems",
+        "read_targets_document",
+        "save_targets",
+        "targets_hand",
+    ),
 }
 
 __all__ = [
     "CATALOG",
     "CONTACT_ALLOWANCE_M",
     "GRASP_NAMES",
+    "MAX_PATH_CHARS",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
+    "QUATERNION_TOLERANCE",
     "Arc",
     "BoxSolid",
     "CatalogEntry",
@@ -175,9 +212,11 @@ __all__ = [
     "GraspPatches",
     "HandObjectClearance",
     "IKReport",
+    "InvalidProblem",
     "Mesh",
     "MeshFileError",
     "MeshSolid",
+    "ObjectCache",
     "Patch",
     "RectangleSurface",
     "RevolvedSolid",
@@ -186,19 +225,30 @@ __all__ = [
     "Solid",
     "Surface",
     "SurfaceJet",
+    "TargetsFile",
     "as_placement",
     "bottle_patches",
+    "build_object",
     "can_patches",
     "convex_hull",
     "load_mesh",
     "load_object",
+    "load_targets",
+    "object_spec",
     "paper_grasp",
     "placement",
+    "problem_from_dict",
+    "problem_from_json",
+    "problem_from_line",
+    "read_problems",
+    "read_targets_document",
     "register_object",
     "rotation_about",
     "rounded_polyline",
     "sample_profile",
+    "save_targets",
     "signed_distances",
+    "targets_hand",
     "tessellate",
     "transform_points",
 ]

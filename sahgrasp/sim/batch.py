@@ -24,8 +24,9 @@ from numpy.typing import NDArray
 from sahgrasp.core.errors import SahGraspError
 from sahgrasp.core.fileio import read_json
 from sahgrasp.core.parallel import process_pool
-from sahgrasp.model.contacts import InvalidProblem, ObjectSpec, object_spec, read_problems
+from sahgrasp.model.contacts import ObjectSpec
 from sahgrasp.model.hand import Hand, load_hand
+from sahgrasp.objects.targets import InvalidProblem, build_object, object_spec, read_problems
 from sahgrasp.sim.hold import HoldResult, HoldTester
 from sahgrasp.sim.settings import HoldSettings
 
@@ -246,7 +247,7 @@ def _tester(hand_name: str, spec: ObjectSpec, settings: HoldSettings) -> HoldTes
             _TESTERS.pop(next(iter(_TESTERS)))
         hand = _HANDS.get(hand_name) or _HANDS.setdefault(hand_name, load_hand(hand_name))
         try:
-            _TESTERS[key] = HoldTester(hand, spec.load(), settings)
+            _TESTERS[key] = HoldTester(hand, build_object(spec), settings)
         except SahGraspError as exc:
             _TESTERS[key] = f"object {spec} cannot be simulated: {exc}"
     return _TESTERS[key]
