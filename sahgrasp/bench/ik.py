@@ -248,6 +248,9 @@ def run(
 
 def plot_fig9(document: dict[str, Any], path: str) -> None:
     """Write the Fig. 9a/9b reproduction: success and time vs inits, success vs time."""
+    from sahgrasp.core.extras import require_extra
+
+    require_extra("plot", f"the figure {path}")
     import matplotlib
 
     matplotlib.use("Agg")
