@@ -41,6 +41,7 @@ MOVED: dict[str, str] = {
     "sahgrasp.hand": "sahgrasp.model.hand",
     "sahgrasp.hand_checks": "sahgrasp.model.hand_checks",
     "sahgrasp.motions": "sahgrasp.optimization.motions",
+    "sahgrasp.objects.clearance": "sahgrasp.collision.hand_object",
     "sahgrasp.objects.collision": "sahgrasp.collision.shapes",
     "sahgrasp.objects.frames": "sahgrasp.core.frames",
     "sahgrasp.parallel": "sahgrasp.core.parallel",

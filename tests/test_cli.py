@@ -823,10 +823,10 @@ def test_time_ms_is_the_solve_and_setup_ms_the_object(
 ) -> None:
     """Building an object's collision pieces is set-up, reported apart from the solve."""
     from sahgrasp.cli.solve import results_document
+    from sahgrasp.collision.hand_object import HandObjectClearance
     from sahgrasp.ik.batch import solve_chunks
     from sahgrasp.model.contacts import GraspTarget, ObjectSpec
     from sahgrasp.objects import paper_grasp
-    from sahgrasp.objects.clearance import HandObjectClearance
 
     built = HandObjectClearance.__init__
 

@@ -5,12 +5,12 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
 collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
-:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object;
 :mod:`~sahgrasp.objects.targets` reads and writes targets files and builds the objects they name.
-Lengths in metres, angles in radians.
+The hand-object clearance (``CONTACT_ALLOWANCE_M``, ``Clearance``, ``HandObjectClearance``) is
+:mod:`sahgrasp.collision.hand_object`'s, exported here too. Lengths in metres, angles in radians.
 
 The names are loaded on first use: importing one module of the package (the IK imports
-:mod:`~sahgrasp.objects.clearance`) does not load the mesh readers (trimesh).
+:mod:`~sahgrasp.objects.body`) does not load the mesh readers (trimesh).
 """
 
 from __future__ import annotations
@@ -20,6 +20,11 @@ from typing import TYPE_CHECKING
 from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from sahgrasp.collision.hand_object import (
+        CONTACT_ALLOWANCE_M,
+        Clearance,
+        HandObjectClearance,
+    )
     from sahgrasp.collision.shapes import (
         CollisionShape,
         convex_hull,
@@ -46,11 +51,6 @@ if TYPE_CHECKING:
         load_object,
         paper_grasp,
         register_object,
-    )
-    from sahgrasp.objects.clearance import (
-        CONTACT_ALLOWANCE_M,
-        Clearance,
-        HandObjectClearance,
     )
     from sahgrasp.objects.mesh_file import (
         MeshFileError,
@@ -131,7 +131,7 @@ _EXPORTS = {
         "paper_grasp",
         "register_object",
     ),
-    "sahgrasp.objects.clearance": (
+    "sahgrasp.collision.hand_object": (
         "CONTACT_ALLOWANCE_M",
         "Clearance",
         "HandObjectClearance",
