@@ -329,14 +329,14 @@ def test_placements_of_one_mesh_share_one_build(
 ) -> None:
     import shutil
 
-    import sahgrasp.objects.targets as targets
+    import sahgrasp.objects as objects
     from sahgrasp.ik.batch import worker_obstacle
     from sahgrasp.objects.targets import ObjectCache, object_spec
 
     shutil.copy(MUG, tmp_path / "mug.stl")
     loads = []
-    real = targets.load_mesh
-    monkeypatch.setattr(targets, "load_mesh", lambda *a, **k: loads.append(a) or real(*a, **k))
+    real = objects.load_mesh
+    monkeypatch.setattr(objects, "load_mesh", lambda *a, **k: loads.append(a) or real(*a, **k))
     specs = [object_spec({"mesh": "mug.stl", "xyz": [0.1 * i, 0, 0]}, tmp_path) for i in range(3)]
     cache = ObjectCache(size=2)
     placed = [build_object(spec, cache) for spec in specs if spec is not None]

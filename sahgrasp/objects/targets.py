@@ -30,6 +30,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+# The package, whose names load on first use: the catalog is read when a file names a catalog
+# object, the mesh reader (trimesh) when a file names a mesh, not when the IK imports this module.
+from sahgrasp import objects
 from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.core.fileio import read_json, write_json_atomic
 from sahgrasp.model.contacts import (
@@ -44,8 +47,6 @@ from sahgrasp.model.contacts import (
 )
 from sahgrasp.model.hands import DEFAULT_HAND, HANDS
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.catalog import OBJECT_NAMES, load_object
-from sahgrasp.objects.mesh_file import MESH_SUFFIXES, load_mesh
 
 __all__ = [
     "MAX_PATH_CHARS",
@@ -70,6 +71,9 @@ QUATERNION_TOLERANCE = 1e-6
 
 MAX_PATH_CHARS = 4096
 """Longest accepted mesh path in a targets file (Linux's PATH_MAX): a longer one is refused."""
+
+_MESH_SUFFIXES = (".stl", ".obj", ".ply")
+"""Mesh files :func:`sahgrasp.objects.load_mesh` reads (checked here without loading it)."""
 
 _DOCUMENT_KEYS = ("hand", "object", "problems")
 _PROBLEM_KEYS = ("name", "contacts", "object")
@@ -97,8 +101,8 @@ def build_object(spec: ObjectSpec, cache: ObjectCache | None = None) -> GraspObj
 def _build(spec: ObjectSpec, T_world_object: NDArray[np.float64]) -> GraspObject:
     if spec.mesh is None:
         assert spec.name is not None
-        return load_object(spec.name, T_world_object)
-    return load_mesh(spec.mesh, scale=spec.scale, T_world_object=T_world_object)
+        return objects.load_object(spec.name, T_world_object)
+    return objects.load_mesh(spec.mesh, scale=spec.scale, T_world_object=T_world_object)
 
 
 def _source(spec: ObjectSpec) -> tuple[Any, ...]:
@@ -225,9 +229,9 @@ def _scale(value: Any) -> float:
 
 
 def _catalog_name(name: Any) -> str:
-    if not isinstance(name, str) or name not in OBJECT_NAMES:
+    if not isinstance(name, str) or name not in objects.OBJECT_NAMES:
         raise InvalidTargetError(
-            f"unknown object {_preview(name)}; valid names are {list(OBJECT_NAMES)}"
+            f"unknown object {_preview(name)}; valid names are {list(objects.OBJECT_NAMES)}"
         )
     return name
 
@@ -251,9 +255,9 @@ def _mesh_path(mesh: Any, folder: Path, allow_outside: bool) -> str:
             f"object mesh path is {len(mesh)} characters long ({shown}); a path has at most "
             f"{MAX_PATH_CHARS}"
         )
-    if os.path.splitext(mesh)[1].lower() not in MESH_SUFFIXES:
+    if os.path.splitext(mesh)[1].lower() not in _MESH_SUFFIXES:
         raise InvalidTargetError(
-            f"object mesh {shown}: unsupported type; use one of {list(MESH_SUFFIXES)}"
+            f"object mesh {shown}: unsupported type; use one of {list(_MESH_SUFFIXES)}"
         )
     # Strings and os.path rather than pathlib: a file of a million problems resolves a path each.
     looked_for = os.path.join(folder, mesh)
@@ -275,10 +279,10 @@ def _mesh_path(mesh: Any, folder: Path, allow_outside: bool) -> str:
             f"object mesh {shown} is not a regular file (a folder, pipe or device); give a mesh "
             "file"
         )
-    if os.path.splitext(resolved)[1].lower() not in MESH_SUFFIXES:
+    if os.path.splitext(resolved)[1].lower() not in _MESH_SUFFIXES:
         raise InvalidTargetError(
             f"object mesh {shown} is a link to {_preview(resolved)}, of unsupported type; "
-            f"use one of {list(MESH_SUFFIXES)}"
+            f"use one of {list(_MESH_SUFFIXES)}"
         )
     return resolved
 
