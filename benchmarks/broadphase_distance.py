@@ -21,10 +21,10 @@ import coal
 import numpy as np
 import pinocchio as pin
 
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.ik import solve_ik
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GRASP_NAMES, load_object, paper_grasp
-from sahgrasp.objects.clearance import HandObjectClearance
 
 
 def _configurations(hand: Hand, name: str, count: int, seed: int) -> list[np.ndarray]:

@@ -22,8 +22,8 @@ from tqdm import tqdm
 from sahgrasp.ik import IKResult, IKSettings, random_problems, solve_ik
 from sahgrasp.ik.initial import default_sequence
 from sahgrasp.ik.learned import GraspDatabase
-from sahgrasp.model.contacts import load_targets
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import load_targets
 
 
 def cut(db: GraspDatabase, random_entries: int, grasp_entries: int) -> GraspDatabase:

@@ -8,8 +8,8 @@ with the benchmark's per-object seed), solves each without and then with the obj
   the GJK/EPA calls per hand link (the timers add their own cost: per-call times are upper
   bounds);
 * ``compare OLD_CLEARANCE_PY``: records every hand-object query the IK made and times it with
-  the ``HandObjectClearance`` of another version of ``sahgrasp/objects/clearance.py`` (e.g.
-  ``git show 6285f32:sahgrasp/objects/clearance.py > old.py``) and with this one, query by query
+  the ``HandObjectClearance`` of another version of ``sahgrasp/collision/hand_object.py`` (e.g.
+  ``git show 6285f32:sahgrasp/collision/hand_object.py > old.py``) and with this one, query by query
   alternating, best of ``--repeats``; prints the mean CPU per query and whether every answer
   (pairs, clearance, link) is the same;
 * ``ik OLD_CLEARANCE_PY``: the same with the IK's own questions, the repair query
@@ -79,6 +79,7 @@ from sahgrasp.bench.grasps import (
     _object_seed,
     _prepare,
 )
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.collision.shapes import CollisionShape, convex_hull
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik import obstacle as obstacle_module
@@ -86,7 +87,6 @@ from sahgrasp.ik.obstacle import REPAIR_PAIRS_PER_LINK, Obstacle
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import GraspObject, load_object
-from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.grasp_sampler import registered_reach, sample_object_grasps
 from sahgrasp.objects.mesh_file import MeshSolid, load_mesh
 from sahgrasp.objects.profiles import chord_count

@@ -21,12 +21,14 @@ if TYPE_CHECKING:
         SequenceFileError,
     )
     from sahgrasp.ik import IKResult, IKSettings, solve_ik, solve_many
-    from sahgrasp.model.contacts import ContactTarget, GraspTarget, load_targets, save_targets
+    from sahgrasp.model.contacts import ContactTarget, GraspTarget
     from sahgrasp.model.hand import Hand, HandDescription, load_hand
+    from sahgrasp.objects.targets import load_targets, save_targets
     from sahgrasp.planner import GraspPlan, PlanSettings, plan_grasps
 
 _EXPORTS = {
-    "sahgrasp.model.contacts": ("ContactTarget", "GraspTarget", "load_targets", "save_targets"),
+    "sahgrasp.model.contacts": ("ContactTarget", "GraspTarget"),
+    "sahgrasp.objects.targets": ("load_targets", "save_targets"),
     "sahgrasp.core.errors": (
         "AtlasError",
         "HandModelError",

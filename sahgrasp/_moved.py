@@ -8,7 +8,9 @@ answers an import of an old name with the new module itself (the same object, so
 other finder (an older copy of sahgrasp on the path, say) answers an old name; it answers nothing
 but the old names. Old paths that are packages now
 (``sahgrasp.collision``, ``sahgrasp.quality``, ``sahgrasp.optimization``) need no alias: their
-``__init__`` re-exports the old module's public names.
+``__init__`` re-exports the old module's public names. Names that left a module that stays
+(``sahgrasp.model.contacts.load_targets`` is ``sahgrasp.objects.targets.load_targets``) are in
+:data:`MOVED_NAMES`, answered by :func:`moved_attribute` from the old module's ``__getattr__``.
 """
 
 from __future__ import annotations
@@ -19,8 +21,16 @@ import warnings
 from collections.abc import Sequence
 from importlib.machinery import ModuleSpec
 from types import ModuleType
+from typing import Any
 
-__all__ = ["MOVED", "MovedModuleFinder", "install"]
+__all__ = [
+    "BECAME_PACKAGES",
+    "MOVED",
+    "MOVED_NAMES",
+    "MovedModuleFinder",
+    "install",
+    "moved_attribute",
+]
 
 #: Old dotted module name -> its new name.
 MOVED: dict[str, str] = {
@@ -31,6 +41,7 @@ MOVED: dict[str, str] = {
     "sahgrasp.hand": "sahgrasp.model.hand",
     "sahgrasp.hand_checks": "sahgrasp.model.hand_checks",
     "sahgrasp.motions": "sahgrasp.optimization.motions",
+    "sahgrasp.objects.clearance": "sahgrasp.collision.hand_object",
     "sahgrasp.objects.collision": "sahgrasp.collision.shapes",
     "sahgrasp.objects.frames": "sahgrasp.core.frames",
     "sahgrasp.parallel": "sahgrasp.core.parallel",
@@ -44,12 +55,58 @@ MOVED: dict[str, str] = {
     "sahgrasp.wrench": "sahgrasp.quality.wrench",
 }
 
+#: Names that left a module that stays: old module -> {old name: "new.module:new name"}. The old
+#: module's ``__getattr__`` (or, for a method, the method itself) calls :func:`moved_attribute`.
+MOVED_NAMES: dict[str, dict[str, str]] = {
+    "sahgrasp.model.contacts": {
+        name: f"sahgrasp.objects.targets:{name}"
+        for name in (
+            "InvalidProblem",
+            "MAX_PATH_CHARS",
+            "ObjectCache",
+            "QUATERNION_TOLERANCE",
+            "TargetsFile",
+            "load_targets",
+            "object_spec",
+            "problem_from_json",
+            "problem_from_line",
+            "read_problems",
+            "read_targets_document",
+            "save_targets",
+            "targets_hand",
+        )
+    }
+    | {
+        "GraspTarget.from_dict": "sahgrasp.objects.targets:problem_from_dict",
+        "ObjectSpec.load": "sahgrasp.objects.targets:build_object",
+    },
+}
+
 #: Old modules that are packages now: their old contents are these modules' public names.
 BECAME_PACKAGES: dict[str, str] = {
     "sahgrasp.collision": "sahgrasp.collision.hand_self",
     "sahgrasp.optimization": "sahgrasp.optimization.optimizer",
     "sahgrasp.quality": "sahgrasp.quality.ellipsoids",
 }
+
+
+def moved_attribute(module: str, name: str) -> Any:
+    """The name ``name`` of ``module`` from its new home (:data:`MOVED_NAMES`), after a warning.
+
+    Raises:
+        AttributeError: ``name`` is not a moved name of ``module`` (what ``getattr`` expects).
+    """
+    new = MOVED_NAMES.get(module, {}).get(name)
+    if new is None:
+        raise AttributeError(f"module {module!r} has no attribute {name!r}")
+    new_module, new_name = new.split(":")
+    warnings.warn(
+        f"{module}.{name} moved to {new_module}.{new_name}; use {new_module}.{new_name} instead "
+        "(the old name goes in the next release)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return getattr(importlib.import_module(new_module), new_name)
 
 
 class _AliasLoader:

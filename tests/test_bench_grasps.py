@@ -13,9 +13,9 @@ from sahgrasp.bench.grasps import (
 )
 from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.ik import solve_ik
-from sahgrasp.model.contacts import load_targets
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import load_object, paper_grasp, placement
+from sahgrasp.objects.targets import load_targets
 
 ROW_FIELDS = {
     "object", "contact_set_seed", "sampling_s", "runs", "time_ratio_mean", "time_ratio_median",

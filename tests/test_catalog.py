@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from sahgrasp.core.errors import InvalidTargetError
-from sahgrasp.model.contacts import object_spec
 from sahgrasp.objects import (
     CATALOG,
     GRASP_NAMES,
@@ -24,6 +23,7 @@ from sahgrasp.objects import (
     placement,
     register_object,
 )
+from sahgrasp.objects.targets import build_object, object_spec
 
 RADIUS_M = 0.04
 
@@ -72,7 +72,7 @@ def test_an_added_object_is_loaded_placed_and_grasped(ball: str) -> None:
 def test_an_added_object_can_be_named_in_a_targets_file(ball: str, tmp_path: Path) -> None:
     spec = object_spec({"name": ball, "xyz": [0.0, 0.2, 0.0]}, tmp_path)
     assert spec is not None and spec.name == "ball"
-    assert spec.load().name == "ball"
+    assert build_object(spec).name == "ball"
 
 
 def test_an_object_without_a_grasp_is_loaded_but_not_grasped(tmp_path: Path) -> None:

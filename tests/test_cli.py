@@ -20,8 +20,8 @@ import psutil
 import pytest
 
 from sahgrasp.ik import IKSettings, random_problems
-from sahgrasp.model.contacts import save_targets
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import save_targets
 
 ROOT = Path(__file__).resolve().parent.parent
 HEAVY = ("numpy", "pinocchio", "coal", "scipy", "matplotlib", "meshcat", "dask", "trimesh", "tqdm")
@@ -708,7 +708,7 @@ def test_resume_matches_results_by_problem_not_by_name(files: Path, tmp_path: Pa
     assert done.returncode in (0, 1) and _resumed(done) == 1, done.stdout + done.stderr
     assert "differs from the one" in done.stdout
     from sahgrasp.ik.stream import problem_digest
-    from sahgrasp.model.contacts import problem_from_json
+    from sahgrasp.objects.targets import problem_from_json
 
     lines = [json.loads(line) for line in (tmp_path / "r.jsonl").read_text().splitlines()[1:]]
     assert [e["problem_digest"] for e in lines] == [
@@ -823,10 +823,10 @@ def test_time_ms_is_the_solve_and_setup_ms_the_object(
 ) -> None:
     """Building an object's collision pieces is set-up, reported apart from the solve."""
     from sahgrasp.cli.solve import results_document
+    from sahgrasp.collision.hand_object import HandObjectClearance
     from sahgrasp.ik.batch import solve_chunks
     from sahgrasp.model.contacts import GraspTarget, ObjectSpec
     from sahgrasp.objects import paper_grasp
-    from sahgrasp.objects.clearance import HandObjectClearance
 
     built = HandObjectClearance.__init__
 

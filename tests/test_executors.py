@@ -17,8 +17,8 @@ from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.core.executors import open_executor
 from sahgrasp.core.parallel import SchedulerError
 from sahgrasp.ik import random_problems
-from sahgrasp.model.contacts import save_targets
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import save_targets
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -21,14 +21,9 @@ from hypothesis import strategies as st
 
 from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.ik import random_problems
-from sahgrasp.model.contacts import (
-    GraspTarget,
-    InvalidProblem,
-    load_targets,
-    read_problems,
-    save_targets,
-)
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import InvalidProblem, load_targets, read_problems, save_targets
 
 ROOT = Path(__file__).resolve().parent.parent
 KEYS = ("hand", "problems", "name", "contacts", "finger", "point", "normal", "thumb", "index",

@@ -313,7 +313,7 @@ def test_three_finger_can_grasp_keeps_the_free_finger_out(sah: Hand) -> None:
 
 
 def test_free_finger_is_returned_placed_clear_of_the_other_links(sah: Hand) -> None:
-    from sahgrasp.objects.clearance import HandObjectClearance
+    from sahgrasp.collision.hand_object import HandObjectClearance
 
     for problem in random_problems(sah, 10, seed=7):
         target = GraspTarget(problem.name, [c for c in problem.contacts if c.finger != "ring"])

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from sahgrasp._moved import BECAME_PACKAGES, MOVED, MovedModuleFinder
+from sahgrasp._moved import BECAME_PACKAGES, MOVED, MOVED_NAMES, MovedModuleFinder
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,6 +33,39 @@ def test_an_old_module_that_became_a_package_keeps_its_names(package: str, modul
     for name in old_contents.__all__:
         assert getattr(new_package, name) is getattr(old_contents, name), name
     assert set(old_contents.__all__) <= set(new_package.__all__)
+
+
+_NAMES = sorted(
+    (module, name, new)
+    for module, names in MOVED_NAMES.items()
+    for name, new in names.items()
+    if "." not in name
+)
+
+
+@pytest.mark.parametrize(("module", "name", "new"), _NAMES)
+def test_a_moved_name_warns_and_is_the_new_object(module: str, name: str, new: str) -> None:
+    new_module, new_name = new.split(":")
+    with pytest.warns(DeprecationWarning, match=re.escape(f"{new_module}.{new_name}")):
+        value = getattr(importlib.import_module(module), name)
+    assert value is getattr(importlib.import_module(new_module), new_name)
+    with pytest.raises(AttributeError, match="no attribute 'nothing'"):
+        _ = importlib.import_module(module).nothing
+
+
+def test_the_moved_methods_warn_and_answer_as_their_new_functions(tmp_path: Path) -> None:
+    from sahgrasp.model.contacts import GraspTarget, ObjectSpec
+
+    data = {
+        "name": "g",
+        "contacts": [{"finger": "thumb", "point": [0, 0, 0], "normal": [0, 0, 1]}],
+        "object": {"name": "can"},
+    }
+    with pytest.warns(DeprecationWarning, match="problem_from_dict"):
+        target = GraspTarget.from_dict(data, tmp_path)
+    assert target.object_spec == ObjectSpec(name="can", mesh=None)
+    with pytest.warns(DeprecationWarning, match="build_object"):
+        assert target.object_spec.load().name == "can"
 
 
 def test_the_finder_answers_only_old_names() -> None:

@@ -7,13 +7,13 @@ import json
 import numpy as np
 import pytest
 
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.core.errors import GraspSystemError, OptimizationError, QualityError
 from sahgrasp.experiments.atlas_examples import show_optimization
 from sahgrasp.experiments.report import collision_notes, summary
 from sahgrasp.experiments.setups import run_experiment
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import can_patches, load_object
-from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.optimization.grasp import (
     HandGraspManifold,
     coordinate_scales,

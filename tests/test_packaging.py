@@ -142,6 +142,7 @@ def test_every_library_import_is_a_declared_runtime_dependency() -> None:
         allowed = runtime | bench if in_bench else runtime
         if SIM in path.parents:  # sahgrasp.sim is the optional extra "sim"
             allowed = allowed | _extra("sim")
+        allowed = allowed | _extra("cluster") | _extra("plot")  # in functions, behind a check
         for module, line in _third_party_imports(path):
             providers = _providers(module)
             if not providers and in_bench and not bench_installed:
@@ -168,7 +169,8 @@ def test_test_only_packages_are_not_runtime_dependencies(dev_only: str) -> None:
 
 
 def test_the_library_imports_no_test_only_package() -> None:
-    test_only = _extra("dev") - _runtime() - _extra("bench") - _extra("sim")
+    optional = _extra("bench") | _extra("sim") | _extra("cluster") | _extra("plot")
+    test_only = _extra("dev") - _runtime() - optional
     offenders = [
         f"{path.relative_to(ROOT)}:{line} imports {module}"
         for path in _sources()
@@ -176,6 +178,32 @@ def test_the_library_imports_no_test_only_package() -> None:
         if _providers(module) & test_only
     ]
     assert not offenders, "\n".join(offenders)
+
+
+def test_the_extras_are_in_dev_and_all_and_not_runtime() -> None:
+    for extra in ("cluster", "plot", "sim"):
+        assert _extra(extra) <= _extra("dev") & _extra("all") - _runtime(), extra
+
+
+def test_the_cluster_and_plot_extras_are_imported_only_in_functions() -> None:
+    """Outside functions, an import of Dask or matplotlib would break ``pip install .``."""
+    optional = _extra("cluster") | _extra("plot")
+    found = []
+    for path in _sources():
+        tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+        for node in tree.body:  # module level, including under if/try
+            for inner in ast.walk(node):
+                if isinstance(inner, ast.FunctionDef | ast.AsyncFunctionDef):
+                    break
+                if isinstance(inner, ast.Import | ast.ImportFrom):
+                    names = (
+                        [a.name for a in inner.names]
+                        if isinstance(inner, ast.Import)
+                        else [inner.module or ""]
+                    )
+                    if any(_providers(n.split(".")[0]) & optional for n in names):
+                        found.append(f"{path.relative_to(ROOT)}:{inner.lineno}")
+    assert not found, "module-level imports of an optional extra:\n" + "\n".join(found)
 
 
 def _loaded_after(code: str) -> list[str]:

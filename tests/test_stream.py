@@ -10,8 +10,9 @@ import pytest
 from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.ik import IKSettings, default_sequence, random_problem
 from sahgrasp.ik.stream import MAX_LINE_BYTES, ResultsWriter, open_targets, settings_header
-from sahgrasp.model.contacts import GraspTarget, InvalidProblem
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import load_hand
+from sahgrasp.objects.targets import InvalidProblem, problem_from_dict
 
 GOOD = random_problem(load_hand("sah"), 5151, 0).to_dict()
 
@@ -152,7 +153,7 @@ def test_a_refused_resume_leaves_the_finished_output_in_place(tmp_path: Path) ->
 def test_resume_keeps_the_results_of_unchanged_problems_only(tmp_path: Path) -> None:
     from sahgrasp.ik.stream import problem_digest
 
-    problems = [GraspTarget.from_dict({**GOOD, "name": n}) for n in "abc"]
+    problems = [problem_from_dict({**GOOD, "name": n}) for n in "abc"]
     digests = [problem_digest(p) for p in problems]
     assert len(set(digests)) == 3
     out = tmp_path / "r.jsonl"
@@ -163,7 +164,7 @@ def test_resume_keeps_the_results_of_unchanged_problems_only(tmp_path: Path) -> 
     writer.close(complete=False)
     moved = {**GOOD, "name": "b"}
     moved["contacts"] = [{**c, "point": [x + 0.001 for x in c["point"]]} for c in GOOD["contacts"]]
-    changed = GraspTarget.from_dict(moved)
+    changed = problem_from_dict(moved)
     assert problem_digest(changed) != digests[1]  # same name, other contacts
     again = ResultsWriter(out, _header(), resume=True)
     kept = []

@@ -32,13 +32,14 @@ from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.core.fileio import write_json_atomic
 from sahgrasp.core.frames import transform_points
 from sahgrasp.ik import IKResult, IKSettings, default_sequence, solve_ik, worker_hand
-from sahgrasp.model.contacts import GraspTarget, save_targets
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, HandDescription, load_hand
 from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import OBJECT_NAMES, GraspObject, load_object
 from sahgrasp.objects.grasp_sampler import sample_object_grasps
 from sahgrasp.objects.mesh_file import load_mesh
 from sahgrasp.objects.reach import sampler_reach
+from sahgrasp.objects.targets import save_targets
 
 __all__ = [
     "BENCH_SEED",

@@ -38,9 +38,9 @@ from sahgrasp.ik import (
 )
 from sahgrasp.ik.learned import QUERY_EPS, GraspDatabase, default_database, target_key
 from sahgrasp.ik.solver import Init, Method, run_algorithm1, solve_ik
-from sahgrasp.model.contacts import load_targets
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.model.hands import DEFAULT_HAND
+from sahgrasp.objects.targets import load_targets
 
 __all__ = ["run", "summarize"]
 
@@ -248,6 +248,9 @@ def run(
 
 def plot_fig9(document: dict[str, Any], path: str) -> None:
     """Write the Fig. 9a/9b reproduction: success and time vs inits, success vs time."""
+    from sahgrasp.core.extras import require_extra
+
+    require_extra("plot", f"the figure {path}")
     import matplotlib
 
     matplotlib.use("Agg")

@@ -155,6 +155,10 @@ def _case(
 
 def _dask_case(targets: Path, total: int, progress: ProgressCallback | None) -> dict[str, Any]:
     import psutil
+
+    from sahgrasp.core.extras import require_extra
+
+    require_extra("cluster", "the Dask case of the solve benchmark")
     from dask.distributed import LocalCluster
 
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True) as cluster:

@@ -292,6 +292,10 @@ def run(args: argparse.Namespace) -> int:
     except argparse.ArgumentTypeError as exc:
         args.usage_error(str(exc))
     check_outputs([args.json, args.plot, args.checkpoint])
+    if args.plot is not None:
+        from sahgrasp.core.extras import require_extra
+
+        require_extra("plot", f"--plot {args.plot}")  # before the work, not after it
     with output_file(args.plot) as plot:
         summary, notes = _summary(args, plot, geometry, paper)
     out = human_stream(args.json)

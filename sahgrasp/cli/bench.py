@@ -227,6 +227,10 @@ def run(args: argparse.Namespace) -> int:
         inputs=[options.get("targets"), *options.get("meshes", ()), options.get("folder")],
     )
     check_json_inputs(options.get("hand"))
+    if options.get("plot") is not None:
+        from sahgrasp.core.extras import require_extra
+
+        require_extra("plot", f"--plot {options['plot']}")  # before the work, not after it
     module = importlib.import_module(f"sahgrasp.bench.{args.bench}")
     with output_file(options.get("plot")) as plot:
         if plot is not None:

@@ -101,7 +101,7 @@ def _hand_name(args: argparse.Namespace, targets: Path | None) -> str:
         return str(args.hand)
     if targets is None:
         return DEFAULT_HAND
-    from sahgrasp.model.contacts import read_problems
+    from sahgrasp.objects.targets import read_problems
 
     return read_problems(targets)[0]
 
@@ -132,7 +132,7 @@ def _table(grasps: list[Any], results: list[Any], summary: dict[str, Any]) -> st
 def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]:
     """The mesh files the targets file or a planner's results name: inputs too."""
     from sahgrasp.core.errors import SahGraspError
-    from sahgrasp.model.contacts import object_spec, read_problems
+    from sahgrasp.objects.targets import object_spec, read_problems
     from sahgrasp.sim.batch import ResultsFileError, read_documents
 
     specs = []
@@ -161,12 +161,9 @@ def _named_inputs(targets: Path | None, results: Path, allow: bool) -> list[str]
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``sahgrasp check``; 0 if every grasp holds, 1 otherwise."""
-    from sahgrasp.core.errors import InvalidSettingsError
+    from sahgrasp.core.extras import require_extra
 
-    try:
-        import sahgrasp.sim  # noqa: F401
-    except ImportError as exc:  # the optional extra is missing: one line that names it
-        raise InvalidSettingsError(str(exc)) from None
+    require_extra("sim", "sahgrasp check")  # before any work: one line naming the extra
     files = [args.targets] if args.results is None else [args.targets, args.results]
     targets, results_path = (None, args.targets) if args.results is None else files
     hand_name = _hand_name(args, targets)

@@ -200,10 +200,11 @@ def _hold_settings(args: argparse.Namespace) -> Any:
                 "--squeeze, --light, --mass-kg and --density need --verify physics"
             )
         return None
-    try:
-        from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
-    except ImportError as exc:
-        raise InvalidSettingsError(str(exc)) from None
+    from sahgrasp.core.extras import require_extra
+
+    require_extra("sim", "--verify physics")  # one line naming the extra when missing
+    from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+
     default = HoldSettings()
     squeeze = LIGHT_SQUEEZE_N if args.light else args.squeeze
     return HoldSettings(
@@ -228,7 +229,7 @@ def _settings(args: argparse.Namespace) -> Any:
 
 
 def _placement(args: argparse.Namespace) -> Any:
-    from sahgrasp.model.contacts import object_spec
+    from sahgrasp.objects.targets import object_spec
 
     data: dict[str, Any] = {"name": "can"}
     if args.xyz is not None:

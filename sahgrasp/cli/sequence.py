@@ -136,7 +136,10 @@ def _print_summary(result: SearchResult, out: str) -> None:
     print(format_table(SUMMARY_HEADERS, summary_rows(result)))
     print(f"{result.cells_computed} cells and {result.ik_runs_computed} IK runs computed in "
           f"{result.wall_seconds:.1f} s")  # fmt: skip
-    print(f"wrote {out}/sequence.json, search.json, fig4.png")
+    from sahgrasp.core.extras import has_extra, install_hint
+
+    figure = "fig4.png" if has_extra("plot") else f"no fig4.png (needs {install_hint('plot')})"
+    print(f"wrote {out}/sequence.json, search.json, {figure}")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -35,8 +35,9 @@ if TYPE_CHECKING:
 
     from sahgrasp.ik.learned import GraspDatabase
     from sahgrasp.ik.stream import ResultsWriter
-    from sahgrasp.model.contacts import GraspTarget, InvalidProblem
+    from sahgrasp.model.contacts import GraspTarget
     from sahgrasp.model.hand import Hand
+    from sahgrasp.objects.targets import InvalidProblem
 
 __all__ = [
     "Summary",
@@ -307,7 +308,7 @@ def solve_items(
     import os
 
     from sahgrasp.ik.stream import problem_digest
-    from sahgrasp.model.contacts import InvalidProblem
+    from sahgrasp.objects.targets import InvalidProblem
 
     written = {os.path.realpath(p) for p in outputs}
     for problem in problems:

@@ -1,9 +1,10 @@
-"""Collision geometry and queries: the hand's self-collision and an object's convex pieces.
+"""Collision geometry and queries: the hand against itself and against an object.
 
 :mod:`~sahgrasp.collision.hand_self` checks a hand against itself (coal through Pinocchio);
-:mod:`~sahgrasp.collision.shapes` holds an object's convex pieces and their signed distances. The
-GJK of the compiled kernels is ``sahgrasp/collision/_gjk.h``. The names of the hand's
-self-collision are loaded on first use.
+:mod:`~sahgrasp.collision.shapes` holds an object's convex pieces and their signed distances;
+:mod:`~sahgrasp.collision.hand_object` measures the signed distances between a hand's links and
+an object's pieces and places free fingers clear. The GJK of the compiled kernels is
+``sahgrasp/collision/_gjk.h``. The names are loaded on first use.
 """
 
 from __future__ import annotations
@@ -13,6 +14,15 @@ from typing import TYPE_CHECKING
 from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from sahgrasp.collision.hand_object import (
+        CONTACT_ALLOWANCE_M,
+        FREE_FINGER_MARGIN_M,
+        Clearance,
+        ClearanceHand,
+        ClearanceObject,
+        FreeFingerPlacement,
+        HandObjectClearance,
+    )
     from sahgrasp.collision.hand_self import (
         CollisionPair,
         Penetration,
@@ -24,6 +34,15 @@ if TYPE_CHECKING:
     )
 
 _EXPORTS = {
+    "sahgrasp.collision.hand_object": (
+        "CONTACT_ALLOWANCE_M",
+        "FREE_FINGER_MARGIN_M",
+        "Clearance",
+        "ClearanceHand",
+        "ClearanceObject",
+        "FreeFingerPlacement",
+        "HandObjectClearance",
+    ),
     "sahgrasp.collision.hand_self": (
         "CollisionPair",
         "Penetration",
@@ -36,7 +55,14 @@ _EXPORTS = {
 }
 
 __all__ = [
+    "CONTACT_ALLOWANCE_M",
+    "FREE_FINGER_MARGIN_M",
+    "Clearance",
+    "ClearanceHand",
+    "ClearanceObject",
     "CollisionPair",
+    "FreeFingerPlacement",
+    "HandObjectClearance",
     "Penetration",
     "SelfCollision",
     "copied_placements",

@@ -218,7 +218,7 @@ class PieceTree:
 
         One C++ query: coal's broad-phase distance, a GJK/EPA call per (piece, link) pair whose
         boxes are nearer than the smallest distance found so far, the pair's arguments in the
-        order :class:`~sahgrasp.objects.clearance.HandObjectClearance` measures them in. Exact
+        order :class:`~sahgrasp.collision.hand_object.HandObjectClearance` measures them in. Exact
         when positive and below ``below_m``; ``below_m`` or more if no pair is nearer than
         ``below_m`` (the search starts from it: only nearer boxes are opened). Coal stops at
         the first pair touching or overlapping: a value <= 0 says that some pair does, not that

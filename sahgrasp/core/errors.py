@@ -14,6 +14,7 @@ __all__ = [
     "InvalidConfigurationError",
     "InvalidSettingsError",
     "InvalidTargetError",
+    "MissingExtraError",
     "OptimizationError",
     "PrincipalMotionsError",
     "QualityError",
@@ -69,3 +70,18 @@ class OptimizationError(SahGraspError):
 
 class VizError(SahGraspError):
     """A drawing was given malformed data (shapes, non-finite points, no finite quality value)."""
+
+
+class MissingExtraError(SahGraspError, ImportError):
+    """An optional dependency is not installed; the message names the extra that installs it.
+
+    Also an :class:`ImportError`, so that ``except ImportError`` around an optional import
+    catches it. :func:`sahgrasp.core.extras.require_extra` raises it.
+
+    Attributes:
+        extra: The extra of pyproject.toml that installs the missing package (``cluster``...).
+    """
+
+    def __init__(self, extra: str, message: str) -> None:
+        super().__init__(message)
+        self.extra = extra

@@ -24,6 +24,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.extras import require_extra
 from sahgrasp.core.parallel import (
     SCHEDULER_TIMEOUT_S,
     SchedulerError,
@@ -74,6 +75,7 @@ def _dask_client(address: str) -> Iterator[Any]:
     at once, where Dask retries for its whole connect timeout. While the client is open, Dask's
     own log of a lost connection is muted: the :class:`SchedulerError` raised instead says it.
     """
+    require_extra("cluster", f"the Dask scheduler {address}")  # before connecting: one line
     host, port = address.removeprefix("tcp://").rsplit(":", 1)
     try:
         socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_TIMEOUT_S).close()

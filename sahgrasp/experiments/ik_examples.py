@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.core.tables import format_table
 from sahgrasp.ik import IKResult, IKSettings, solve_ik
-from sahgrasp.model.contacts import GraspTarget, ObjectCache
+from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import (
     GRASP_NAMES,
@@ -31,6 +31,7 @@ from sahgrasp.objects import (
     paper_grasp,
     transform_points,
 )
+from sahgrasp.objects.targets import ObjectCache, build_object
 from sahgrasp.viz.grasp_view import grasp_points, show_grasp
 from sahgrasp.viz.viewer import Viewer
 
@@ -113,7 +114,7 @@ def solve_problems(
     for problem in problems:
         spec = problem.object_spec
         if spec is not None and spec.key() not in objects:
-            objects[spec.key()] = spec.load(built)
+            objects[spec.key()] = build_object(spec, built)
         obj = None if spec is None else objects[spec.key()]
         result = solve_ik(hand, problem, settings, obstacle=obj, record_history=True)
         solved.append(SolvedGrasp(problem.name, obj, problem, result))

@@ -44,6 +44,7 @@ from sahgrasp.model.hand import Hand
 from sahgrasp.objects import CONTACT_ALLOWANCE_M, GraspObject, HandObjectClearance
 from sahgrasp.objects.patches import GraspPatches
 from sahgrasp.objects.smooth_surface import MeshPatch
+from sahgrasp.objects.targets import problem_from_dict
 from sahgrasp.optimization import OptimizationResult, OptimizationSettings, optimize
 from sahgrasp.optimization.grasp import HandGraspManifold, make_mesh_manifold, mesh_patches
 from sahgrasp.planner.pieces import planning_object
@@ -576,7 +577,7 @@ def read_starts(path: str | os.PathLike[str], hand: Hand) -> list[MeshStart]:
         if not isinstance(item, dict):
             raise InvalidTargetError(f"{where}: must be an object")
         label = str(item.get("name", f"{key}[{i}]"))
-        target = GraspTarget.from_dict(
+        target = problem_from_dict(
             {"name": label, "contacts": item.get("contacts")}, Path(path).parent
         )
         if len(target.contacts) < 2:

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sahgrasp.core.errors import OptimizationError
+from sahgrasp.core.extras import require_extra
 from sahgrasp.optimization.optimizer import OptimizationResult
 from sahgrasp.optimization.planar import PlanarGraspProblem, PlanarHand
 from sahgrasp.quality.ellipsoids import INDICES, SINGULAR_THRESHOLDS, principal_projection
@@ -38,7 +39,12 @@ def _index_panel(
 
 
 def plot_index_map(result: OptimizationResult, path: str | Path, title: str) -> None:
-    """The chart centres coloured by the optimised index, with a colour bar, as a PNG."""
+    """The chart centres coloured by the optimised index, with a colour bar, as a PNG.
+
+    Raises:
+        MissingExtraError: matplotlib is not installed (the extra ``plot``).
+    """
+    require_extra("plot", f"the figure {path}")
     from matplotlib.figure import Figure
 
     xy = principal_projection(result.atlas.centres)
@@ -60,7 +66,9 @@ def plot_planar(result: OptimizationResult, path: str | Path) -> None:
 
     Raises:
         OptimizationError: The result is not the planar hand's, or was ranked by a user index.
+        MissingExtraError: matplotlib is not installed (the extra ``plot``).
     """
+    require_extra("plot", f"the figure {path}")
     from matplotlib.figure import Figure
 
     problem = result.problem

@@ -45,9 +45,10 @@ from sahgrasp.ik.initial import Sequence as PoseSequence
 from sahgrasp.ik.learned import GraspDatabase
 from sahgrasp.ik.obstacle import check_obstacle, checker_of, pieces_of
 from sahgrasp.ik.solver import IKResult, IKSettings, solve_ik
-from sahgrasp.model.contacts import GraspTarget, InvalidProblem, ObjectCache, ObjectSpec
+from sahgrasp.model.contacts import GraspTarget, ObjectSpec
 from sahgrasp.model.hand import Hand, HandDescription, load_hand
 from sahgrasp.model.hands import hand_entry
+from sahgrasp.objects.targets import InvalidProblem, ObjectCache, build_object
 
 if TYPE_CHECKING:
     from sahgrasp.objects import GraspObject
@@ -141,7 +142,9 @@ def worker_obstacle(obstacle: GraspObject | ObjectSpec, key: str) -> GraspObject
             del kept[next(iter(kept))]
         try:
             kept[key] = (
-                obstacle.load(_CACHE.objects) if isinstance(obstacle, ObjectSpec) else obstacle
+                build_object(obstacle, _CACHE.objects)
+                if isinstance(obstacle, ObjectSpec)
+                else obstacle
             )
         except SahGraspError as exc:
             kept[key] = f"object {obstacle}: {exc}"

@@ -3,7 +3,7 @@
 Every hand link must stay outside the object, except the fingertip sphere of each finger that has
 a contact: it touches the object at its contact by design, and Eq. (9) accepts its contact point
 up to ``d_min`` from the target, so that sphere alone may penetrate by up to ``d_min``. The
-signed distances come from :class:`sahgrasp.objects.clearance.HandObjectClearance` (coal GJK/EPA
+signed distances come from :class:`sahgrasp.collision.hand_object.HandObjectClearance` (coal GJK/EPA
 between each link shape and the object's convex pieces); its penetration records have the object
 as body ``a`` (joint 0, fixed), so the IK's separation rows push the links out along the normals.
 """
@@ -15,13 +15,13 @@ import functools
 import numpy as np
 from numpy.typing import NDArray
 
+from sahgrasp.collision.hand_object import Clearance, HandObjectClearance
 from sahgrasp.collision.hand_self import Penetration
 from sahgrasp.core.errors import InvalidTargetError
 from sahgrasp.ik._lm import Pieces
 from sahgrasp.ik.compiled import CONVEX, TIE_M, compiled_tree, describe_shape
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects.body import GraspObject
-from sahgrasp.objects.clearance import Clearance, HandObjectClearance
 
 __all__ = [
     "REPAIR_PAIRS_PER_LINK",

@@ -38,10 +38,9 @@ from sahgrasp.core.fileio import (
     side_files,
     write_error,
 )
-from sahgrasp.model.contacts import (
-    GraspTarget,
+from sahgrasp.model.contacts import GraspTarget, ObjectSpec
+from sahgrasp.objects.targets import (
     InvalidProblem,
-    ObjectSpec,
     object_spec,
     problem_from_line,
     read_targets_document,

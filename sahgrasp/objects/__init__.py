@@ -5,11 +5,12 @@ The papers' objects and grasps are in :mod:`sahgrasp.objects.catalog`; the reusa
 (parametrised surfaces), :mod:`~sahgrasp.objects.patches` (contact regions of the atlas paper),
 :mod:`~sahgrasp.objects.solids`, :mod:`~sahgrasp.objects.body` (an object) and its meshes and
 collision shapes; :mod:`~sahgrasp.objects.mesh_file` reads objects from mesh files and
-:mod:`~sahgrasp.objects.clearance` measures a hand's clearance to an object.
-Lengths in metres, angles in radians.
+:mod:`~sahgrasp.objects.targets` reads and writes targets files and builds the objects they name.
+The hand-object clearance (``CONTACT_ALLOWANCE_M``, ``Clearance``, ``HandObjectClearance``) is
+:mod:`sahgrasp.collision.hand_object`'s, exported here too. Lengths in metres, angles in radians.
 
 The names are loaded on first use: importing one module of the package (the IK imports
-:mod:`~sahgrasp.objects.clearance`) does not load the mesh readers (trimesh).
+:mod:`~sahgrasp.objects.body`) does not load the mesh readers (trimesh).
 """
 
 from __future__ import annotations
@@ -19,6 +20,11 @@ from typing import TYPE_CHECKING
 from sahgrasp.core.lazy import lazy_exports
 
 if TYPE_CHECKING:
+    from sahgrasp.collision.hand_object import (
+        CONTACT_ALLOWANCE_M,
+        Clearance,
+        HandObjectClearance,
+    )
     from sahgrasp.collision.shapes import (
         CollisionShape,
         convex_hull,
@@ -45,11 +51,6 @@ if TYPE_CHECKING:
         load_object,
         paper_grasp,
         register_object,
-    )
-    from sahgrasp.objects.clearance import (
-        CONTACT_ALLOWANCE_M,
-        Clearance,
-        HandObjectClearance,
     )
     from sahgrasp.objects.mesh_file import (
         MeshFileError,
@@ -86,6 +87,23 @@ if TYPE_CHECKING:
         Surface,
         SurfaceJet,
     )
+    from sahgrasp.objects.targets import (
+        MAX_PATH_CHARS,
+        QUATERNION_TOLERANCE,
+        InvalidProblem,
+        ObjectCache,
+        TargetsFile,
+        build_object,
+        load_targets,
+        object_spec,
+        problem_from_dict,
+        problem_from_json,
+        problem_from_line,
+        read_problems,
+        read_targets_document,
+        save_targets,
+        targets_hand,
+    )
 
 _EXPORTS = {
     "sahgrasp.collision.shapes": (
@@ -113,7 +131,7 @@ _EXPORTS = {
         "paper_grasp",
         "register_object",
     ),
-    "sahgrasp.objects.clearance": (
+    "sahgrasp.collision.hand_object": (
         "CONTACT_ALLOWANCE_M",
         "Clearance",
         "HandObjectClearance",
@@ -153,14 +171,33 @@ _EXPORTS = {
         "Surface",
         "SurfaceJet",
     ),
+    "sahgrasp.objects.targets": (
+        "MAX_PATH_CHARS",
+        "QUATERNION_TOLERANCE",
+        "InvalidProblem",
+        "ObjectCache",
+        "TargetsFile",
+        "build_object",
+        "load_targets",
+        "object_spec",
+        "problem_from_dict",
+        "problem_from_json",
+        "problem_from_line",
+        "read_problems",
+        "read_targets_document",
+        "save_targets",
+        "targets_hand",
+    ),
 }
 
 __all__ = [
     "CATALOG",
     "CONTACT_ALLOWANCE_M",
     "GRASP_NAMES",
+    "MAX_PATH_CHARS",
     "OBJECT_NAMES",
     "PAPER_IK_REPORT",
+    "QUATERNION_TOLERANCE",
     "Arc",
     "BoxSolid",
     "CatalogEntry",
@@ -175,9 +212,11 @@ __all__ = [
     "GraspPatches",
     "HandObjectClearance",
     "IKReport",
+    "InvalidProblem",
     "Mesh",
     "MeshFileError",
     "MeshSolid",
+    "ObjectCache",
     "Patch",
     "RectangleSurface",
     "RevolvedSolid",
@@ -186,19 +225,30 @@ __all__ = [
     "Solid",
     "Surface",
     "SurfaceJet",
+    "TargetsFile",
     "as_placement",
     "bottle_patches",
+    "build_object",
     "can_patches",
     "convex_hull",
     "load_mesh",
     "load_object",
+    "load_targets",
+    "object_spec",
     "paper_grasp",
     "placement",
+    "problem_from_dict",
+    "problem_from_json",
+    "problem_from_line",
+    "read_problems",
+    "read_targets_document",
     "register_object",
     "rotation_about",
     "rounded_polyline",
     "sample_profile",
+    "save_targets",
     "signed_distances",
+    "targets_hand",
     "tessellate",
     "transform_points",
 ]

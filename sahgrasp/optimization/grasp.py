@@ -44,6 +44,7 @@ import numpy as np
 import pinocchio as pin
 from numpy.typing import ArrayLike, NDArray
 
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.core.errors import GraspSystemError, OptimizationError
 from sahgrasp.ik import IKSettings, solve_ik
 from sahgrasp.ik.batch import object_key, worker_hand, worker_obstacle
@@ -51,7 +52,6 @@ from sahgrasp.ik.obstacle import checker_of
 from sahgrasp.model.contacts import GraspTarget
 from sahgrasp.model.hand import Hand, HandDescription
 from sahgrasp.objects import GraspObject
-from sahgrasp.objects.clearance import HandObjectClearance
 from sahgrasp.objects.patches import ContactRegion, GraspPatches
 from sahgrasp.objects.smooth_surface import fit_mesh_patch
 from sahgrasp.optimization.motions import PrincipalMotions, principal_motions

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.core.executors import open_executor
+from sahgrasp.core.extras import has_extra
 from sahgrasp.core.fileio import write_bytes_atomic, write_json_atomic
 from sahgrasp.ik import IKSettings, PoseBasis, Sequence, pose_basis
 from sahgrasp.ik.initial import PCA_SAMPLES, PCA_SEED, expansion_matrix
@@ -251,10 +252,11 @@ def search_sequence(
     """Search the sequence of initial poses and write it, with its statistics, to ``out_dir``.
 
     Writes ``sequence.json`` (:meth:`Sequence.save`), ``search.json`` (settings, the ``E_i``
-    maps and per-round statistics), ``fig4.png`` (the ``E_i`` maps as in the paper's Fig. 4) and
-    keeps ``checkpoint/`` up to date as cells finish. It holds an exclusive lock on ``out_dir``
-    from start to end (:func:`sahgrasp.sequence.folder.locked_folder`) and deletes the temporary
-    files of writes that a kill interrupted. Call it under ``if __name__ == "__main__":`` in
+    maps and per-round statistics), ``fig4.png`` (the ``E_i`` maps as in the paper's Fig. 4;
+    with matplotlib only, the extra ``plot``) and keeps ``checkpoint/`` up to date as cells
+    finish. It holds an exclusive lock on ``out_dir`` from start to end
+    (:func:`sahgrasp.sequence.folder.locked_folder`) and deletes the temporary files of writes
+    that a kill interrupted. Call it under ``if __name__ == "__main__":`` in
     scripts: local workers are started with ``spawn``.
 
     Args:
@@ -492,6 +494,8 @@ def _sequence(
 def _write_outputs(result: SearchResult, out: Path) -> None:
     write_json_atomic(out / SEQUENCE, result.sequence.to_dict())  # as Sequence.save writes it
     write_json_atomic(out / REPORT, result.to_dict())
+    if not has_extra("plot"):  # the figure is a view of search.json: without matplotlib, none
+        return
     rounds = result.rounds
     title = f"Success rates E_i of the initial-pose search, hand {result.sequence.hand}"
     png = success_maps_png([r.success_rates for r in rounds], [r.lambdas for r in rounds], title)

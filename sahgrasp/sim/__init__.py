@@ -5,10 +5,12 @@ BODex's benchmark way; :class:`HoldTester` tests many grasps of one object with 
 model. docs/methods/physics.md describes the model, its parameters and the criterion.
 """
 
+from sahgrasp.core.extras import require_extra
+
 try:
     import mujoco  # noqa: F401
-except ImportError as exc:  # the optional extra is missing
-    raise ImportError('sahgrasp.sim needs MuJoCo: pip install "sahgrasp[sim]"') from exc
+except ImportError:  # the optional extra is missing: the one error naming it
+    require_extra("sim", "sahgrasp.sim")
 
 from sahgrasp.sim.batch import (
     GraspToCheck,

@@ -24,8 +24,10 @@ from numpy.typing import NDArray
 from sahgrasp.core.errors import SahGraspError
 from sahgrasp.core.fileio import read_json
 from sahgrasp.core.parallel import process_pool
-from sahgrasp.model.contacts import InvalidProblem, ObjectSpec, object_spec, read_problems
-from sahgrasp.model.hand import Hand, load_hand
+from sahgrasp.ik.batch import worker_hand
+from sahgrasp.model.contacts import ObjectSpec
+from sahgrasp.model.hand import Hand, HandDescription, load_hand
+from sahgrasp.objects.targets import InvalidProblem, build_object, object_spec, read_problems
 from sahgrasp.sim.hold import HoldResult, HoldTester
 from sahgrasp.sim.settings import HoldSettings
 
@@ -234,35 +236,41 @@ def read_grasps(
     return out
 
 
-_TESTERS: dict[tuple[str, str, HoldSettings], HoldTester | str] = {}
-"""A worker's models, per (hand, object, settings); a string when the object cannot be built."""
-_HANDS: dict[str, Hand] = {}
+_KEPT_TESTERS = 8
+"""Hold testers (compiled MuJoCo models) a hand's cache keeps: a long run covers many objects."""
 
 
-def _tester(hand_name: str, spec: ObjectSpec, settings: HoldSettings) -> HoldTester | str:
-    key = (hand_name, spec.key(), settings)
-    if key not in _TESTERS:
-        if len(_TESTERS) >= 8:  # a bounded cache: a long run over many objects
-            _TESTERS.pop(next(iter(_TESTERS)))
-        hand = _HANDS.get(hand_name) or _HANDS.setdefault(hand_name, load_hand(hand_name))
+def _tester(hand: Hand, spec: ObjectSpec, settings: HoldSettings) -> HoldTester | str:
+    """The hand's tester of ``spec`` under ``settings``, kept in ``hand.cache``.
+
+    A string says why the object cannot be simulated.
+    """
+
+    def build() -> HoldTester | str:
         try:
-            _TESTERS[key] = HoldTester(hand, spec.load(), settings)
+            return HoldTester(hand, build_object(spec), settings)
         except SahGraspError as exc:
-            _TESTERS[key] = f"object {spec} cannot be simulated: {exc}"
-    return _TESTERS[key]
+            return f"object {spec} cannot be simulated: {exc}"
+
+    return hand.cache.kept("hold_testers", (spec.key(), settings), build, _KEPT_TESTERS)
 
 
 def _check_chunk(
     task: tuple[
+        HandDescription,
         str,
         ObjectSpec,
         HoldSettings,
         list[tuple[str, NDArray[np.float64], tuple[str, ...] | None]],
     ],
 ) -> list[HoldResult | str]:
-    """Hold-test grasps of one object (a worker's task); a string says why one was not."""
-    hand_name, spec, settings, grasps = task
-    tester = _tester(hand_name, spec, settings)
+    """Hold-test grasps of one object (a worker's task); a string says why one was not.
+
+    The worker's hand is the one :func:`sahgrasp.ik.worker_hand` keeps per worker (rebuilt from
+    its description: Pinocchio's geometry does not pickle), its testers in the hand's cache.
+    """
+    description, digest, spec, settings, grasps = task
+    tester = _tester(worker_hand(description, digest), spec, settings)
     if isinstance(tester, str):
         return [tester] * len(grasps)
     return [tester.test(q, name=name, fingers=fingers) for name, q, fingers in grasps]
@@ -285,6 +293,8 @@ def check_grasps(
         progress: Called with the number of grasps done after each chunk.
     """
     settings = settings or HoldSettings()
+    description = load_hand(hand_name).description  # what the workers rebuild the hand from
+    digest = description.digest()
     out: list[HoldResult | str] = [g.skipped or "" for g in grasps]
     tasks, where = [], []
     by_object: dict[str, list[int]] = {}
@@ -297,7 +307,7 @@ def check_grasps(
             spec = grasps[chunk[0]].object_spec
             assert spec is not None
             items = [(grasps[i].name, grasps[i].q, grasps[i].fingers) for i in chunk]
-            tasks.append((hand_name, spec, settings, items))
+            tasks.append((description, digest, spec, settings, items))
             where.append(chunk)
     done = 0
 

@@ -22,8 +22,10 @@ from sahgrasp.viz.colors import (
     FINGER_COLORS,
     MARKER_COLOR,
     QUALITY_COLORMAP,
+    RDYLGN_RGB,
     finger_colors,
     hex_color,
+    quality_colormap,
     quality_colors,
 )
 from sahgrasp.viz.grasp_view import frame_grasp, grasp_points, show_grasp
@@ -39,6 +41,7 @@ __all__ = [
     "FINGER_COLORS",
     "MARKER_COLOR",
     "QUALITY_COLORMAP",
+    "RDYLGN_RGB",
     "AtlasPlot",
     "ChartGrasp",
     "DrawExtreme",
@@ -52,6 +55,7 @@ __all__ = [
     "grasp_points",
     "hex_color",
     "present",
+    "quality_colormap",
     "quality_colors",
     "scene_commands",
     "show_atlas",

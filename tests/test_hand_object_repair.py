@@ -13,11 +13,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.collision.shapes import PieceTree
 from sahgrasp.ik import solve_ik
 from sahgrasp.model.hand import Hand
 from sahgrasp.objects import GraspObject, load_object, paper_grasp
-from sahgrasp.objects.clearance import HandObjectClearance
 
 ALLOWANCE_M = 1.5e-3
 CONTACTS = ("thumb", "index")

@@ -1,4 +1,4 @@
-"""Hand-object clearance (sahgrasp.objects.clearance), checked against coal directly."""
+"""Hand-object clearance (sahgrasp.collision.hand_object), checked against coal directly."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from sahgrasp.collision.hand_object import HandObjectClearance
 from sahgrasp.collision.hand_self import CollisionPair
 from sahgrasp.core.errors import InvalidConfigurationError, InvalidSettingsError, InvalidTargetError
 from sahgrasp.experiments.ik_examples import solve_example
@@ -21,7 +22,6 @@ from sahgrasp.objects import (
     load_object,
     placement,
 )
-from sahgrasp.objects.clearance import HandObjectClearance
 
 CUBE_M = 0.004
 

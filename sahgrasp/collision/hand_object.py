@@ -33,6 +33,11 @@ instead: collision tests and one broad-phase distance, whatever the number of li
 The object side of a :class:`~sahgrasp.collision.hand_self.Penetration` is joint 0 (the universe,
 which does not move), so the IK's separation rows ``n^T (J_b(p_b) - J_a(p_a))`` hold with ``J_a =
 0``.
+
+The hand and the object are what the queries read of them (:class:`ClearanceHand`,
+:class:`ClearanceObject`): a :class:`sahgrasp.model.hand.Hand` and a
+:class:`sahgrasp.objects.GraspObject` are both, and this package, below the model and the
+objects, imports neither.
 """
 
 from __future__ import annotations
@@ -40,26 +45,122 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Generic, Protocol, TypeVar
 
 import coal
 import numpy as np
 import pinocchio as pin
 from numpy.typing import NDArray
 
-from sahgrasp.collision.hand_self import Penetration, copied_placements, geometry_placement_views
-from sahgrasp.collision.shapes import PieceTree
+from sahgrasp.collision.hand_self import (
+    Penetration,
+    SelfCollision,
+    copied_placements,
+    geometry_placement_views,
+)
+from sahgrasp.collision.shapes import CollisionShape, PieceTree
 from sahgrasp.core.errors import InvalidSettingsError, InvalidTargetError
 from sahgrasp.core.frames import FloatArray, as_placement
-from sahgrasp.model.hand import Hand
-from sahgrasp.objects.body import GraspObject
 
 __all__ = [
     "CONTACT_ALLOWANCE_M",
     "FREE_FINGER_MARGIN_M",
     "Clearance",
+    "ClearanceHand",
+    "ClearanceObject",
     "FreeFingerPlacement",
     "HandObjectClearance",
 ]
+
+
+class _Finger(Protocol):
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def tip_link(self) -> str: ...
+
+
+class _Description(Protocol):
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def fingers(self) -> Sequence[_Finger]: ...
+
+
+class ClearanceHand(Protocol):
+    """What the clearance queries read of a hand (:class:`sahgrasp.model.hand.Hand` is one).
+
+    Its Pinocchio model and collision geometry (``collision``), its fingers' names and tip links
+    (``description``), its coordinates (names, each finger's, the virtual contact joints, the
+    limits [rad]) and the two helpers on configurations.
+    """
+
+    @property
+    def model(self) -> pin.Model:
+        """The Pinocchio model (free-flyer wrist)."""
+
+    @property
+    def collision(self) -> SelfCollision:
+        """The self-collision queries, whose ``geometry_model`` the links are."""
+
+    @property
+    def description(self) -> _Description:
+        """The hand's name and fingers (names, tip links)."""
+
+    @property
+    def virtual_joint_names(self) -> tuple[str, ...]:
+        """The virtual contact joints, not moved to place a free finger."""
+
+    @property
+    def coordinate_names(self) -> tuple[str, ...]:
+        """The joint of each finger coordinate."""
+
+    @property
+    def finger_coordinates(self) -> dict[str, NDArray[np.intp]]:
+        """Per finger, its coordinates' indices in ``finger_part(q)``."""
+
+    @property
+    def lower(self) -> NDArray[np.float64]:
+        """Lower limits of the finger coordinates [rad]."""
+
+    @property
+    def upper(self) -> NDArray[np.float64]:
+        """Upper limits of the finger coordinates [rad]."""
+
+    def check_q(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``q`` checked: its size and finiteness."""
+
+    def finger_part(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The finger coordinates of ``q`` (a view)."""
+
+
+class ClearanceObject(Protocol):
+    """What the clearance queries read of an object (:class:`sahgrasp.objects.GraspObject` is one).
+
+    Its convex pieces in the object frame and its placement in the world.
+    """
+
+    @property
+    def T_world_object(self) -> FloatArray:
+        """The object's placement in the world (4x4)."""
+
+    def collision_shapes(self) -> tuple[CollisionShape, ...]:
+        """The convex pieces whose union is the object, in the object frame."""
+
+
+class _NoObject:
+    """No object: no piece, every link clear of it (to place free fingers clear of the hand)."""
+
+    T_world_object: FloatArray = as_placement(np.eye(4))
+
+    def collision_shapes(self) -> tuple[CollisionShape, ...]:
+        return ()
+
+
+HandT = TypeVar("HandT", bound=ClearanceHand)
+"""The hand type of a :class:`HandObjectClearance` (its ``hand`` attribute is the one given)."""
 
 CONTACT_ALLOWANCE_M = 1.5e-3
 """Default penetration allowed to a contact fingertip sphere: the IK's ``d_min`` [m]."""
@@ -126,7 +227,7 @@ class FreeFingerPlacement:
 class _FreeFinger:
     """A finger's own joint coordinates, the geometries they move, and its self-collision pairs."""
 
-    coordinates: NDArray[np.intp]  # indices in Hand.finger_part(q)
+    coordinates: NDArray[np.intp]  # indices in hand.finger_part(q)
     grid: NDArray[np.float64]  # candidate values of those coordinates, (N, len(coordinates))
     geometries: NDArray[np.intp]  # hand geometries moved by the coordinates
     pairs: NDArray[np.intp]  # hand geometry pairs (P, 2) the hand checks for self-collision
@@ -143,7 +244,7 @@ class _Pair:
     normal: FloatArray  # from the object towards the hand link
 
 
-class HandObjectClearance:
+class HandObjectClearance(Generic[HandT]):
     """Signed distances between a hand's collision geometry and an object's convex pieces.
 
     Independent of any solver: it owns its Pinocchio data and coal geometry data, so queries
@@ -156,9 +257,9 @@ class HandObjectClearance:
             fingers clear of the other links only.
     """
 
-    def __init__(self, hand: Hand, obj: GraspObject | None) -> None:
+    def __init__(self, hand: HandT, obj: ClearanceObject | None) -> None:
         self.hand = hand
-        self.object = GraspObject("nothing", (), (0.0, 0.0, 0.0, 0.0)) if obj is None else obj
+        self.object: ClearanceObject = _NoObject() if obj is None else obj
         self._model = hand.model
         self._data = hand.model.createData()
         self._geometry_model = hand.collision.geometry_model
