@@ -75,7 +75,7 @@ class VizError(SahGraspError):
 class MissingExtraError(SahGraspError, ImportError):
     """An optional dependency is not installed; the message names the extra that installs it.
 
-    Also an :class:`ImportError`, so that ``except ImportError`` around an optional import
+    Also an ``ImportError``, so that ``except ImportError`` around an optional import
     catches it. :func:`sahgrasp.core.extras.require_extra` raises it.
 
     Attributes:

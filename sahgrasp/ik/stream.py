@@ -102,7 +102,7 @@ def open_targets(path: str | os.PathLike[str], *, allow_outside_paths: bool = Fa
 
     A ``.jsonl`` file is read once, from its start to its end: a named pipe loses no line. A
     UTF-8 byte order mark before its first line is skipped. ``allow_outside_paths``: accept object
-    meshes outside the file's folder (:func:`sahgrasp.model.contacts.read_problems`).
+    meshes outside the file's folder (:func:`sahgrasp.objects.targets.read_problems`).
 
     Raises:
         InvalidTargetError: The file cannot be read, or its header (first line of a ``.jsonl``

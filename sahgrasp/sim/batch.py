@@ -182,7 +182,7 @@ def read_grasps(
             document(s) carrying their object (then ``targets`` may be None).
         targets: The targets file the results were solved from (names each grasp's object).
         allow_outside_paths: Accept object meshes named outside the folder of the file that
-            names them (see :func:`sahgrasp.model.contacts.object_spec`).
+            names them (see :func:`sahgrasp.objects.targets.object_spec`).
 
     Raises:
         ResultsFileError: A file cannot be read, the results are not of the targets' problems
