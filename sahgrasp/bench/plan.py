@@ -302,7 +302,7 @@ def run(
     candidates: int = 60,
     grasps: int = 10,
     seed: int = 0,
-    rank: str = "epsilon",
+    rank: str = "weight",
     workers: Sequence[int] = (1, 2),
     atlas: bool = True,
     quiet: bool = False,
