@@ -22,6 +22,8 @@ def test_bench_check_on_the_can() -> None:
         assert rates["checked"] == row["solved"]
         assert rates["holds"] + sum(rates["failures"].values()) == rates["checked"]
     assert doc["settings"]["squeeze_n"] == 10.0 and doc["light_squeeze_n"] == 1.0
+    assert row["dexgraspbench"]["checked"] == row["solved"]
+    assert row["default_not_dexgraspbench"] <= row["default"]["holds"]
     assert "can" in summary_table(doc)
     assert format_table(doc).splitlines()[2].startswith("| can | 0.379 | 1 |")
 
