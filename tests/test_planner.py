@@ -225,7 +225,7 @@ def test_time_limit_caps_the_plan(hand, box_file: Path) -> None:  # type: ignore
 
 
 def test_an_extra_check_drops_and_reranks(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
-    settings = PlanSettings(candidates=8, grasps=4, seed=4)
+    settings = PlanSettings(candidates=8, grasps=4, seed=4, rank="epsilon")
     plain = plan_grasps(hand, load_mesh(box_file), settings)
 
     def prefer_low_epsilon(grasp):  # type: ignore[no-untyped-def]
@@ -246,7 +246,7 @@ def test_epsilon_bound_is_never_below_the_epsilon(hand, box_file: Path) -> None:
     obj = load_mesh(box_file)
     mesh = obj.mesh()
     frame = ObjectFrame.of(mesh.vertices_m, mesh.faces)
-    settings = PlanSettings(grasps=10, candidates=20, fingers=(3, 4), seed=3)
+    settings = PlanSettings(grasps=10, candidates=20, fingers=(3, 4), seed=3, rank="epsilon")
     plan = plan_grasps(hand, obj, settings)
     assert plan.grasps
     previous = np.inf

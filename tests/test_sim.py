@@ -15,7 +15,13 @@ from sahgrasp.core.errors import InvalidSettingsError
 from sahgrasp.ik import IKResult, solve_ik
 from sahgrasp.model.hand import Hand, load_hand
 from sahgrasp.objects import BoxSolid, GraspObject, load_object, paper_grasp
-from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings, HoldTester, hold_test
+from sahgrasp.sim import (
+    LIGHT_SQUEEZE_N,
+    HoldSettings,
+    HoldTester,
+    dexgraspbench_solver,
+    hold_test,
+)
 
 
 @cache
@@ -99,6 +105,8 @@ def test_result_json_has_every_direction() -> None:
         {"mass_kg": 0.0},
         {"timestep_s": 0.05},
         {"solver_iterations": 0},
+        {"ls_iterations": 0},
+        {"ls_iterations": 2.5},
         {"balance_friction": 2.0},
         {"pull_s": "1"},
     ],
@@ -114,6 +122,37 @@ def test_paper_grasps_hold(name: str) -> None:
     result = _tester(name).test(_solved(name))
     assert result.holds, result.detail
     assert result.holds_bodex
+
+
+def test_dexgraspbench_solver_changes_the_solver_only() -> None:
+    base = HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=0.1)
+    solver = dexgraspbench_solver(base)
+    assert (solver.timestep_s, solver.impratio, solver.noslip_iterations) == (0.004, 10.0, 2)
+    # DexGraspBench's 5 ms contact time constant is below MuJoCo's floor of two steps.
+    assert solver.contact_timeconst_s == 2 * solver.timestep_s
+    assert (solver.solver_iterations, solver.ls_iterations) == (100, 50)
+    kept = ("squeeze_n", "mass_kg", "friction", "patch_radius_m", "pull_s",
+            "max_displacement_m", "max_rotation_deg", "directions")  # fmt: skip
+    assert all(getattr(solver, k) == getattr(base, k) for k in kept)
+    assert dexgraspbench_solver().squeeze_n == HoldSettings().squeeze_n
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["cup", "buddha", "can"])
+def test_paper_grasps_hold_in_dexgraspbenchs_solver_settings(name: str) -> None:
+    # The cross-check: stiff friction (impratio 10) and the no-slip post-solver converge with
+    # MuJoCo's 50 line-search iterations; the squeeze settles without dragging the object.
+    tester = HoldTester(_sah(), load_object(name), dexgraspbench_solver())
+    result = tester.test(_solved(name))
+    assert result.holds, result.detail
+    assert result.settle_displacement_m < 0.002 and result.settle_rotation_deg < 2.0
+
+
+@pytest.mark.slow
+def test_can_without_friction_does_not_hold_in_dexgraspbenchs_solver_settings() -> None:
+    settings = dexgraspbench_solver(HoldSettings(friction=0.0))
+    result = HoldTester(_sah(), load_object("can"), settings).test(_solved("can"))
+    assert not result.holds
 
 
 @pytest.mark.slow

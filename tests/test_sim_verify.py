@@ -67,6 +67,7 @@ def test_planner_keeps_only_grasps_that_hold_ranked_by_margin() -> None:
     # The verdict is the hold test's, found again by an independent tester.
     rates = hold_rates(hand, can, [g.q for g in plan.grasps], {"default": HoldSettings()})
     assert rates["default"]["holds"] == len(plan.grasps)
+    assert rates["default"]["held"] == [True] * len(plan.grasps)
     # Without friction nothing holds: the check drops every grasp.
     frictionless = PhysicsCheck(hand, can, HoldSettings(friction=0.0))
     assert not plan_grasps(hand, can, settings, check=frictionless).grasps

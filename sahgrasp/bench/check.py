@@ -4,7 +4,10 @@ Per object: contact sets drawn as ``sahgrasp bench grasps`` draws them (same see
 solved by the IK with the object as the obstacle; every solution is hold-tested with the default
 settings and with the light squeeze (:data:`~sahgrasp.sim.LIGHT_SQUEEZE_N` per contact finger).
 The object's paper grasp, if it has one, is tested too. Times are CPU seconds of this process
-(one core), the model built once per object and timed apart.
+(one core), the model built once per object and timed apart. Every solution is also tested with
+the default settings in DexGraspBench's MuJoCo solver settings
+(:func:`~sahgrasp.sim.settings.dexgraspbench_solver`, untimed), the independent cross-check:
+``default_not_dexgraspbench`` counts the grasps that hold by default but not there.
 """
 
 from __future__ import annotations
@@ -26,7 +29,13 @@ from sahgrasp.model.hands import DEFAULT_HAND
 from sahgrasp.objects import GRASP_NAMES, OBJECT_NAMES, load_object, paper_grasp
 from sahgrasp.objects.grasp_sampler import sample_object_grasps
 from sahgrasp.objects.reach import sampler_reach
-from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldResult, HoldSettings, HoldTester
+from sahgrasp.sim import (
+    LIGHT_SQUEEZE_N,
+    HoldResult,
+    HoldSettings,
+    HoldTester,
+    dexgraspbench_solver,
+)
 
 __all__ = ["format_table", "run"]
 
@@ -97,7 +106,8 @@ def run(
                 "light": HoldTester(hand, obj, light),
             }
             build_s = (time.process_time() - start) / 2
-            out: dict[str, list[HoldResult]] = {"default": [], "light": []}
+            cross = HoldTester(hand, obj, dexgraspbench_solver(settings))
+            out: dict[str, list[HoldResult]] = {"default": [], "light": [], "dexgraspbench": []}
             cpu: list[float] = []
             paper: dict[str, bool] = {}
             for k, (is_paper, result) in enumerate(solved):
@@ -109,6 +119,8 @@ def run(
                         paper[label] = held.holds
                     else:
                         out[label].append(held)
+                if not is_paper:  # the cross-check, untimed
+                    out["dexgraspbench"].append(cross.test(result))
                 if report is not None:
                     report(f"{stage}: hold test", k + 1, len(solved))
             rows.append({
@@ -123,6 +135,11 @@ def run(
                 "checks_per_s_one_core": 1.0 / mean(cpu) if cpu else None,
                 "default": _rates(out["default"]),
                 "light": _rates(out["light"]),
+                "dexgraspbench": _rates(out["dexgraspbench"]),
+                "default_not_dexgraspbench": sum(
+                    a.holds and not b.holds
+                    for a, b in zip(out["default"], out["dexgraspbench"], strict=True)
+                ),
                 "paper_grasp_holds": paper or None,
             })  # fmt: skip
     all_cpu = [float(r["check_cpu_mean_ms"]) for r in rows if r["check_cpu_mean_ms"] is not None]
@@ -147,8 +164,8 @@ def format_table(document: dict[str, Any]) -> str:
     lines = [
         "| object | mass kg | pieces | solved | holds (default) | BODex (default) "
         "| holds (light squeeze) | paper grasp (default, light) | check CPU ms (median) "
-        "| checks/s, 1 core |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| checks/s, 1 core | holds (DexGraspBench solver) | default, not DexGraspBench |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
 
     def pct(rates: dict[str, Any], key: str) -> str:
@@ -171,6 +188,8 @@ def format_table(document: dict[str, Any]) -> str:
             f"{row['solved']}/{row['contact_sets']} | {pct(row['default'], 'hold_rate')} | "
             f"{pct(row['default'], 'hold_rate_bodex')} | {pct(row['light'], 'hold_rate')} | "
             f"{paper_cell} | {'-' if cpu is None else f'{cpu:.0f}'} | "
-            f"{'-' if rate is None else f'{rate:.0f}'} |"
+            f"{'-' if rate is None else f'{rate:.0f}'} | "
+            f"{pct(row['dexgraspbench'], 'hold_rate') if 'dexgraspbench' in row else '-'} | "
+            f"{row.get('default_not_dexgraspbench', '-')} |"
         )
     return "\n".join(lines)

@@ -11,6 +11,13 @@ from the first object submitted to the last document; the workers' start-up -- t
 the planner's imports, the hand -- comes before and is reported apart as ``warm_up_s``):
 verified force-closure grasps per second and the speed-up.
 
+With MuJoCo (``sahgrasp[sim]``), the returned grasps are hold-tested (:mod:`sahgrasp.sim`)
+with the default settings and the light squeeze at the object's mass from the default density
+(1000 kg/m^3), the same two at the field's convention of 0.1 kg for every object
+(DexGraspBench's), and the default settings in DexGraspBench's MuJoCo solver settings
+(:func:`~sahgrasp.sim.settings.dexgraspbench_solver`), the independent cross-check: the count of
+grasps that hold by default but not there (``default_not_dexgraspbench``) should be 0.
+
 The test meshes (:func:`write_test_meshes`) are trimesh primitives of graspable size (4-15 cm):
 boxes, a plate, a cube, cylinders, a sphere, a capsule, a cone, a torus, a tube, and a box written
 in millimetres (planned with ``scale = 1e-3``; left out of the folder run, whose files are in
@@ -120,16 +127,37 @@ def _object_row(
     }
 
 
+HOLD_SETTINGS = ("default", "light", "default_0.1kg", "light_0.1kg", "dexgraspbench")
+"""The hold tests of the returned grasps (module docstring), keys of each row's ``hold``."""
+
+
 def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[str, Any] | None:
-    """Hold rates of the returned grasps, default and light squeeze (None without MuJoCo)."""
+    """Hold rates of the returned grasps under :data:`HOLD_SETTINGS` (None without MuJoCo)."""
     try:
-        from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+        from sahgrasp.sim import (
+            DEXGRASPBENCH_MASS_KG,
+            LIGHT_SQUEEZE_N,
+            HoldSettings,
+            dexgraspbench_solver,
+        )
         from sahgrasp.sim.verify import hold_rates
     except ImportError:
         return None
-    settings = {"default": HoldSettings(), "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N)}
+    field = DEXGRASPBENCH_MASS_KG
+    settings = {
+        "default": HoldSettings(),
+        "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N),
+        "default_0.1kg": HoldSettings(mass_kg=field),
+        "light_0.1kg": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=field),
+        "dexgraspbench": dexgraspbench_solver(HoldSettings()),
+    }
     rates = hold_rates(hand, obj, qs, settings, fingers)
-    return {**rates, "mass_kg": _mass_kg(hand, obj)}
+    crossed = zip(rates["default"]["held"], rates["dexgraspbench"]["held"], strict=True)
+    return {
+        **rates,
+        "mass_kg": _mass_kg(hand, obj),
+        "default_not_dexgraspbench": sum(a and not b for a, b in crossed),
+    }
 
 
 def _mass_kg(hand: Any, obj: Any) -> float:
@@ -274,7 +302,7 @@ def run(
     candidates: int = 60,
     grasps: int = 10,
     seed: int = 0,
-    rank: str = "epsilon",
+    rank: str = "weight",
     workers: Sequence[int] = (1, 2),
     atlas: bool = True,
     quiet: bool = False,
@@ -385,6 +413,7 @@ def run(
             ),
             "returned_failing_recheck": sum(r["returned_failing_recheck"] for r in rows),
             "returned": sum(r["returned"] for r in rows),
+            "hold": hold_summary(rows),
         },
         "folder_runs": runs,
         "atlas_comparison": comparison,
@@ -393,9 +422,40 @@ def run(
     }
 
 
+HOLD_TARGETS = {"default": 0.95, "light": 0.80, "default_0.1kg": 0.95, "light_0.1kg": 0.80}
+"""The hold-rate targets per object of the planner's top grasps (the default squeeze and light)."""
+
+
+def hold_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """Per hold test of :data:`HOLD_SETTINGS`: grasps held, and objects at their target rate.
+
+    ``objects_at_target``: objects whose returned grasps hold at :data:`HOLD_TARGETS`' rate or
+    above (the cross-check has no target of its own); ``default_not_dexgraspbench``: grasps
+    that hold with the default settings but not in DexGraspBench's solver settings.
+    """
+    holds = [r["hold"] for r in rows if r.get("hold") is not None]
+    if not holds:
+        return None
+    out: dict[str, Any] = {}
+    for key in HOLD_SETTINGS:
+        present = [h[key] for h in holds if key in h and h[key]["checked"]]
+        target = HOLD_TARGETS.get(key)
+        out[key] = {
+            "holds": sum(h["holds"] for h in present),
+            "checked": sum(h["checked"] for h in present),
+            "objects": len(present),
+            "target": target,
+            "objects_at_target": (
+                None if target is None else sum(h["hold_rate"] >= target for h in present)
+            ),
+        }
+    out["default_not_dexgraspbench"] = sum(h.get("default_not_dexgraspbench", 0) for h in holds)
+    return out
+
+
 def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
     if hold is None:
-        return ("-", "-", "-", "-")
+        return ("-",) * 9
 
     def rate(row: dict[str, Any]) -> str:
         if not row["checked"]:
@@ -403,12 +463,21 @@ def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
         return f"{round(100 * row['hold_rate'])}% ({row['holds']}/{row['checked']})"
 
     speed = hold["default"]["checks_per_cpu_s"]
+    # Rows of an older document lack the 0.1 kg and solver cross-check columns.
+    extra = [rate(hold[k]) if k in hold else "-" for k in HOLD_SETTINGS[2:]]
     return (
         round(hold["mass_kg"], 3),
         rate(hold["default"]),
         rate(hold["light"]),
+        *extra,
+        hold.get("default_not_dexgraspbench", "-"),
+        _reasons(hold["default"]),
         "-" if speed is None else round(speed),
     )
+
+
+def _reasons(row: dict[str, Any]) -> str:
+    return ", ".join(f"{k} {v}" for k, v in row.get("reasons", {}).items()) or "-"
 
 
 def format_table(doc: dict[str, Any]) -> str:
@@ -451,6 +520,11 @@ def format_table(doc: dict[str, Any]) -> str:
         "mass [kg]",
         "holds (default)",
         "holds (light)",
+        "holds 0.1 kg",
+        "holds light 0.1 kg",
+        "holds (DexGraspBench solver)",
+        "default, not DGB",
+        "failures (default)",
         "checks/CPU s",
     )
     s = doc["summary"]
@@ -464,6 +538,20 @@ def format_table(doc: dict[str, Any]) -> str:
         f"it: {'-' if first is None else f'{first:.3f} s'}; returned grasps failing the "
         f"re-check: {s['returned_failing_recheck']}/{s['returned']}",
     ]
+    hold = s.get("hold")
+    if hold is not None:
+        parts = []
+        for key in HOLD_SETTINGS:
+            h = hold[key]
+            at = "" if h["target"] is None else (
+                f", {h['objects_at_target']}/{h['objects']} objects >= {100 * h['target']:.0f}%"
+            )  # fmt: skip
+            parts.append(f"{key} {h['holds']}/{h['checked']}{at}")
+        lines.append("grasps held: " + "; ".join(parts))
+        lines.append(
+            "held by default but not in DexGraspBench's solver settings: "
+            f"{hold['default_not_dexgraspbench']}"
+        )
     command = s.get("median_command_time_to_first_s")
     if command is not None:
         lines.append(

@@ -188,7 +188,7 @@ def _plan(benches: Any) -> None:
     plan.add_argument("--grasps", type=positive_int, default=10, help="grasps returned per object")
     plan.add_argument("--seed", type=nonnegative_int, default=0, help="plan seed (>= 0)")
     plan.add_argument(
-        "--rank", default="epsilon",
+        "--rank", default="weight",
         choices=("epsilon", "weight", "inverse_condition", "volume", "min_semiaxis"),
         help="what the planner ranks grasps by (as plan --rank)",
     )  # fmt: skip

@@ -107,10 +107,11 @@ def add_parser(sub: Any) -> None:
     p.add_argument("--seed", type=nonnegative_int, default=0, help="random seed (>= 0)")
     p.add_argument(
         "--rank",
-        default="epsilon",
+        default="weight",
         choices=("epsilon", "weight", "inverse_condition", "volume", "min_semiaxis"),
-        help="rank force-closure grasps by the L1 epsilon, the weight support (the pull they "
-        "resist in six directions per newton of finger force) or a manipulability index",
+        help="rank force-closure grasps by the weight support (the pull they resist in six "
+        "directions per newton of finger force; the default), the L1 epsilon or a "
+        "manipulability index",
     )
     p.add_argument("--mu", type=positive_float, default=0.5, help="Coulomb friction coefficient")
     p.add_argument(

@@ -36,8 +36,10 @@ class PlanSettings:
         mu: Coulomb friction coefficient of the quality and of the pre-filter.
         cone_edges: Friction cone edges of the L1 epsilon and of force closure.
         linf_edges: Friction cone edges of the L-infinity epsilon (computed for returned grasps).
-        rank: ``"epsilon"`` (L1), ``"weight"`` (the weight support,
-            :func:`sahgrasp.quality.weight.weight_support`) or a manipulability index
+        rank: ``"weight"`` (the weight support, :func:`sahgrasp.quality.weight.weight_support`:
+            the pull through the centre of mass the contacts resist in six directions; the
+            default, as the grasps it ranks first hold best in the physics hold test),
+            ``"epsilon"`` (L1) or a manipulability index
             (:data:`sahgrasp.quality.ellipsoids.INDICES`); force-closure grasps always rank before
             the others.
         time_limit_s: Optional cap on the planning time [s]: a run it cuts depends on the
@@ -59,7 +61,7 @@ class PlanSettings:
     mu: float = FRICTION
     cone_edges: int = CONE_EDGES
     linf_edges: int = LINF_CONE_EDGES
-    rank: str = "epsilon"
+    rank: str = "weight"
     time_limit_s: float | None = None
     ik_max_inits: int = 6
     d_min_m: float = 1.5e-3

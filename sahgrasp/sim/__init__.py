@@ -22,9 +22,16 @@ from sahgrasp.sim.batch import (
 )
 from sahgrasp.sim.hold import REASONS, DirectionResult, HoldResult, HoldTester, Squeeze, hold_test
 from sahgrasp.sim.model import SimModel, SimModelError, build_model
-from sahgrasp.sim.settings import DIRECTIONS, LIGHT_SQUEEZE_N, HoldSettings
+from sahgrasp.sim.settings import (
+    DEXGRASPBENCH_MASS_KG,
+    DIRECTIONS,
+    LIGHT_SQUEEZE_N,
+    HoldSettings,
+    dexgraspbench_solver,
+)
 
 __all__ = [
+    "DEXGRASPBENCH_MASS_KG",
     "DIRECTIONS",
     "LIGHT_SQUEEZE_N",
     "REASONS",
@@ -39,6 +46,7 @@ __all__ = [
     "Squeeze",
     "build_model",
     "check_grasps",
+    "dexgraspbench_solver",
     "grasp_configuration",
     "hold_test",
     "read_grasps",

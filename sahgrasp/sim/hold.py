@@ -417,9 +417,16 @@ class HoldTester:
         full = d.warning[mujoco.mjtWarning.mjWARN_CNSTRFULL]  # contacts dropped: not trusted
         while done < steps:
             n = min(self._chunk, steps - done)
-            if ramp is not None:
-                d.ctrl[:] = ramp[0] + min(1.0, (done + n) / ramp[2]) * (ramp[1] - ramp[0])
-            mujoco.mj_step(m, d, n)
+            if ramp is not None and done < ramp[2]:
+                # The targets move every step while the grip closes: jumps of the targets
+                # would jerk the fingers, and stiff friction carries a jerk into the object.
+                for k in range(n):
+                    d.ctrl[:] = ramp[0] + min(1.0, (done + k + 1) / ramp[2]) * (ramp[1] - ramp[0])
+                    mujoco.mj_step(m, d)
+            else:
+                if ramp is not None:
+                    d.ctrl[:] = ramp[1]
+                mujoco.mj_step(m, d, n)
             done += n
             if bad_qacc.number > 0 or full.number > 0:
                 return moved, turned, done * m.opt.timestep, False

@@ -243,7 +243,8 @@ def model_xml(hand: Hand, obj: GraspObject, settings: HoldSettings) -> str:
         "timestep": repr(settings.timestep_s), "integrator": "implicitfast", "cone": "elliptic",
         "solver": "Newton", "iterations": str(settings.solver_iterations),
         "noslip_iterations": str(settings.noslip_iterations),
-        "ls_iterations": "10", "impratio": repr(settings.impratio), "gravity": "0 0 0",
+        "ls_iterations": str(settings.ls_iterations), "impratio": repr(settings.impratio),
+        "gravity": "0 0 0",
     })  # fmt: skip
     ET.SubElement(root, "size", {"memory": "20M"})
     default = ET.SubElement(root, "default")

@@ -135,8 +135,9 @@ def hold_rates(
     fingertips near the object (:meth:`HoldTester.test`).
 
     Returns, per name: ``checked``, ``holds``, ``hold_rate`` (None without grasps),
-    ``holds_bodex``, the ``reasons`` of the failures counted, and ``checks_per_cpu_s`` (hold tests
-    per CPU second of this process, the models' compilation excluded).
+    ``holds_bodex``, the ``reasons`` of the failures counted, ``held`` (each grasp's verdict,
+    in the order of ``qs``) and ``checks_per_cpu_s`` (hold tests per CPU second of this
+    process, the models' compilation excluded).
     """
     import time
     from collections import Counter
@@ -155,6 +156,7 @@ def hold_rates(
             "hold_rate": holds / len(results) if results else None,
             "holds_bodex": sum(r.holds_bodex for r in results),
             "reasons": dict(sorted(Counter(r.reason for r in results if not r.holds).items())),
+            "held": [r.holds for r in results],
             "checks_per_cpu_s": len(results) / cpu_s if results and cpu_s > 0 else None,
         }
     return out
