@@ -257,3 +257,29 @@ def test_epsilon_bound_is_never_below_the_epsilon(hand, box_file: Path) -> None:
         # Force-closure grasps come ranked by their exact epsilon (ties aside).
         assert value <= previous + 1e-9
         previous = value
+
+
+def test_a_check_draws_further_batches_until_enough_pass(hand, box_file: Path) -> None:  # type: ignore[no-untyped-def]
+    settings = PlanSettings(candidates=8, grasps=3, seed=2)
+
+    def rare(grasp):  # type: ignore[no-untyped-def]
+        return 1.0 if grasp.seed % 4 == 0 else None  # about one verified grasp in four
+
+    one = plan_grasps(hand, load_mesh(box_file), settings, check=rare)
+    assert one.summary.candidates == 8  # without max_candidates: one batch
+    more = plan_grasps(hand, load_mesh(box_file), settings, check=rare, max_candidates=40)
+    s = more.summary
+    assert s.candidates % 8 == 0 and 8 <= s.candidates <= 40
+    # Stopped because enough pass, or at the cap; a batch more than needed is never drawn.
+    assert len(more.grasps) == 3 or s.candidates == 40
+    assert len(more.grasps) >= len(one.grasps)
+    assert all(g.seed % 4 == 0 for g in more.grasps)
+    if s.candidates > 8:
+        assert len(one.grasps) < 3
+    again = plan_grasps(hand, load_mesh(box_file), settings, check=rare, max_candidates=40)
+    assert [g.seed for g in again.grasps] == [g.seed for g in more.grasps]
+    # Without a check the cap changes nothing: one batch, the same plan.
+    plain = plan_grasps(hand, load_mesh(box_file), settings, max_candidates=40)
+    assert plain.summary.candidates == 8
+    with pytest.raises(PlanningError, match="max_candidates"):
+        plan_grasps(hand, load_mesh(box_file), settings, check=rare, max_candidates=0)

@@ -26,6 +26,20 @@ def test_bench_plan_document_and_table(tmp_path: Path) -> None:
         assert 0.0 <= row["force_closure_share"] <= 1.0
     table = summary_table(doc)
     assert "bench plan: sah, 2 objects" in table and "re-check fails" in table
+    verified = [r["verify_physics"] for r in doc["objects"]]
+    if verified[0] is None:  # without MuJoCo
+        return
+    for v in verified:
+        # Batches of 4 candidates up to 4 x 4, only while fewer than 2 grasps hold.
+        assert v["candidates"] in (4, 8, 12, 16) and v["max_candidates"] == 16
+        assert v["returned"] == 2 or v["candidates"] == 16
+        assert v["returned_first_batch"] <= v["returned"] <= v["hold_passed"] <= v["hold_checked"]
+        assert v["dexgraspbench"]["checked"] == v["returned"] == len(v["margins"])
+        assert all(0.0 < m <= 1.0 for m in v["margins"])
+        assert (v["time_to_first_hold_s"] is None) == (v["returned"] == 0)
+    summary = doc["summary"]["verify_physics"]
+    assert summary["returned"] == sum(v["returned"] for v in verified)
+    assert "plan --verify physics: objects with 2 holding grasps" in table
 
 
 def test_test_meshes_are_graspable_sizes(tmp_path: Path) -> None:

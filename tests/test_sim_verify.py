@@ -91,6 +91,8 @@ def test_plan_verify_physics_json_and_option_errors(
     capsys.readouterr()
     assert main(["plan", "can", "--light", "--quiet"]) == 2
     assert "need --verify physics" in capsys.readouterr().err
+    assert main(["plan", "can", "--max-candidates", "12", "--quiet"]) == 2
+    assert "need --verify physics" in capsys.readouterr().err
 
 
 def test_plan_verify_physics_on_a_folder(tmp_path: Path) -> None:
@@ -109,3 +111,32 @@ def test_plan_verify_physics_on_a_folder(tmp_path: Path) -> None:
     document = lines[1]
     assert "hold_checked" in document["summary"]
     assert all(g["hold"]["holds"] for g in document["grasps"])
+
+
+@pytest.mark.slow
+def test_plan_verify_physics_batches_are_the_same_on_one_and_two_workers(tmp_path: Path) -> None:
+    import trimesh
+
+    from sahgrasp.cli import main
+
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    trimesh.creation.cylinder(radius=0.03, height=0.1, sections=32).export(folder / "cyl.stl")
+    trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(folder / "box.stl")
+    args = ["--candidates", "4", "--grasps", "4", "--max-candidates", "12", "--verify",
+            "physics", "--seed", "1", "--quiet"]  # fmt: skip
+    documents = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"plans{workers}.jsonl"
+        main(["plan", str(folder), "--workers", workers, "--json", str(out), *args])
+        lines = [json.loads(line) for line in out.read_text().splitlines()]
+        assert lines[0]["settings"]["verify"]["max_candidates"] == 12
+        documents.append(lines[1:])
+    one, two = documents
+    assert [d["object"] for d in one] == [d["object"] for d in two]
+    for a, b in zip(one, two, strict=True):
+        assert [g["seed"] for g in a["grasps"]] == [g["seed"] for g in b["grasps"]]
+        assert a["summary"]["candidates"] == b["summary"]["candidates"]
+        assert a["summary"]["candidates"] in (4, 8, 12)
+        # Further batches only while fewer than asked hold.
+        assert len(a["grasps"]) == 4 or a["summary"]["candidates"] == 12

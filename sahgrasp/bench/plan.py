@@ -16,7 +16,14 @@ with the default settings and the light squeeze at the object's mass from the de
 (1000 kg/m^3), the same two at the field's convention of 0.1 kg for every object
 (DexGraspBench's), and the default settings in DexGraspBench's MuJoCo solver settings
 (:func:`~sahgrasp.sim.settings.dexgraspbench_solver`), the independent cross-check: the count of
-grasps that hold by default but not there (``default_not_dexgraspbench``) should be 0.
+grasps that hold by default but not there (``default_not_dexgraspbench``) should be 0. And each
+object is planned once more as ``plan --verify physics`` plans it (the planner keeps only the
+grasps that hold in the default hold test, ranked by their margin, drawing further batches of
+candidates while fewer than asked hold, up to four times the candidates:
+:data:`sahgrasp.planner.settings.CHECK_CANDIDATES_FACTOR`): the grasps it returns (and how many
+of them passed after the first batch, what a plan without further batches returns), the seconds
+to the first holding grasp and in all (from before the object is loaded), and how many of the
+returned grasps hold in DexGraspBench's solver settings and with the light squeeze at 0.1 kg.
 
 The test meshes (:func:`write_test_meshes`) are trimesh primitives of graspable size (4-15 cm):
 boxes, a plate, a cube, cylinders, a sphere, a capsule, a cone, a torus, a tube, and a box written
@@ -86,7 +93,12 @@ def write_test_meshes(folder: str | os.PathLike[str]) -> dict[str, float]:
 
 
 def _object_row(
-    hand: Any, name: str, load: Any, settings: Any, object_spec: dict[str, Any]
+    hand: Any,
+    name: str,
+    load: Any,
+    settings: Any,
+    object_spec: dict[str, Any],
+    verify_physics: bool = True,
 ) -> dict[str, Any]:
     from sahgrasp.planner import plan_grasps
     from sahgrasp.planner.verify import GraspVerifier
@@ -124,6 +136,9 @@ def _object_row(
         "hold": _hold_rates(
             hand, obj, [g.q for g in plan.grasps], [g.fingers for g in plan.grasps]
         ),
+        "verify_physics": (
+            _verified_physics(hand, load, settings, object_spec) if verify_physics else None
+        ),
     }
 
 
@@ -157,6 +172,98 @@ def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[
         **rates,
         "mass_kg": _mass_kg(hand, obj),
         "default_not_dexgraspbench": sum(a and not b for a, b in crossed),
+    }
+
+
+class _FirstHold:
+    """A planner check that records its first pass and the candidates solved at each pass.
+
+    Attributes:
+        first: ``perf_counter()`` at the first pass (None: none).
+        candidates: Candidates solved so far (counted by :meth:`candidate`).
+        passed_at: Per pass, the candidates solved when it was checked.
+    """
+
+    def __init__(self, check: Any) -> None:
+        self.check = check
+        self.first: float | None = None
+        self.candidates = 0
+        self.passed_at: list[int] = []
+
+    def candidate(self) -> None:
+        """One more candidate solved (the planner's ``on_candidate``)."""
+        self.candidates += 1
+
+    def __call__(self, grasp: Any) -> float | None:
+        value = self.check(grasp)
+        if value is not None:
+            self.passed_at.append(self.candidates)
+            if self.first is None:
+                self.first = time.perf_counter()
+        return value
+
+
+def _verified_physics(
+    hand: Any, load: Any, settings: Any, object_spec: dict[str, Any]
+) -> dict[str, Any] | None:
+    """``plan --verify physics`` on one object (module docstring); None without MuJoCo.
+
+    Timed from before the object is loaded, the hold test's model compiled in the time. The
+    returned grasps are then hold-tested in DexGraspBench's solver settings and with the light
+    squeeze at 0.1 kg (untimed).
+    """
+    try:
+        from sahgrasp.sim import (
+            DEXGRASPBENCH_MASS_KG,
+            LIGHT_SQUEEZE_N,
+            HoldSettings,
+            dexgraspbench_solver,
+        )
+        from sahgrasp.sim.verify import PhysicsCheck, hold_rates
+    except ImportError:
+        return None
+    from sahgrasp.planner import plan_grasps
+    from sahgrasp.planner.settings import CHECK_CANDIDATES_FACTOR
+
+    cap = CHECK_CANDIDATES_FACTOR * settings.candidates
+    start, cpu = time.perf_counter(), time.process_time()
+    obj = load()
+    physics = PhysicsCheck(hand, obj, HoldSettings())
+    check = _FirstHold(physics)
+    plan = plan_grasps(
+        hand, obj, settings, object_spec=object_spec, check=check, started=start,
+        on_candidate=check.candidate, max_candidates=cap,
+    )  # fmt: skip
+    time_s, cpu_s = time.perf_counter() - start, time.process_time() - cpu
+    s = plan.summary
+    # The grasps that passed the check after the first batch of candidates: what a plan
+    # without further batches returns (its selection is the first batch's).
+    first_batch = sum(n <= settings.candidates for n in check.passed_at)
+    rates = hold_rates(
+        hand,
+        obj,
+        [g.q for g in plan.grasps],
+        {
+            "dexgraspbench": dexgraspbench_solver(HoldSettings()),
+            "light_0.1kg": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=DEXGRASPBENCH_MASS_KG),
+        },
+        [g.fingers for g in plan.grasps],
+    )
+    return {
+        "requested": settings.grasps,
+        "returned": s.grasps,
+        "candidates": s.candidates,
+        "max_candidates": cap,
+        "verified": s.verified,
+        "hold_checked": physics.checked,
+        "hold_passed": sum(r.holds for r in physics.results.values()),
+        "time_to_first_hold_s": None if check.first is None else check.first - start,
+        "time_s": time_s,
+        "cpu_s": cpu_s,
+        "margins": [float(g.quality["check"]) for g in plan.grasps],
+        "dexgraspbench": {k: rates["dexgraspbench"][k] for k in ("checked", "holds", "held")},
+        "light_0.1kg": {k: rates["light_0.1kg"][k] for k in ("checked", "holds", "held")},
+        "returned_first_batch": first_batch,
     }
 
 
@@ -307,6 +414,7 @@ def run(
     atlas: bool = True,
     quiet: bool = False,
     commands: bool = True,
+    verify_physics: bool = True,
 ) -> dict[str, Any]:
     """Run the benchmark; return its JSON document (module docstring).
 
@@ -326,6 +434,7 @@ def run(
         commands: Also run ``sahgrasp plan`` on each object in a fresh process and record the
             seconds from the process's start (interpreter, imports, hand, mesh: all included)
             to its first verified force-closure grasp.
+        verify_physics: Also plan each object with ``--verify physics`` (with MuJoCo).
     """
     from tqdm import tqdm
 
@@ -361,7 +470,12 @@ def run(
             for name in names:
                 rows.append(
                     _object_row(
-                        the_hand, name, lambda n=name: load_object(n), settings, {"name": name}
+                        the_hand,
+                        name,
+                        lambda n=name: load_object(n),
+                        settings,
+                        {"name": name},
+                        verify_physics,
                     )
                 )
                 bar.update()
@@ -374,6 +488,7 @@ def run(
                         lambda p=path, s=scale: load_mesh(p, scale=s),
                         settings,
                         spec,
+                        verify_physics,
                     )
                 )
                 bar.update()
@@ -414,6 +529,7 @@ def run(
             "returned_failing_recheck": sum(r["returned_failing_recheck"] for r in rows),
             "returned": sum(r["returned"] for r in rows),
             "hold": hold_summary(rows),
+            "verify_physics": verify_summary(rows),
         },
         "folder_runs": runs,
         "atlas_comparison": comparison,
@@ -451,6 +567,51 @@ def hold_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
         }
     out["default_not_dexgraspbench"] = sum(h.get("default_not_dexgraspbench", 0) for h in holds)
     return out
+
+
+def verify_summary(rows: Sequence[dict[str, Any]]) -> dict[str, Any] | None:
+    """Totals of ``plan --verify physics`` over the objects (None when not run).
+
+    ``objects_complete``: objects with as many holding grasps as asked (``objects_complete_first
+    _batch``: within the first batch of candidates); ``dexgraspbench_share``: the returned
+    grasps that hold in DexGraspBench's solver settings, of all returned.
+    """
+    runs = [r["verify_physics"] for r in rows if r.get("verify_physics") is not None]
+    if not runs:
+        return None
+    returned = sum(v["returned"] for v in runs)
+    crossed = sum(v["dexgraspbench"]["holds"] for v in runs)
+    return {
+        "objects": len(runs),
+        "objects_complete": sum(v["returned"] == v["requested"] for v in runs),
+        "objects_complete_first_batch": sum(
+            v["returned_first_batch"] == v["requested"] for v in runs
+        ),
+        "objects_without_grasp": sum(v["returned"] == 0 for v in runs),
+        "requested": sum(v["requested"] for v in runs),
+        "returned": returned,
+        "returned_first_batch": sum(v["returned_first_batch"] for v in runs),
+        "dexgraspbench_holds": crossed,
+        "dexgraspbench_share": crossed / returned if returned else None,
+        "light_0.1kg_holds": sum(v["light_0.1kg"]["holds"] for v in runs),
+        "time_s": sum(v["time_s"] for v in runs),
+    }
+
+
+def _verify_cells(v: dict[str, Any] | None) -> tuple[Any, ...]:
+    if v is None:
+        return ("-",) * 6
+    full = v["returned"] == v["requested"]
+    first = v["time_to_first_hold_s"]
+    return (
+        f"{v['returned_first_batch']}/{v['requested']}",
+        f"{v['returned']}/{v['requested']} ({v['candidates']} cand.)"
+        + ("" if full else ", too few hold"),
+        f"{v['dexgraspbench']['holds']}/{v['dexgraspbench']['checked']}",
+        f"{v['light_0.1kg']['holds']}/{v['light_0.1kg']['checked']}",
+        "-" if first is None else round(first, 2),
+        round(v["time_s"], 1),
+    )
 
 
 def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
@@ -503,6 +664,7 @@ def format_table(doc: dict[str, Any]) -> str:
                 f"{f.get('2', 0)}/{f.get('3', 0)}/{f.get('4', 0)}",
                 r["returned_failing_recheck"],
                 *_hold_cells(r.get("hold")),
+                *_verify_cells(r.get("verify_physics")),
             )
         )
     headers = (
@@ -526,6 +688,12 @@ def format_table(doc: dict[str, Any]) -> str:
         "default, not DGB",
         "failures (default)",
         "checks/CPU s",
+        "verified in physics, first batch",
+        "verified in physics (<= 4x candidates)",
+        "of them DexGraspBench",
+        "of them light 0.1 kg",
+        "first hold [s]",
+        "verify time [s]",
     )
     s = doc["summary"]
     first = s["median_time_to_first_s"]
@@ -551,6 +719,20 @@ def format_table(doc: dict[str, Any]) -> str:
         lines.append(
             "held by default but not in DexGraspBench's solver settings: "
             f"{hold['default_not_dexgraspbench']}"
+        )
+    verified = s.get("verify_physics")
+    if verified is not None:
+        share = verified["dexgraspbench_share"]
+        lines.append(
+            f"plan --verify physics: objects with {doc['settings']['grasps']} holding grasps "
+            f"{verified['objects_complete']}/{verified['objects']} "
+            f"({verified['objects_complete_first_batch']} within the first "
+            f"{doc['settings']['candidates']} candidates), none: "
+            f"{verified['objects_without_grasp']}; grasps returned {verified['returned']}/"
+            f"{verified['requested']} ({verified['returned_first_batch']} from the first batch); "
+            f"of them holding in DexGraspBench's solver settings {verified['dexgraspbench_holds']}"
+            f" ({'-' if share is None else f'{100 * share:.0f}%'}), with the light squeeze at "
+            f"0.1 kg {verified['light_0.1kg_holds']}; {verified['time_s']:.0f} s in all"
         )
     command = s.get("median_command_time_to_first_s")
     if command is not None:

@@ -201,8 +201,14 @@ def _plan(benches: Any) -> None:
         help="no comparison with the atlas optimum on the can and the bottle",
     )  # fmt: skip
     plan.add_argument(
-        "--no-commands", dest="commands", action="store_false",
+        "--no-commands",
+        dest="commands",
+        action="store_false",
         help="do not run 'sahgrasp plan' per object in a fresh process (time from its start)",
+    )
+    plan.add_argument(
+        "--no-verify-physics", dest="verify_physics", action="store_false",
+        help="do not plan each object again with --verify physics (MuJoCo)",
     )  # fmt: skip
     _add_quiet(plan)
     add_json_argument(plan, "the results")

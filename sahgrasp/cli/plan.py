@@ -183,6 +183,14 @@ def _add_verify_arguments(p: Any) -> None:
                          help="--verify: mean normal force per finger [N] (10)")  # fmt: skip
     squeeze.add_argument("--light", action="store_true",
                          help="--verify: the light squeeze, 1 N per contact finger")  # fmt: skip
+    p.add_argument(
+        "--max-candidates",
+        type=positive_int,
+        default=None,
+        metavar="N",
+        help="--verify: while fewer than --grasps grasps hold, draw further batches of "
+        "--candidates candidates, up to N in all (default: 4 x --candidates)",
+    )
     mass = p.add_mutually_exclusive_group()
     mass.add_argument("--mass-kg", type=positive_float, default=None,
                       help="--verify: object mass [kg] (default: from --density)")  # fmt: skip
@@ -196,9 +204,10 @@ def _hold_settings(args: argparse.Namespace) -> Any:
 
     given = args.light or args.squeeze is not None or args.mass_kg or args.density
     if args.verify is None:
-        if given:
+        if given or args.max_candidates is not None:
             raise InvalidSettingsError(
-                "--squeeze, --light, --mass-kg and --density need --verify physics"
+                "--squeeze, --light, --mass-kg, --density and --max-candidates need "
+                "--verify physics"
             )
         return None
     from sahgrasp.core.extras import require_extra
@@ -213,6 +222,17 @@ def _hold_settings(args: argparse.Namespace) -> Any:
         density_kg_m3=default.density_kg_m3 if args.density is None else args.density,
         mass_kg=args.mass_kg,
     )
+
+
+def _max_candidates(args: argparse.Namespace) -> int | None:
+    """The candidate cap of ``--verify physics`` (None without it)."""
+    if args.verify is None:
+        return None
+    if args.max_candidates is not None:
+        return int(args.max_candidates)
+    from sahgrasp.planner.settings import CHECK_CANDIDATES_FACTOR
+
+    return CHECK_CANDIDATES_FACTOR * int(args.candidates)
 
 
 def _settings(args: argparse.Namespace) -> Any:
@@ -316,6 +336,7 @@ def _run_object(args: argparse.Namespace) -> int:
             check=check,
             started=_STARTED,
             on_candidate=bar.update,
+            max_candidates=_max_candidates(args),
         )
     document = plan.to_dict() if check is None else check.annotate(plan.to_dict())
     for line in _lines(document):
@@ -387,7 +408,13 @@ def _run_folder(args: argparse.Namespace) -> int:
             _bar(args, len(jobs), "object", len(jobs) - len(todo)) as bar,
         ):
             for doc in plan_jobs(
-                hand.description, todo, settings, pool, 2 * max(args.workers, 1), make_check
+                hand.description,
+                todo,
+                settings,
+                pool,
+                2 * max(args.workers, 1),
+                make_check,
+                _max_candidates(args),
             ):
                 bar.update()
                 failed += not doc.get("grasps")
@@ -439,7 +466,10 @@ def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
     import dataclasses
 
     hold = _hold_settings(args)
-    return {} if hold is None else {"verify": {"physics": dataclasses.asdict(hold)}}
+    if hold is None:
+        return {}
+    physics = dataclasses.asdict(hold)
+    return {"verify": {"physics": physics, "max_candidates": _max_candidates(args)}}
 
 
 def _bar(args: argparse.Namespace, total: int, unit: str, done: int = 0) -> Any:

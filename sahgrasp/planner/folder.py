@@ -76,13 +76,16 @@ def plan_file(
     job: ObjectJob,
     settings: PlanSettings,
     make_check: Callable[[Hand, GraspObject], Any] | None = None,
+    max_candidates: int | None = None,
 ) -> dict[str, Any]:
     """Plan one mesh file; its document (an ``error`` entry instead when the mesh is refused).
 
     ``make_check``: builds the extra check of every verified grasp for the file's hand and object
     (``plan_grasps(check=)``; e.g. :class:`sahgrasp.sim.verify.PhysicsCheckFactory` for ``plan
     --verify physics``), picklable so that workers build their own; a check with an ``annotate``
-    method adds its verdicts to the document. None: no extra check.
+    method adds its verdicts to the document. None: no extra check. ``max_candidates``: with a
+    check, the candidates the planner may draw in batches until enough grasps pass it
+    (``plan_grasps(max_candidates=)``).
     """
     start = time.perf_counter()
     hand = worker_hand(description, description.digest())
@@ -94,7 +97,15 @@ def plan_file(
     if job.scale != 1.0:
         spec["scale"] = job.scale
     check = None if make_check is None else make_check(hand, obj)
-    plan = plan_grasps(hand, obj, settings, object_spec=spec, check=check, started=start)
+    plan = plan_grasps(
+        hand,
+        obj,
+        settings,
+        object_spec=spec,
+        check=check,
+        started=start,
+        max_candidates=max_candidates,
+    )
     document = plan.to_dict()
     annotate = getattr(check, "annotate", None)
     if annotate is not None:
@@ -109,6 +120,7 @@ def plan_jobs(
     executor: Executor | None,
     in_flight: int = 4,
     make_check: Callable[[Hand, GraspObject], Any] | None = None,
+    max_candidates: int | None = None,
 ) -> Iterator[dict[str, Any]]:
     """The documents of ``jobs``, in their order, planned here or on ``executor``'s workers.
 
@@ -119,7 +131,7 @@ def plan_jobs(
     """
     if executor is None:
         for job in jobs:
-            yield plan_file(description, job, settings, make_check)
+            yield plan_file(description, job, settings, make_check, max_candidates)
         return
     ordered = list(jobs)
     queue = sorted(range(len(ordered)), key=lambda i: (-_size(ordered[i].path), i))
@@ -130,8 +142,11 @@ def plan_jobs(
         while following < len(ordered):
             while queue and len(running) < max(in_flight, 1):
                 index = queue.pop(0)
+                job = ordered[index]
                 running[
-                    executor.submit(plan_file, description, ordered[index], settings, make_check)
+                    executor.submit(
+                        plan_file, description, job, settings, make_check, max_candidates
+                    )
                 ] = index
             done, _ = wait(list(running), return_when=FIRST_COMPLETED)
             for future in done:

@@ -15,7 +15,11 @@ returned with their L-infinity epsilon.
 
 The work done is a fixed number of candidates (:attr:`PlanSettings.candidates`), each drawn from a
 seed derived from the plan's seed, the object's name and the draw's index: the same seed gives the
-same plan whatever the machine, its load or the number of worker processes.
+same plan whatever the machine, its load or the number of worker processes. With an extra check
+and ``max_candidates``, the planner draws further batches of that many candidates (the draws
+continuing where they stopped) while fewer grasps than asked pass the check, up to
+``max_candidates`` in all: the work then depends on the check's verdicts, which are
+deterministic too.
 """
 
 from __future__ import annotations
@@ -254,6 +258,7 @@ def plan_grasps(
     check: GraspCheck | None = None,
     started: float | None = None,
     on_candidate: Callable[[], object] | None = None,
+    max_candidates: int | None = None,
 ) -> GraspPlan:
     """Plan ranked, verified grasps of ``obj`` (module docstring, docs/methods/planner.md).
 
@@ -268,14 +273,27 @@ def plan_grasps(
         started: ``time.perf_counter()`` at the user's start (a command's launch), for
             ``time_to_first_s`` and ``time_s``; default: this call's start.
         on_candidate: Called after each candidate is solved (progress).
+        max_candidates: With ``check``: when fewer than ``settings.grasps`` grasps pass it
+            after ``settings.candidates`` candidates, further batches of
+            ``settings.candidates`` candidates are drawn (the draws continue where they
+            stopped) and the check asked again, over all verified grasps in rank order, until
+            enough pass or this many candidates were solved. None (or without a check): one
+            batch. The draws' seeds do not depend on the batches, so a plan stays the same on
+            any machine and worker count.
 
     Returns:
         The plan; an object without a reachable grasp gives a plan of no grasps (its summary
         says what was rejected), not an error.
 
     Raises:
-        PlanningError: A finger count the hand does not have.
+        PlanningError: A finger count the hand does not have, or ``max_candidates`` < 1.
     """
+    if max_candidates is not None and (
+        isinstance(max_candidates, bool)
+        or not isinstance(max_candidates, int)
+        or max_candidates < 1
+    ):
+        raise PlanningError(f"max_candidates must be an integer >= 1, got {max_candidates!r}")
     start = time.perf_counter() if started is None else started
     settings = settings or PlanSettings()
     hand = hand if isinstance(hand, Hand) else load_hand(hand)
@@ -306,32 +324,45 @@ def plan_grasps(
     candidates = draws = 0
     first: float | None = None
     limited = False
-    max_draws = settings.candidates * settings.max_draws_per_candidate
-    while candidates < settings.candidates and draws < max_draws:
+    # Candidates of this batch and of all batches a check may ask for (module docstring).
+    budget = settings.candidates
+    cap = budget if check is None or max_candidates is None else max(budget, max_candidates)
+    scores: dict[int, float | None] = {}  # the check's verdicts, by verified grasp's index
+    while True:
+        max_draws = budget * settings.max_draws_per_candidate
+        while candidates < budget and draws < max_draws:
+            if (
+                settings.time_limit_s is not None
+                and time.perf_counter() - start > settings.time_limit_s
+            ):
+                limited = True
+                break
+            seed = draw_seed(settings.seed, obj, draws)
+            fingers = sets[cycle[draws % len(cycle)]]
+            draws += 1
+            candidate = draw.draw(fingers, seed)
+            if isinstance(candidate, str):
+                rejected[candidate] += 1
+                continue
+            candidates += 1
+            grasp = _solve(hand, obj, candidate, ik, verifier, frame, settings, failed, start)
+            if on_candidate is not None:
+                on_candidate()
+            if grasp is None:
+                continue
+            verified.append(grasp)
+            if first is None and grasp.force_closure:
+                first = grasp.time_s
+        chosen = _select(hand, verified, settings, check, frame, scores)
         if (
-            settings.time_limit_s is not None
-            and time.perf_counter() - start > settings.time_limit_s
+            len(chosen) >= settings.grasps
+            or budget >= cap
+            or limited
+            or candidates < budget  # the draws ran out: the object is given up
         ):
-            limited = True
             break
-        seed = draw_seed(settings.seed, obj, draws)
-        fingers = sets[cycle[draws % len(cycle)]]
-        draws += 1
-        candidate = draw.draw(fingers, seed)
-        if isinstance(candidate, str):
-            rejected[candidate] += 1
-            continue
-        candidates += 1
-        grasp = _solve(hand, obj, candidate, ik, verifier, frame, settings, failed, start)
-        if on_candidate is not None:
-            on_candidate()
-        if grasp is None:
-            continue
-        verified.append(grasp)
-        if first is None and grasp.force_closure:
-            first = grasp.time_s
+        budget = min(budget + settings.candidates, cap)
     solved = len(verified) + failed.total()
-    chosen = _select(hand, verified, settings, check, frame)
     summary = PlanSummary(
         grasps=len(chosen),
         force_closure=sum(g.force_closure for g in chosen),
@@ -518,6 +549,7 @@ def _select(
     settings: PlanSettings,
     check: GraspCheck | None,
     frame: ObjectFrame,
+    scores: dict[int, float | None],
 ) -> list[PlannedGrasp]:
     """The best distinct grasps (module docstring), with their L-infinity epsilon.
 
@@ -528,7 +560,6 @@ def _select(
     computed first: the check is asked about the same grasps, in the same order, as when every
     epsilon is known.
     """
-    scores: dict[int, float | None] = {}  # the extra check's verdicts, by grasp index
     if settings.rank != "epsilon":
         chosen = _choose(hand, list(enumerate(verified)), settings, check, frame, scores)
     else:

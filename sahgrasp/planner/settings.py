@@ -11,7 +11,18 @@ from sahgrasp.core.errors import SahGraspError
 from sahgrasp.quality.ellipsoids import INDICES
 from sahgrasp.quality.wrench import CONE_EDGES, FRICTION, LINF_CONE_EDGES
 
-__all__ = ["FINGER_COUNTS", "RANKINGS", "PlanSettings", "PlanningError"]
+__all__ = [
+    "CHECK_CANDIDATES_FACTOR",
+    "FINGER_COUNTS",
+    "RANKINGS",
+    "PlanSettings",
+    "PlanningError",
+]
+
+CHECK_CANDIDATES_FACTOR = 4
+"""With an extra check (``plan --verify physics``): the candidates the planner may draw in
+batches while fewer grasps than asked pass it, as a multiple of
+:attr:`PlanSettings.candidates` (``plan_grasps(max_candidates=)``, ``--max-candidates``)."""
 
 FINGER_COUNTS = (2, 3, 4)
 """Grasps the planner draws: 2 (thumb + index), 3 (+ middle), 4 (+ ring) fingers."""
