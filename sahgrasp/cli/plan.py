@@ -365,11 +365,18 @@ def _lines(doc: dict[str, Any]) -> list[str]:
             f"  physics: {s['hold_passed']} of {s['hold_checked']} grasps checked hold "
             "(those that do not are dropped)"
         )
+    # The index the grasps are ranked by comes first, so the order of the lines reads off it.
+    ranked_by = doc["settings"].get("rank", "epsilon")
     for g in doc["grasps"]:
         q = g["quality"]
         held = f"  holds, margin {g['hold']['margin']:.2f}" if "hold" in g else ""
+        index = (
+            f"{ranked_by} {q[ranked_by]:<7.4g} "
+            if ranked_by != "epsilon" and q.get(ranked_by) is not None
+            else ""
+        )
         lines.append(
-            f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} epsilon {q['epsilon_l1']:.4f}  "
+            f"  {g['rank']:>2} {'+'.join(g['fingers']):<24} {index}epsilon {q['epsilon_l1']:.4f}  "
             f"force closure {'yes' if q['force_closure'] else 'no ':<3}  "
             f"clearance {g['object_clearance_mm']:.2f} mm ({g['closest_link']}){held}"
         )
