@@ -207,9 +207,10 @@ def epsilon(wrenches: ArrayLike, exact: bool = True) -> float:
 
     Args:
         wrenches: Points (K, 6) spanning the wrench space.
-        exact: Qhull merges coplanar facets exactly (option ``Qx``); False joggles the input
-            instead (``QJ``: about five times faster on cone edges, whose points are coplanar
-            in groups, and within about 1e-10 of the exact distance), for screening.
+        exact: Where Qhull without merging meets a precision problem (:func:`_hull_distance`),
+            it merges coplanar facets exactly (option ``Qx``); False joggles the input instead
+            (``QJ``: about twice as fast on cone edges, whose points are coplanar in groups,
+            and within about 1e-10 of the exact distance), for screening.
 
     Returns:
         The radius of the largest origin-centred ball inside the hull when the origin is strictly
@@ -221,13 +222,27 @@ def epsilon(wrenches: ArrayLike, exact: bool = True) -> float:
     singular = np.linalg.svd(w, compute_uv=False)
     if singular[-1] <= _RANK_TOL * max(singular[0], 1e-300):
         return 0.0  # flat: a hull of fewer than six dimensions holds no 6-D ball
-    try:
-        hull = ConvexHull(w, qhull_options="Qx" if exact else "QJ")
-    except QhullError:  # (nearly) flat wrench sets Qhull cannot triangulate: not force closure
-        return 0.0
-    # Facet i: normal . x + offset <= 0 inside, unit normal: the origin's distance is -offset.
-    distance = float(-hull.equations[:, -1].max())
+    distance = _hull_distance(w, "Qx" if exact else "QJ")
     return distance if distance > _INSIDE_TOL else 0.0
+
+
+def _hull_distance(w: FloatArray, merge: str) -> float:
+    """The origin's distance to the nearest facet plane of ``ConvexHull(w)`` (0: no hull).
+
+    Qhull first without merging (``Q0``): several times faster than merging coplanar facets
+    (``Qx``) or joggling (``QJ``), and it stops with a precision error rather than return a
+    concave ridge or a flipped facet, so a hull it returns has the merged hull's facet planes
+    (its coplanar facets are left split, which moves no plane). On that error, most common on
+    the L-infinity Minkowski sums, the hull is computed again with ``merge``.
+    """
+    for options in ("Q0", merge):
+        try:
+            hull = ConvexHull(w, qhull_options=options)
+        except QhullError:  # with merge: a (nearly) flat set Qhull cannot triangulate
+            continue
+        # Facet i: normal . x + offset <= 0 inside, unit normal: the origin's distance is -offset.
+        return float(-hull.equations[:, -1].max())
+    return 0.0
 
 
 def grasp_quality(
