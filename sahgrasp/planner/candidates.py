@@ -13,15 +13,14 @@ hand's span. Then, by the number of fingers:
 A set is kept when the fingers' normals agree (fan), the fingers are a spacing apart, the thumb
 opposes the fingers (its normal within twice the friction angle, ``2 atan(mu)``, of the opposite
 of the fingers' mean normal, at least 30 degrees), every contact is exposed (not inside another
-shell) and every fingertip sphere fits against the surface at its contact, and -- the test that
-needs no hand at all --
-when its contacts could hold the object: force closure of the contact set (a set without it
-never gives a force-closure grasp), or for two fingers the antipodal condition (the line between
-the contacts inside both friction cones; two hard-finger contacts cannot be in force closure,
-since nothing resists a torque about that line). Last, every contact must have room in front of
-it: its outward normal must not meet the object again within :data:`CAVITY_RADII` fingertip
-radii (a contact on the inside of a tube or a cup, whose finger would have to enter the cavity
-along its walls).
+shell), its contacts could hold the object -- the test that needs no hand at all: force closure
+of the contact set (a set without it never gives a force-closure grasp), or for two fingers the
+antipodal condition (the line between the contacts inside both friction cones; two hard-finger
+contacts cannot be in force closure, since nothing resists a torque about that line) -- and
+every fingertip sphere fits against the surface at its contact. Last, every contact must have
+room in front of it: its outward normal must not meet the object again within
+:data:`CAVITY_RADII` fingertip radii (a contact on the inside of a tube or a cup, whose finger
+would have to enter the cavity along its walls).
 """
 
 from __future__ import annotations
@@ -189,11 +188,7 @@ class CandidateDraw:
                 contacts = [thumb, neighbours[0], opposite, neighbours[1]]
                 if np.linalg.norm(contacts[1][0] - contacts[3][0]) < self.reach.finger_spacing_m[0]:
                     return "spacing"
-        for reason, check in (
-            ("opposition", self._opposed),
-            ("hidden", self._exposed),
-            ("fingertip_fit", self._fits),
-        ):
+        for reason, check in (("opposition", self._opposed), ("hidden", self._exposed)):
             if not check(contacts):
                 return reason
         points = np.array([p for p, _ in contacts])
@@ -211,7 +206,10 @@ class CandidateDraw:
             if not force_closure(wrenches.reshape(-1, 6)):
                 return "no_closure"
             closure = True
-        # Last: a ray per contact, asked of the few sets that passed every other test.
+        # Then the tests of closest points and rays, asked of the few sets that hold: almost
+        # every set that reaches the fit test passes it.
+        if not self._fits(contacts):
+            return "fingertip_fit"
         if not self._roomy(contacts):
             return "cavity"
         return Candidate(fingers, points, normals, seed, closure)
