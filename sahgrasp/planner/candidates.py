@@ -64,7 +64,7 @@ objects of ``sahgrasp bench plan`` (the catalog, the shipped and the test meshes
 3 of the 37 candidates with such a contact (on the tube, the cups and the mug), at 13 ms of CPU
 each against 7 ms for the others, of which 80% were solved: these candidates are rejected
 before the IK (``cavity``). The same distance bounds the path a fingertip may take to leave
-the object's convex hull (``deep``, :meth:`CandidateDraw._shallow`): on the same objects, the IK
+the object's convex hull (``deep``, :meth:`CandidateDraw._room`): on the same objects, the IK
 solved 5 of the 50 candidates whose fingertip has no such path (on the mug and the cups), at
 16 ms of CPU each."""
 _ESCAPE_TILTS_DEG = (0.0, 30.0, 60.0, 85.0)
@@ -239,10 +239,10 @@ class CandidateDraw:
         # every set that reaches the fit test passes it.
         if not self._fits(contacts):
             return "fingertip_fit"
-        if not self._roomy(contacts):
-            return "cavity"
-        if not all(self._shallow(p, n) for p, n in contacts):
-            return "deep"
+        for point, normal in contacts:
+            room = self._room(point, normal)
+            if room is not None:
+                return room
         return Candidate(fingers, points, normals, seed, closure)
 
     def _opposite(self, rng: np.random.Generator, thumb: Contact) -> Contact | None:
@@ -286,25 +286,25 @@ class CandidateDraw:
         radius = self.reach.fingertip_radius_m
         return all(self.nearest.closest(p + radius * n)[2] >= self.clearance_m for p, n in contacts)
 
-    def _roomy(self, contacts: list[Contact]) -> bool:
-        """No contact's outward normal meets the object within the cavity distance."""
-        return all(
-            not np.any(self.nearest.ray_hits(p + _OFF_SURFACE_M * n, n)[0] < self.cavity_m)
-            for p, n in contacts
-        )
+    def _room(self, point: FloatArray, normal: FloatArray) -> str | None:
+        """Why the contact at ``point`` has no room in front of it (module docstring), or None.
 
-    def _shallow(self, point: FloatArray, normal: FloatArray) -> bool:
-        """The fingertip at ``point`` leaves the convex hull within the cavity distance.
-
-        Outside the hull already, or along one of the escape directions about ``normal``
-        (:data:`_ESCAPE_TILTS_DEG`) whose exit from the hull is within the cavity distance and
-        which meets the object no sooner: the hull's exits first (one product for all
-        directions), a ray of the mesh only for the short ones, nearest first.
+        A fingertip whose centre is outside the convex hull has room: the normal ray leaves the
+        hull there and never meets the object again (the fit test has cleared the way to the
+        centre). Inside the hull, ``cavity`` if the ray meets the object within the cavity
+        distance, ``deep`` if the fingertip cannot leave the hull along one of the escape
+        directions about ``normal`` (:data:`_ESCAPE_TILTS_DEG`) within that distance without
+        meeting the object first: the hull's exits first (one product for all directions), a
+        ray of the mesh only for the short ones, nearest first.
         """
         centre = point + self.reach.fingertip_radius_m * normal
         slack = self.hull_offsets - self.hull_normals @ centre
         if slack.min() <= 0.0:
-            return True
+            return None
+        if np.any(
+            self.nearest.ray_hits(point + _OFF_SURFACE_M * normal, normal)[0] < self.cavity_m
+        ):
+            return "cavity"
         u, v = _basis(normal)
         directions = _ESCAPES @ np.array([u, v, normal])
         along = self.hull_normals @ directions.T  # (facets, directions)
@@ -312,11 +312,11 @@ class CandidateDraw:
         exits = np.where(leaving, slack[:, None] / np.where(leaving, along, 1.0), np.inf).min(0)
         for k in np.argsort(exits, kind="stable").tolist():
             if exits[k] > self.cavity_m:
-                return False
+                return "deep"
             hits = self.nearest.ray_hits(centre, directions[k])[0]
             if not len(hits) or hits[0] >= exits[k]:
-                return True
-        return False
+                return None
+        return "deep"
 
     def _antipodal(self, contacts: list[Contact]) -> bool:
         """Two contacts: the line between them inside both friction cones."""
