@@ -156,3 +156,11 @@ def test_force_closure_without_the_hull_agrees_with_the_hull() -> None:
     assert not force_closure(np.zeros((6, 6)))
     assert not force_closure(np.full((12, 6), np.nan))
     assert not force_closure(np.zeros((12, 5)))
+
+
+def test_cross_is_numpys() -> None:
+    from sahgrasp.quality.wrench import _cross
+
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(4, 8, 3)), rng.normal(size=(4, 8, 3))
+    assert np.array_equal(_cross(a, b), np.cross(a, b))

@@ -495,21 +495,31 @@ def _wrenches(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -
     ).reshape(-1, 6)
 
 
-def _epsilon_of(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> None:
-    """Set a grasp's L1 epsilon (the joggled hull: within about 1e-10 of the exact value)."""
-    value = epsilon(_wrenches(grasp, frame, settings), exact=False)
+def _epsilon_of(grasp: PlannedGrasp, wrenches: FloatArray) -> float:
+    """Set and return a grasp's L1 epsilon from its primitive wrenches (:func:`_wrenches`).
+
+    The screening hull (:func:`sahgrasp.quality.wrench.epsilon` with ``exact=False``): within
+    about 1e-10 of the exact value.
+    """
+    value = epsilon(wrenches, exact=False)
     grasp.quality["epsilon_l1"] = value
     grasp.quality["force_closure"] = value > 0.0
+    return value
 
 
 def _epsilon_bound(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> float:
-    """An upper bound of a grasp's L1 epsilon, without the hull.
+    """An upper bound of a grasp's L1 epsilon, without the hull (:func:`_support_bound`)."""
+    return _support_bound(_wrenches(grasp, frame, settings))
+
+
+def _support_bound(wrenches: FloatArray) -> float:
+    """An upper bound of the L1 epsilon of the primitive ``wrenches`` (K, 6), without the hull.
 
     For any unit direction ``u``, the ball of radius epsilon inside the hull reaches
     ``epsilon u``, so epsilon is at most the hull's support ``max_i u . w_i``: the smallest
     support over fixed directions (:data:`_BOUND_DIRECTIONS`) bounds it.
     """
-    return float((_wrenches(grasp, frame, settings) @ _BOUND_DIRECTIONS.T).max(axis=0).min())
+    return float((wrenches @ _BOUND_DIRECTIONS.T).max(axis=0).min())
 
 
 def _directions(count: int) -> FloatArray:
@@ -566,28 +576,33 @@ def _select(
         for grasp in verified:
             if not grasp.force_closure:
                 grasp.quality["epsilon_l1"] = 0.0
-        waiting = sorted(
-            (
-                (-_epsilon_bound(g, frame, settings), i)
-                for i, g in enumerate(verified)
-                if g.force_closure
-            ),
-        )
+        wrenches = {
+            i: _wrenches(g, frame, settings) for i, g in enumerate(verified) if g.force_closure
+        }
+        waiting = sorted((-_support_bound(w), i) for i, w in wrenches.items())
         if check is not None:  # a costly check (physics) is asked once, in the final order
             while waiting:
-                _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
-        while True:
-            known = [(i, g) for i, g in enumerate(verified) if g.quality["epsilon_l1"] is not None]
-            chosen = _choose(
-                hand, known, settings, check, frame, scores, complete=not waiting, indices=False
-            )
-            if not waiting:
-                break
-            if len(chosen) == settings.grasps:
-                last = min(float(g.quality["epsilon_l1"]) for _, _, g in chosen)
-                if -waiting[0][0] < last and all(g.force_closure for _, _, g in chosen):
-                    break
-            _epsilon_of(verified[waiting.pop(0)[1]], frame, settings)
+                i = waiting.pop(0)[1]
+                _epsilon_of(verified[i], wrenches[i])
+        largest = 0.0  # the largest epsilon computed
+        while waiting:
+            bound = -waiting[0][0]
+            # The chosen grasps are final once the largest bound left is below the least
+            # epsilon chosen, itself at most the largest computed: only then are they chosen.
+            if bound < largest:
+                known = [
+                    (i, g) for i, g in enumerate(verified) if g.quality["epsilon_l1"] is not None
+                ]
+                chosen = _choose(
+                    hand, known, settings, check, frame, scores, complete=False, indices=False
+                )
+                if len(chosen) == settings.grasps:
+                    last = min(float(g.quality["epsilon_l1"]) for _, _, g in chosen)
+                    if bound < last and all(g.force_closure for _, _, g in chosen):
+                        break
+            i = waiting.pop(0)[1]
+            largest = max(largest, _epsilon_of(verified[i], wrenches[i]))
+        known = [(i, g) for i, g in enumerate(verified) if g.quality["epsilon_l1"] is not None]
         chosen = _choose(hand, known, settings, check, frame, scores, complete=not waiting)
     chosen.sort(key=lambda e: (e[0], _rank_key(e[2], settings.rank), e[1]))
     out = []

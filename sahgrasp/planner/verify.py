@@ -182,9 +182,13 @@ class GraspVerifier:
             if problem:
                 problems.append(problem)
             touching.add(self.tip_links.get(c["finger"], ""))
-        depth, clearance, closest, link_problems = self._links(touching)
+        # Each link shape's box centre in the world: the bounding-sphere tests of both checks.
+        centres = np.array(
+            [oMg.act(c) for oMg, c in zip(self.geometry_data.oMg, self.link_centres, strict=True)]
+        )
+        depth, clearance, closest, link_problems = self._links(touching, centres)
         problems += link_problems
-        problems += self._self_collisions()
+        problems += self._self_collisions(centres)
         return Verdict(not problems, tuple(problems), depth, clearance, closest, tuple(errors))
 
     def _limits(self, q: FloatArray, joints: dict[str, float]) -> list[str]:
@@ -254,22 +258,25 @@ class GraspVerifier:
             inside |= np.asarray(shell.contains(points), dtype=bool)
         return inside
 
-    def _links(self, touching: set[str]) -> tuple[float, float, str, list[str]]:
+    def _links(
+        self, touching: set[str], centres: FloatArray
+    ) -> tuple[float, float, str, list[str]]:
         deepest, clearance, closest = 0.0, math.inf, ""
         problems = []
         request, collide = coal.DistanceRequest(), coal.CollisionRequest()
         far: list[tuple[float, int]] = []
+        # How far each link's box centre is outside the object's box, per axis: a link whose
+        # ball misses the box is far.
+        outside = np.maximum(self.low - centres, 0.0) + np.maximum(centres - self.high, 0.0)
+        missing = (outside > self.link_radii[:, None]).any(axis=1).tolist()
         for k, (g, oMg) in enumerate(
             zip(self.geometry.geometryObjects, self.geometry_data.oMg, strict=True)
         ):
             link = self.links[k]
             if link in touching:
                 continue
-            centre = oMg.act(self.link_centres[k])
-            reach = self.link_radii[k]
-            outside = np.maximum(self.low - centre, 0.0) + np.maximum(centre - self.high, 0.0)
-            if np.any(outside > reach):  # the link's ball misses the object's box
-                far.append((float(np.linalg.norm(outside)) - reach, k))
+            if missing[k]:
+                far.append((float(np.linalg.norm(outside[k])) - self.link_radii[k], k))
                 continue
             placed = coal.Transform3s(oMg.rotation, oMg.translation)
             hit = coal.collide(
@@ -317,14 +324,11 @@ class GraspVerifier:
         depth = max(depth, _depth_inside(self.geometry.geometryObjects[k].geometry, local))
         return depth
 
-    def _self_collisions(self) -> list[str]:
+    def _self_collisions(self, centres: FloatArray) -> list[str]:
         out = []
         request = coal.CollisionRequest()
         objects = self.geometry.geometryObjects
         # Only pairs whose bounding spheres meet can collide: the rest need no coal query.
-        centres = np.array(
-            [oMg.act(c) for oMg, c in zip(self.geometry_data.oMg, self.link_centres, strict=True)]
-        )
         a_idx, b_idx = self.pair_array[:, 0], self.pair_array[:, 1]
         gaps = np.linalg.norm(centres[a_idx] - centres[b_idx], axis=1)
         near = gaps <= self.link_radii[a_idx] + self.link_radii[b_idx]
