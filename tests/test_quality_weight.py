@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sahgrasp.quality.weight import PULL_DIRECTIONS, holds_weight, weight_support
+from sahgrasp.quality.weight import (
+    PULL_DIRECTIONS,
+    holds_weight,
+    weight_support,
+    weight_supports,
+)
 from sahgrasp.quality.wrench import WrenchError
 
 # A pinch across a sphere of radius 40 mm along x.
@@ -43,6 +48,25 @@ def test_one_sided_contacts_resist_nothing_pulled_away() -> None:
     w = weight_support(points, normals, np.zeros(3))
     assert w.support == 0.0
     assert w.per_direction[1] == 0.0  # -x: the fingers, pressing along -x, would have to pull
+
+
+def test_grasps_solved_together_get_what_each_gets_alone() -> None:
+    rng = np.random.default_rng(5)
+    sets = []
+    for k in (2, 3, 4, 3, 2):
+        normals = rng.normal(size=(k, 3))
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        sets.append((0.04 * normals + 0.005 * rng.normal(size=(k, 3)), normals))
+    sets.append((PINCH_POINTS[:1], PINCH_NORMALS[:1]))  # one finger: resists no pull at all
+    centre = np.array([0.0, 0.002, -0.004])
+    together = weight_supports(sets, centre, mu=0.6)
+    assert len(together) == len(sets)
+    for (points, normals), joint in zip(sets, together, strict=True):
+        alone = weight_support(points, normals, centre, mu=0.6)
+        assert joint.weakest == alone.weakest
+        assert joint.per_direction == pytest.approx(alone.per_direction, abs=1e-12)
+    assert together[-1].support == 0.0
+    assert weight_supports([], centre) == []
 
 
 def test_support_is_invariant_to_a_rigid_motion_of_pinch_and_centre_about_z() -> None:

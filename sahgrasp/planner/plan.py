@@ -52,7 +52,7 @@ from sahgrasp.planner.pieces import planning_object
 from sahgrasp.planner.settings import PlanningError, PlanSettings
 from sahgrasp.planner.verify import GraspVerifier
 from sahgrasp.quality.ellipsoids import INDICES, ellipsoid_indices, null_space
-from sahgrasp.quality.weight import weight_support
+from sahgrasp.quality.weight import weight_supports
 from sahgrasp.quality.wrench import epsilon, grasp_quality, primitive_wrenches
 
 __all__ = [
@@ -423,11 +423,12 @@ def _solve(
         "epsilon_l1": None,
         "epsilon_linf": None,
     }
-    if settings.rank == "weight":  # ranked by the weight support: every verified grasp needs it
-        quality["weight"] = weight_support(
-            candidate.points_m, candidate.normals, frame.centroid_m, settings.mu
-        ).support
-    elif settings.rank != "epsilon":  # ranked by an index: every verified grasp needs it
+    # Ranked by the weight support, every verified grasp needs it: _select computes all of an
+    # object's at once (one linear program). Ranked by an index, it is computed here.
+    if settings.rank not in (
+        "epsilon",
+        "weight",
+    ):  # ranked by an index: every verified grasp needs it
         quality.update(manipulability_indices(hand, result.q, candidate.fingers, frame.centroid_m))
     return PlannedGrasp(
         fingers=candidate.fingers,
@@ -570,6 +571,16 @@ def _select(
     computed first: the check is asked about the same grasps, in the same order, as when every
     epsilon is known.
     """
+    if settings.rank == "weight":
+        missing = [g for g in verified if "weight" not in g.quality]
+        contacts = [
+            (np.array([c.point for c in g.contacts]), np.array([c.normal for c in g.contacts]))
+            for g in missing
+        ]
+        for grasp, support in zip(
+            missing, weight_supports(contacts, frame.centroid_m, settings.mu), strict=True
+        ):
+            grasp.quality["weight"] = support.support
     if settings.rank != "epsilon":
         chosen = _choose(hand, list(enumerate(verified)), settings, check, frame, scores)
     else:

@@ -35,7 +35,9 @@ screening test before a simulation (:func:`holds_weight`).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,6 +52,7 @@ __all__ = [
     "WeightSupport",
     "holds_weight",
     "weight_support",
+    "weight_supports",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -123,56 +126,105 @@ def weight_support(
     Raises:
         WrenchError: Malformed arrays or parameters.
     """
-    points = np.asarray(points_m, dtype=np.float64)
-    normal = np.asarray(normals, dtype=np.float64)
+    return weight_supports(
+        [(points_m, normals)], centre_of_mass_m, mu, patch_radius_m=patch_radius_m, edges=edges
+    )[0]
+
+
+def weight_supports(
+    contact_sets: Sequence[tuple[ArrayLike, ArrayLike]],
+    centre_of_mass_m: ArrayLike,
+    mu: float = FRICTION,
+    patch_radius_m: float = PATCH_RADIUS_M,
+    edges: int = CONE_EDGES,
+) -> list[WeightSupport]:
+    """The weight supports of several grasps of one object, in one linear program.
+
+    Each grasp's six programs of Eq. (1) are independent blocks of one program, so many grasps
+    cost one solver call instead of one each (the call's set-up costs more than a block).
+
+    Args:
+        contact_sets: Each grasp's contact points [m] and outward unit normals, (k, 3) each.
+        centre_of_mass_m: The object's centre of mass, world frame [m], (3,).
+        mu: Coulomb friction coefficient (>= 0).
+        patch_radius_m: Contact patch radius [m] of the torsional friction (0: point contacts).
+        edges: Edges of each linearised friction cone (>= 3).
+
+    Raises:
+        WrenchError: Malformed arrays or parameters.
+    """
     centre = np.asarray(centre_of_mass_m, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
-        raise WrenchError(f"contact points must be a non-empty (k, 3) array, got {points.shape}")
-    if normal.shape != points.shape:
-        raise WrenchError(f"normals {normal.shape} must match the points {points.shape}")
     if centre.shape != (3,):
         raise WrenchError(f"the centre of mass must be 3 numbers, got shape {centre.shape}")
-    if not (np.all(np.isfinite(points)) and np.all(np.isfinite(normal))
-            and np.all(np.isfinite(centre))):  # fmt: skip
+    if not np.all(np.isfinite(centre)):
         raise WrenchError("contact points, normals and the centre of mass must be finite")
-    lengths = np.linalg.norm(normal, axis=1)
-    if np.any(np.abs(lengths - 1.0) > 1e-6):
-        raise WrenchError("contact normals must be unit vectors")
     if not (isinstance(patch_radius_m, int | float) and math.isfinite(patch_radius_m)
             and patch_radius_m >= 0.0):  # fmt: skip
         raise WrenchError(
             f"patch_radius_m must be a finite number >= 0 [m], got {patch_radius_m!r}"
         )
     torsion_m = 2.0 / 3.0 * mu * patch_radius_m if mu > 0 else 0.0
-    G = _generators(points, normal, centre, float(mu), torsion_m, edges)  # validates mu, edges
-    k = len(points)
-    # Generator j belongs to contact owner[j] (contact-major: each contact's edges, torsion).
-    owner = np.repeat(np.arange(k), G.shape[1] // k)
-    n_g = G.shape[1]
-    # Variables (g, t): minimise t; each contact's normal force sum_j g_ij <= t.
-    A_ub = np.zeros((k, n_g + 1))
-    A_ub[owner, np.arange(n_g)] = 1.0
-    A_ub[:, -1] = -1.0
-    A_eq = np.hstack([G, np.zeros((6, 1))])
-    pulls = -np.hstack([np.array([axis for _, axis in PULL_DIRECTIONS]), np.zeros((6, 3))])
-    # The six programs of Eq. (1) are independent: one block-diagonal program minimising the sum
-    # of the t_d has the same optimum per block and costs one HiGHS call instead of six.
+    pulls = np.hstack([np.array([axis for _, axis in PULL_DIRECTIONS]), np.zeros((6, 3))])
     count = len(PULL_DIRECTIONS)
-    cost = np.tile(np.r_[np.zeros(n_g), 1.0], count)
-    out = linprog(cost, A_ub=sparse.block_diag([A_ub] * count, format="csr"),
-                  b_ub=np.zeros(k * count), A_eq=sparse.block_diag([A_eq] * count, format="csr"),
-                  b_eq=pulls.ravel(), bounds=(0, None), method="highs")  # fmt: skip
-    if out.status == 0:
-        ts = [float(t) for t in out.x[n_g :: n_g + 1]]
-    else:  # some pull is not resisted: solve each alone to tell which
-        ts = []
-        for b_eq in pulls:
-            one = linprog(np.r_[np.zeros(n_g), 1.0], A_ub=A_ub, b_ub=np.zeros(k), A_eq=A_eq,
-                          b_eq=b_eq, bounds=(0, None), method="highs")  # fmt: skip
-            ts.append(float(one.x[-1]) if one.status == 0 else math.inf)
-    values = [1.0 / t if t > 0.0 and math.isfinite(t) else 0.0 for t in ts]
-    weakest = int(np.argmin(values))
-    return WeightSupport(float(values[weakest]), tuple(values), PULL_DIRECTIONS[weakest][0])
+    A_ub: list[Any] = []
+    A_eq: list[Any] = []
+    sizes: list[int] = []
+    for points_m, normals in contact_sets:
+        points, normal = _checked_contacts(points_m, normals)
+        G = _generators(points, normal, centre, float(mu), torsion_m, edges)  # validates mu
+        k = len(points)
+        # Generator j belongs to contact owner[j] (contact-major: each contact's edges, torsion).
+        owner = np.repeat(np.arange(k), G.shape[1] // k)
+        n_g = G.shape[1]
+        # Eq. (1) scaled by 1 / t: variables (g, lam), maximise lam = 1 / t_d with every
+        # contact's normal force sum_j g_ij <= 1 and G g + lam (d, 0) = 0. Always feasible
+        # (g = 0, lam = 0), so a pull the grasp cannot resist is lam = 0, not a failed program.
+        ub = np.zeros((k, n_g + 1))
+        ub[owner, np.arange(n_g)] = 1.0
+        for d in range(count):
+            A_ub.append(ub)
+            A_eq.append(np.hstack([G, pulls[d][:, None]]))
+        sizes.append(n_g + 1)
+    if not sizes:
+        return []
+    # HiGHS's presolve costs more than it saves on these small blocks (same optima).
+    cost = np.concatenate([np.r_[np.zeros(n - 1), -1.0] for n in sizes for _ in range(count)])
+    out = linprog(cost, A_ub=sparse.block_diag(A_ub, format="csr"),
+                  b_ub=np.ones(sum(a.shape[0] for a in A_ub)),
+                  A_eq=sparse.block_diag(A_eq, format="csr"), b_eq=np.zeros(6 * len(A_eq)),
+                  bounds=(0, None), method="highs",
+                  options={"presolve": False})  # fmt: skip
+    if out.status != 0:
+        raise WrenchError(f"the weight-support program failed: {out.message}")
+    ends = np.cumsum([n for n in sizes for _ in range(count)]) - 1
+    lams = np.maximum(out.x[ends], 0.0).reshape(len(sizes), count)
+    supports = []
+    for values in lams:
+        weakest = int(np.argmin(values))
+        supports.append(
+            WeightSupport(
+                float(values[weakest]),
+                tuple(float(v) for v in values),
+                PULL_DIRECTIONS[weakest][0],
+            )
+        )
+    return supports
+
+
+def _checked_contacts(points_m: ArrayLike, normals: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """The contact points and unit normals as (k, 3) arrays, or raise :class:`WrenchError`."""
+    points = np.asarray(points_m, dtype=np.float64)
+    normal = np.asarray(normals, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
+        raise WrenchError(f"contact points must be a non-empty (k, 3) array, got {points.shape}")
+    if normal.shape != points.shape:
+        raise WrenchError(f"normals {normal.shape} must match the points {points.shape}")
+    if not (np.all(np.isfinite(points)) and np.all(np.isfinite(normal))):
+        raise WrenchError("contact points, normals and the centre of mass must be finite")
+    lengths = np.linalg.norm(normal, axis=1)
+    if np.any(np.abs(lengths - 1.0) > 1e-6):
+        raise WrenchError("contact normals must be unit vectors")
+    return points, normal
 
 
 def holds_weight(
