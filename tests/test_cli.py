@@ -259,6 +259,7 @@ def test_unreadable_targets_files(tmp_path: Path, content: bytes | None, pattern
     )
 
 
+@pytest.mark.slow
 def test_a_refused_scheduler_connection_is_one_line_at_once(files: Path) -> None:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
@@ -406,6 +407,7 @@ def test_signals_stop_solve_with_one_line_and_no_orphan(files: Path, signum: int
     assert not [w for w in workers if w.is_running() and w.status() != psutil.STATUS_ZOMBIE]
 
 
+@pytest.mark.slow
 def test_sighup_to_the_process_group_prints_no_traceback(files: Path) -> None:
     # As when the terminal closes: every process of the group gets SIGHUP, the workers and
     # multiprocessing's resource tracker too.
@@ -526,6 +528,7 @@ def test_bench_grasps_runs_from_the_command_line(tmp_path: Path) -> None:
     assert json.loads((tmp_path / "g.json").read_text())["problems_per_object"] == 1
 
 
+@pytest.mark.slow
 def test_bench_ik_reports_its_plot_under_the_users_name(tmp_path: Path) -> None:
     args = ("bench", "ik", "--problems", "2", "--peers", "--quiet", "--plot", "fig.png")
     done = sahgrasp(*args, "--json", "-", cwd=tmp_path)
@@ -586,6 +589,7 @@ def _my_hand(folder: Path) -> tuple[Path, Path]:
     return folder / "mysah.json", urdf
 
 
+@pytest.mark.slow
 def test_a_second_solve_writing_the_same_output_is_refused(files: Path, tmp_path: Path) -> None:
     """The first run reads a pipe, so it is still writing when the second one starts."""
     fifo = tmp_path / "pipe.jsonl"
@@ -629,6 +633,7 @@ def test_side_files_never_replace_an_input(files: Path, tmp_path: Path) -> None:
     assert len(source.read_text().splitlines()) == 2
 
 
+@pytest.mark.slow
 def test_files_named_inside_the_inputs_are_inputs(files: Path, tmp_path: Path) -> None:
     import shutil
 
@@ -671,6 +676,7 @@ def test_a_fifo_of_problems_loses_none(files: Path, tmp_path: Path) -> None:
     assert len((tmp_path / "r.jsonl").read_text().splitlines()) == 1 + 40
 
 
+@pytest.mark.slow
 def test_a_refused_resume_leaves_the_finished_output(files: Path, tmp_path: Path) -> None:
     targets = _jsonl(files, tmp_path, 2)
     done = sahgrasp("solve", targets, "--inits", "1", "--json", "r.jsonl", cwd=tmp_path)
@@ -696,6 +702,7 @@ def _resumed(done: subprocess.CompletedProcess[str]) -> int:
     return int(match.group(1))
 
 
+@pytest.mark.slow
 def test_resume_matches_results_by_problem_not_by_name(files: Path, tmp_path: Path) -> None:
     targets = _jsonl(files, tmp_path, 3)
     solve = ("solve", targets, "--inits", "1", "--json", "r.jsonl")
@@ -741,6 +748,7 @@ def test_a_jsonl_output_in_a_missing_folder_is_made_before_the_work(
     assert len((tmp_path / "new" / "sub" / "r.jsonl").read_text().splitlines()) == 2
 
 
+@pytest.mark.slow
 def test_learn_refuses_its_inputs_and_a_locked_output(tmp_path: Path) -> None:
     from sahgrasp.core.fileio import lock_output
 
@@ -770,6 +778,7 @@ def test_concurrent_learns_leave_one_database_and_no_parts(tmp_path: Path) -> No
     assert sorted(p.name for p in tmp_path.iterdir()) == ["db.npz"]
 
 
+@pytest.mark.slow
 def test_solve_uses_a_database_made_by_learn(files: Path, tmp_path: Path) -> None:
     from sahgrasp.ik.learned import default_database
 
@@ -797,6 +806,7 @@ def test_solve_uses_a_database_made_by_learn(files: Path, tmp_path: Path) -> Non
     one_line_error(done, "--database is the database of --init learned")
 
 
+@pytest.mark.slow
 def test_demo_and_solve_share_one_code_path(tmp_path: Path) -> None:
     """The same starts and solutions; a bad problem is marked invalid, the others are shown."""
     from sahgrasp.objects import paper_grasp
@@ -851,6 +861,7 @@ def test_time_ms_is_the_solve_and_setup_ms_the_object(
     assert summary["median_time_ms"] < 400.0
 
 
+@pytest.mark.slow
 def test_solve_lines_and_its_bar_do_not_interleave_on_a_terminal(files: Path) -> None:
     """On a terminal each problem's line starts on a cleared line; off one, no bar at all."""
     import fcntl

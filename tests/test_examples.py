@@ -94,6 +94,7 @@ def test_optimize_example(name: str, tmp_path: Path, capsys: pytest.CaptureFixtu
         assert any(p.startswith(f"/meshcat/{extreme}/") for p in drawn)
 
 
+@pytest.mark.slow
 def test_an_example_runs_on_its_own(tmp_path: Path) -> None:
     out = tmp_path / "fork.html"
     done = subprocess.run(

@@ -22,6 +22,7 @@ from sahgrasp.quality.ellipsoids import INDICES
 ROOT = Path(__file__).resolve().parent.parent
 
 
+@pytest.mark.slow
 def test_viz_does_not_load_the_ik_or_the_experiments() -> None:
     code = "import sys, sahgrasp.viz; print(sorted(m for m in sys.modules if m.startswith(("
     code += "'sahgrasp.ik', 'sahgrasp.experiments'))))"

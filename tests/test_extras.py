@@ -77,6 +77,7 @@ def test_a_plot_without_matplotlib_is_one_line_naming_the_plot_extra(tmp_path: P
     assert not (tmp_path / "f.png").exists()
 
 
+@pytest.mark.slow
 def test_the_scenes_colour_quality_without_matplotlib(tmp_path: Path) -> None:
     code = (
         "from sahgrasp.viz.colors import quality_colors\n"

@@ -184,6 +184,7 @@ def test_a_test_hand_loads_and_gets_a_derived_reach(tripod: HandEntry) -> None:
     assert isinstance(reach, SamplerReach) and measured.span_m == reach.span_m
 
 
+@pytest.mark.slow
 def test_a_test_hand_plans_and_solves(tripod: HandEntry) -> None:
     hand = load_hand("tripod")
     can = load_object("can")

@@ -283,6 +283,7 @@ def test_mesh_example_solves_a_clear_grasp(
     assert "MeshCat.Viewer" in out.read_text(encoding="utf-8")
 
 
+@pytest.mark.slow
 def test_mesh_example_grasp_checked_with_coal(sah: Hand) -> None:
     """The example's grasp, re-checked link by link with coal against the mug's prisms."""
     obj = load_mesh(MESHES / "mug.stl")

@@ -137,6 +137,7 @@ def _points(piece: CollisionShape) -> NDArray[np.float64]:
     return np.asarray(piece.geometry.points(), dtype=np.float64) + piece.placement[:3, 3]
 
 
+@pytest.mark.slow
 def test_the_mug_cavity_and_handle_gap_stay_empty() -> None:
     """Hulls across the cavity or the handle's gap are refused: those points stay outside."""
     pieces = _mesh("mug.stl").collision_shapes()

@@ -153,6 +153,7 @@ def test_every_library_import_is_a_declared_runtime_dependency() -> None:
     assert not undeclared, "undeclared runtime dependencies:\n" + "\n".join(undeclared)
 
 
+@pytest.mark.slow
 def test_every_runtime_dependency_is_used_by_the_library() -> None:
     used: set[str] = set(BACKENDS)
     for path in _sources():

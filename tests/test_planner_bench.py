@@ -13,6 +13,7 @@ from sahgrasp.bench.report import summary_table
 from sahgrasp.cli import main
 
 
+@pytest.mark.slow
 def test_bench_plan_document_and_table(tmp_path: Path) -> None:
     box = tmp_path / "box.stl"
     trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(box)
@@ -52,6 +53,7 @@ def test_test_meshes_are_graspable_sizes(tmp_path: Path) -> None:
         assert mesh.is_watertight, name
 
 
+@pytest.mark.slow
 def test_bench_plan_command_writes_json(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
     out = tmp_path / "bench.json"
     argv = ["bench", "plan", "--objects", "bottle", "--no-test-meshes", "--mesh",

@@ -92,6 +92,7 @@ def test_check_of_a_planners_results(
     assert "1/1 grasps hold" in done.stdout
 
 
+@pytest.mark.slow
 def test_planners_results_name_their_fingers_repairs_and_meshes(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, files: Path
 ) -> None:

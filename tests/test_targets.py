@@ -202,6 +202,7 @@ def test_mesh_paths_are_confined_to_the_targets_folder(tmp_path: Path) -> None:
         read_problems(default)
 
 
+@pytest.mark.slow
 def test_solve_and_demo_take_the_option_to_allow_outside_meshes(tmp_path: Path) -> None:
     """``sahgrasp solve``: the refused problem is invalid input; the option lets it load."""
     from sahgrasp.cli import main
