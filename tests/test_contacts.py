@@ -42,6 +42,21 @@ def test_repeated_unknown_and_missing_fingers() -> None:
         GraspTarget("g", [index, ring]).check_fingers(FINGERS)
 
 
+def test_swapped_or_wrong_arguments_are_a_typed_error() -> None:
+    contacts = [
+        ContactTarget("thumb", [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]),
+        ContactTarget("index", [0.05, 0.0, 0.0], [-1.0, 0.0, 0.0]),
+    ]
+    with pytest.raises(InvalidTargetError, match="name must be a string, got list"):
+        GraspTarget(contacts, "pinch")  # type: ignore[arg-type]
+    with pytest.raises(InvalidTargetError, match="iterable of ContactTarget, got int"):
+        GraspTarget("pinch", 5)  # type: ignore[arg-type]
+    with pytest.raises(InvalidTargetError, match="iterable of ContactTarget, got str"):
+        GraspTarget("pinch", "thumb")  # type: ignore[arg-type]
+    with pytest.raises(InvalidTargetError, match=r"must be a ContactTarget, got \['tuple'\]"):
+        GraspTarget("pinch", [("thumb", [0, 0, 0], [1, 0, 0])])  # type: ignore[list-item]
+
+
 def test_a_grasp_may_leave_fingers_free() -> None:
     """Contacts for a subset of the fingers: at least two, the thumb among them if any."""
     thumb, index = (ContactTarget(f, [0, 0, 0], [0, 0, 1]) for f in ("thumb", "index"))

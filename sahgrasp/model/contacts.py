@@ -249,8 +249,23 @@ class GraspTarget:
     def __init__(
         self, name: str, contacts: Iterable[ContactTarget], object_spec: ObjectSpec | None = None
     ) -> None:
-        name = _clean_name(str(name))
+        if not isinstance(name, str):
+            raise InvalidTargetError(
+                f"a grasp's name must be a string, got {type(name).__name__}: "
+                "GraspTarget(name, contacts[, object_spec])"
+            )
+        name = _clean_name(name)
+        if isinstance(contacts, str | bytes) or not isinstance(contacts, Iterable):
+            raise InvalidTargetError(
+                f"grasp {name!r}: contacts must be an iterable of ContactTarget, "
+                f"got {type(contacts).__name__}"
+            )
         contacts_t = tuple(contacts)
+        wrong = sorted({type(c).__name__ for c in contacts_t if not isinstance(c, ContactTarget)})
+        if wrong:
+            raise InvalidTargetError(
+                f"grasp {name!r}: every contact must be a ContactTarget, got {wrong}"
+            )
         if not contacts_t:
             raise InvalidTargetError(
                 f"grasp {name!r} has no contacts; give one for each finger that touches the object"
