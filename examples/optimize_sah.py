@@ -16,6 +16,7 @@ import sys
 from collections.abc import Sequence
 from typing import cast
 
+from sahgrasp.core.errors import SahGraspError
 from sahgrasp.core.progress import StderrProgress
 from sahgrasp.experiments.arguments import add_atlas_arguments, add_html_argument, atlas_geometry
 from sahgrasp.experiments.reference import PAPER_ATLAS_REPORT
@@ -39,11 +40,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except argparse.ArgumentTypeError as exc:  # --r out of the experiment's range
         parser.error(str(exc))
 
-    with StderrProgress() as progress:
-        result = run_experiment(
-            args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
-            max_charts=args.max_charts, progress=progress, workers=args.workers,
-        )  # fmt: skip
+    try:
+        with StderrProgress() as progress:
+            result = run_experiment(
+                args.experiment, k=args.k, radius=radius, epsilon=epsilon, index=args.index,
+                max_charts=args.max_charts, progress=progress, workers=args.workers,
+            )  # fmt: skip
+    except SahGraspError as exc:  # e.g. a partial atlas with no collision-free chart
+        print(f"{parser.prog}: {exc}", file=sys.stderr)
+        return 1
     problem = cast(HandGraspManifold, result.problem)  # the SAH experiments' manifold
     atlas, paper = result.atlas, PAPER_ATLAS_REPORT[args.experiment]
     print(f"{args.experiment}: {atlas.n_charts} charts (paper {paper.charts}), "
