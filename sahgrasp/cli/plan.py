@@ -6,6 +6,7 @@ import argparse
 import os
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -335,7 +336,7 @@ def _run_object(args: argparse.Namespace) -> int:
             object_spec=spec,
             check=check,
             started=_STARTED,
-            on_candidate=bar.update,
+            on_candidate=_growing(bar, settings.candidates),
             max_candidates=_max_candidates(args),
         )
     document = plan.to_dict() if check is None else check.annotate(plan.to_dict())
@@ -477,6 +478,19 @@ def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
         return {}
     physics = dataclasses.asdict(hold)
     return {"verify": {"physics": physics, "max_candidates": _max_candidates(args)}}
+
+
+def _growing(bar: Any, batch: int) -> Callable[[], None]:
+    """Advance ``bar`` by one candidate, its total by a batch when a further batch is drawn."""
+
+    def step() -> None:
+        # --verify physics draws further batches while too few grasps hold.
+        if bar.total is not None and bar.n >= bar.total:
+            bar.total += batch
+            bar.refresh()
+        bar.update()
+
+    return step
 
 
 def _bar(args: argparse.Namespace, total: int, unit: str, done: int = 0) -> Any:
