@@ -8,14 +8,15 @@ import socket
 import subprocess
 import sys
 import time
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from sahgrasp.core.errors import InvalidSettingsError
-from sahgrasp.core.executors import open_executor
-from sahgrasp.core.parallel import SchedulerError
+from sahgrasp.core.executors import WatchedExecutor, open_executor
+from sahgrasp.core.parallel import SchedulerError, SchedulerLostError
 from sahgrasp.ik import random_problems
 from sahgrasp.model.hand import load_hand
 from sahgrasp.objects.targets import save_targets
@@ -34,6 +35,65 @@ def test_an_executor_is_used_as_is_and_left_open() -> None:
 def test_anything_else_is_refused_naming_what_is_valid() -> None:
     with pytest.raises(InvalidSettingsError, match="Dask scheduler address"), open_executor(42):
         pass
+
+
+class _Stuck(Executor):
+    """An executor whose futures never finish, as Dask's when its event loop has failed."""
+
+    def submit(self, fn: Any, /, *args: Any, **kwargs: Any) -> Future[Any]:
+        return Future()
+
+
+class _Comm:
+    def closed(self) -> bool:
+        return False
+
+
+class _Send:
+    comm = _Comm()
+
+
+class _Client:
+    """What the watch reads of a ``dask.distributed.Client``: its status, its scheduler comm."""
+
+    scheduler_comm = _Send()
+
+    def __init__(self, status: str) -> None:
+        self.status = status
+
+
+def _watched(status: str, reachable: bool, probes: list[str]) -> WatchedExecutor:
+    def probe(address: str) -> bool:
+        probes.append(address)
+        return reachable
+
+    return WatchedExecutor(
+        _Stuck(), _Client(status), "tcp://127.0.0.1:1", patience_s=0.2, period_s=0.02, probe=probe
+    )
+
+
+def test_futures_fail_once_a_lost_scheduler_stays_unreachable() -> None:
+    probes: list[str] = []
+    watched = _watched("connecting", reachable=False, probes=probes)
+    future = watched.submit(print)
+    with pytest.raises(SchedulerLostError, match=r"lost the Dask scheduler at tcp://127.0.0.1:1"):
+        future.result(timeout=10)
+    assert watched.lost and probes
+    with pytest.raises(SchedulerLostError):
+        watched.submit(print)
+    watched.shutdown()
+
+
+def test_a_running_client_or_a_reachable_scheduler_is_left_alone() -> None:
+    for status, reachable in (("running", False), ("connecting", True)):
+        probes: list[str] = []
+        watched = _watched(status, reachable, probes)
+        future = watched.submit(print)
+        time.sleep(0.5)
+        assert not future.done() and not watched.lost
+        # A running client with an open connection is never probed: the scheduler would log it.
+        assert bool(probes) == (status != "running")
+        watched.shutdown()
 
 
 def _free_port() -> int:

@@ -18,9 +18,12 @@ from __future__ import annotations
 
 import logging
 import socket
-from collections.abc import Iterator
-from concurrent.futures import CancelledError, Executor
-from contextlib import contextmanager
+import threading
+import time
+import weakref
+from collections.abc import Callable, Iterator
+from concurrent.futures import CancelledError, Executor, Future, InvalidStateError
+from contextlib import contextmanager, suppress
 from typing import Any
 
 from sahgrasp.core.errors import InvalidSettingsError
@@ -33,7 +36,7 @@ from sahgrasp.core.parallel import (
     process_pool,
 )
 
-__all__ = ["open_executor"]
+__all__ = ["WatchedExecutor", "open_executor"]
 
 
 @contextmanager
@@ -56,8 +59,13 @@ def open_executor(spec: Any = None, workers: int | None = None) -> Iterator[Exec
     elif isinstance(spec, Executor):
         yield spec
     elif isinstance(spec, str):
-        with _dask_client(check_scheduler_address(spec)) as client:
-            yield client.get_executor(pure=False)
+        address = check_scheduler_address(spec)
+        with _dask_client(address) as client:
+            watched = WatchedExecutor(client.get_executor(pure=False), client, address)
+            try:
+                yield watched
+            finally:
+                watched.stop()
     elif hasattr(spec, "get_executor"):
         yield spec.get_executor(pure=False)
     else:
@@ -97,6 +105,8 @@ def _dask_client(address: str) -> Iterator[Any]:
         with client:
             try:
                 yield client
+            except SchedulerLostError:
+                raise
             except (CancelledError, OSError, RuntimeError):
                 # A lost scheduler cancels the chunks in flight (CancelledError); a submit after
                 # it fails on the closed connection. Either way the client is no longer running.
@@ -105,3 +115,102 @@ def _dask_client(address: str) -> Iterator[Any]:
                 raise SchedulerLostError(f"lost the Dask scheduler at {address} mid-run") from None
     finally:
         log.setLevel(level)
+
+
+class WatchedExecutor(Executor):
+    """A Dask client's executor whose futures fail once its scheduler is gone for good.
+
+    Dask cancels the futures of a client whose scheduler connection is lost after its reconnect
+    timeout, but an error inside its event loop can leave them pending for ever, and a run
+    waiting on them would hang. A thread looks every ``period_s``: while the client is not
+    running or its connection to the scheduler is closed, the scheduler's port is probed (only
+    then, so that a healthy scheduler is not sent connections it logs), and once it has refused
+    connections for ``patience_s``, every future not done fails with
+    :class:`~sahgrasp.core.parallel.SchedulerLostError`.
+
+    Args:
+        inner: The client's executor (``Client.get_executor()``).
+        client: The client (its ``status`` and ``scheduler_comm`` are looked at).
+        address: The scheduler's ``tcp://HOST:PORT``.
+        patience_s: How long the scheduler may be unreachable [s]; twice Dask's reconnect
+            timeout by default, so that Dask's own cancellation comes first.
+        period_s: How often the thread looks [s].
+        probe: Whether the scheduler accepts connections (tests replace it).
+    """
+
+    def __init__(
+        self,
+        inner: Executor,
+        client: Any,
+        address: str,
+        patience_s: float = 2.0 * SCHEDULER_TIMEOUT_S,
+        period_s: float = 1.0,
+        probe: Callable[[str], bool] | None = None,
+    ) -> None:
+        self._inner = inner
+        self._client = client
+        self._address = address
+        self._probe = probe if probe is not None else _accepts_connections
+        self._pending: weakref.WeakSet[Future[Any]] = weakref.WeakSet()
+        self._lock = threading.Lock()
+        self._stopped = threading.Event()
+        self.lost = False
+        self._thread = threading.Thread(
+            target=self._watch, args=(patience_s, period_s), name="sahgrasp-scheduler-watch",
+            daemon=True,
+        )  # fmt: skip
+        self._thread.start()
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
+        """Submit to the client's executor, the future watched until it is done."""
+        if self.lost:
+            raise SchedulerLostError(f"lost the Dask scheduler at {self._address} mid-run")
+        future = self._inner.submit(fn, *args, **kwargs)
+        with self._lock:
+            self._pending.add(future)
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop watching and shut the client's executor down."""
+        self.stop()
+        self._inner.shutdown(wait=wait)
+
+    def stop(self) -> None:
+        """Stop watching (the futures are left as they are)."""
+        self._stopped.set()
+
+    def _suspect(self) -> bool:
+        if getattr(self._client, "status", "running") != "running":
+            return True
+        comm = getattr(getattr(self._client, "scheduler_comm", None), "comm", None)
+        return comm is None or bool(getattr(comm, "closed", lambda: False)())
+
+    def _watch(self, patience_s: float, period_s: float) -> None:
+        unreachable_since: float | None = None
+        while not self._stopped.wait(period_s):
+            if not self._suspect() or self._probe(self._address):
+                unreachable_since = None
+                continue
+            now = time.monotonic()
+            unreachable_since = now if unreachable_since is None else unreachable_since
+            if now - unreachable_since < patience_s:
+                continue
+            self.lost = True
+            with self._lock:
+                pending = [f for f in self._pending if not f.done()]
+            for future in pending:
+                with suppress(InvalidStateError):  # Dask settled it meanwhile
+                    future.set_exception(
+                        SchedulerLostError(f"lost the Dask scheduler at {self._address} mid-run")
+                    )
+            return
+
+
+def _accepts_connections(address: str) -> bool:
+    """Whether something accepts a TCP connection at ``tcp://HOST:PORT`` within a second."""
+    host, port = address.removeprefix("tcp://").rsplit(":", 1)
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), 1.0).close()
+    except OSError:
+        return False
+    return True
