@@ -68,7 +68,7 @@ PULL_DIRECTIONS: tuple[tuple[str, tuple[float, float, float]], ...] = (
     ("+z", (0.0, 0.0, 1.0)),
     ("-z", (0.0, 0.0, -1.0)),
 )
-"""The six pulls, world axes (those of the physics hold test)."""
+"""The six pulls, world axes (also those of the physics hold test, ``sim.settings.DIRECTIONS``)."""
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass
 
 from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.quality.weight import PULL_DIRECTIONS
 
 __all__ = [
     "DEXGRASPBENCH_MASS_KG",
@@ -15,15 +16,9 @@ __all__ = [
     "dexgraspbench_solver",
 ]
 
-DIRECTIONS: tuple[tuple[str, tuple[float, float, float]], ...] = (
-    ("+x", (1.0, 0.0, 0.0)),
-    ("-x", (-1.0, 0.0, 0.0)),
-    ("+y", (0.0, 1.0, 0.0)),
-    ("-y", (0.0, -1.0, 0.0)),
-    ("+z", (0.0, 0.0, 1.0)),
-    ("-z", (0.0, 0.0, -1.0)),
-)
-"""The six pulls of the test, world axes (DexGraspNet's and BODex's six directions)."""
+DIRECTIONS: tuple[tuple[str, tuple[float, float, float]], ...] = PULL_DIRECTIONS
+"""The six pulls of the test, world axes (DexGraspNet's and BODex's six directions): those the
+weight support (:mod:`sahgrasp.quality.weight`) resists, one table for both."""
 
 LIGHT_SQUEEZE_N = 1.0
 """The light squeeze [N] per contact finger on average, which separates strong grasps from weak."""
