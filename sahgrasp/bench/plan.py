@@ -146,8 +146,8 @@ HOLD_SETTINGS = ("default", "light", "default_0.1kg", "light_0.1kg", "dexgraspbe
 """The hold tests of the returned grasps (module docstring), keys of each row's ``hold``."""
 
 
-def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[str, Any] | None:
-    """Hold rates of the returned grasps under :data:`HOLD_SETTINGS` (None without MuJoCo)."""
+def _hold_settings() -> dict[str, Any] | None:
+    """The hold tests of :data:`HOLD_SETTINGS` by name (None without MuJoCo)."""
     try:
         from sahgrasp.sim import (
             DEXGRASPBENCH_MASS_KG,
@@ -155,17 +155,25 @@ def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[
             HoldSettings,
             dexgraspbench_solver,
         )
-        from sahgrasp.sim.verify import hold_rates
     except ImportError:
         return None
     field = DEXGRASPBENCH_MASS_KG
-    settings = {
+    return {
         "default": HoldSettings(),
         "light": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N),
         "default_0.1kg": HoldSettings(mass_kg=field),
         "light_0.1kg": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=field),
         "dexgraspbench": dexgraspbench_solver(HoldSettings()),
     }
+
+
+def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[str, Any] | None:
+    """Hold rates of the returned grasps under :data:`HOLD_SETTINGS` (None without MuJoCo)."""
+    settings = _hold_settings()
+    if settings is None:
+        return None
+    from sahgrasp.sim.verify import hold_rates
+
     rates = hold_rates(hand, obj, qs, settings, fingers)
     crossed = zip(rates["default"]["held"], rates["dexgraspbench"]["held"], strict=True)
     return {
@@ -212,23 +220,17 @@ def _verified_physics(
     returned grasps are then hold-tested in DexGraspBench's solver settings and with the light
     squeeze at 0.1 kg (untimed).
     """
-    try:
-        from sahgrasp.sim import (
-            DEXGRASPBENCH_MASS_KG,
-            LIGHT_SQUEEZE_N,
-            HoldSettings,
-            dexgraspbench_solver,
-        )
-        from sahgrasp.sim.verify import PhysicsCheck, hold_rates
-    except ImportError:
+    tests = _hold_settings()
+    if tests is None:
         return None
     from sahgrasp.planner import plan_grasps
     from sahgrasp.planner.settings import CHECK_CANDIDATES_FACTOR
+    from sahgrasp.sim.verify import PhysicsCheck, hold_rates
 
     cap = CHECK_CANDIDATES_FACTOR * settings.candidates
     start, cpu = time.perf_counter(), time.process_time()
     obj = load()
-    physics = PhysicsCheck(hand, obj, HoldSettings())
+    physics = PhysicsCheck(hand, obj, tests["default"])
     check = _FirstHold(physics)
     plan = plan_grasps(
         hand, obj, settings, object_spec=object_spec, check=check, started=start,
@@ -243,10 +245,7 @@ def _verified_physics(
         hand,
         obj,
         [g.q for g in plan.grasps],
-        {
-            "dexgraspbench": dexgraspbench_solver(HoldSettings()),
-            "light_0.1kg": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=DEXGRASPBENCH_MASS_KG),
-        },
+        {name: tests[name] for name in ("dexgraspbench", "light_0.1kg")},
         [g.fingers for g in plan.grasps],
     )
     return {
