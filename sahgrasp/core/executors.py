@@ -84,9 +84,8 @@ def _dask_client(address: str) -> Iterator[Any]:
     own log of a lost connection is muted: the :class:`SchedulerError` raised instead says it.
     """
     require_extra("cluster", f"the Dask scheduler {address}")  # before connecting: one line
-    host, port = address.removeprefix("tcp://").rsplit(":", 1)
     try:
-        socket.create_connection((host.strip("[]"), int(port)), SCHEDULER_TIMEOUT_S).close()
+        _connect(address, SCHEDULER_TIMEOUT_S)
     except OSError as exc:
         reason = exc.strerror or type(exc).__name__
         raise SchedulerError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
@@ -206,11 +205,16 @@ class WatchedExecutor(Executor):
             return
 
 
+def _connect(address: str, timeout_s: float) -> None:
+    """Open and close a TCP connection to ``tcp://HOST:PORT``; OSError if none is accepted."""
+    host, port = address.removeprefix("tcp://").rsplit(":", 1)
+    socket.create_connection((host.strip("[]"), int(port)), timeout_s).close()
+
+
 def _accepts_connections(address: str) -> bool:
     """Whether something accepts a TCP connection at ``tcp://HOST:PORT`` within a second."""
-    host, port = address.removeprefix("tcp://").rsplit(":", 1)
     try:
-        socket.create_connection((host.strip("[]"), int(port)), 1.0).close()
+        _connect(address, 1.0)
     except OSError:
         return False
     return True
