@@ -484,11 +484,18 @@ def _choose(
     return chosen
 
 
+def _contact_arrays(grasp: PlannedGrasp) -> tuple[FloatArray, FloatArray]:
+    """A grasp's contact points [m] and outward unit normals, (k, 3) each."""
+    return (
+        np.array([c.point for c in grasp.contacts]),
+        np.array([c.normal for c in grasp.contacts]),
+    )
+
+
 def _wrenches(grasp: PlannedGrasp, frame: ObjectFrame, settings: PlanSettings) -> FloatArray:
     """The primitive wrenches (K, 6) of a grasp's contacts (the plan's friction and cone)."""
     return primitive_wrenches(
-        np.array([c.point for c in grasp.contacts]),
-        np.array([c.normal for c in grasp.contacts]),
+        *_contact_arrays(grasp),
         frame.centroid_m,
         frame.radius_m,
         settings.mu,
@@ -573,10 +580,7 @@ def _select(
     """
     if settings.rank == "weight":
         missing = [g for g in verified if "weight" not in g.quality]
-        contacts = [
-            (np.array([c.point for c in g.contacts]), np.array([c.normal for c in g.contacts]))
-            for g in missing
-        ]
+        contacts = [_contact_arrays(g) for g in missing]
         for grasp, support in zip(
             missing, weight_supports(contacts, frame.centroid_m, settings.mu), strict=True
         ):
@@ -618,12 +622,12 @@ def _select(
     chosen.sort(key=lambda e: (e[0], _rank_key(e[2], settings.rank), e[1]))
     out = []
     for _, _, grasp in chosen:
-        # The exact hull for what is returned (the candidates were screened with a joggled
-        # one); the L-infinity epsilon where its Minkowski sum is small enough.
+        # The exact hull for what is returned (the candidates were screened with one that
+        # joggles where Qhull meets a precision problem); the L-infinity epsilon where its
+        # Minkowski sum is small enough.
         linf = (settings.linf_edges + 1) ** len(grasp.contacts) <= LINF_MAX_POINTS
         exact = grasp_quality(
-            np.array([c.point for c in grasp.contacts]),
-            np.array([c.normal for c in grasp.contacts]),
+            *_contact_arrays(grasp),
             frame.centroid_m,
             frame.radius_m,
             settings.mu,
