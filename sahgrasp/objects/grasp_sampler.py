@@ -42,6 +42,8 @@ __all__ = [
     "registered_reach",
     "sample_contact_sets",
     "sample_object_grasps",
+    "spaced_neighbour",
+    "thumb_opposes",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -430,22 +432,11 @@ class _ContactSetDraw:
     def _neighbour(
         self, start: FloatArray, direction: FloatArray, spacing_m: float
     ) -> Contact | None:
-        """A surface point within the spacing range of ``start``, about ``spacing_m`` away.
-
-        The point closest to ``start + step * direction``, ``step`` stretched while the surface
-        curves away from the tangent line; None if no such point is in range.
-        """
-        lo, hi = self.reach.finger_spacing_m
-        step = spacing_m
-        for _ in range(_SPACING_ITERATIONS):
-            closest, face, _ = self.surface.closest(start + step * direction)
-            chord = float(np.linalg.norm(closest - start))
-            if lo <= chord <= hi:
-                return closest, self.surface.normals[face]
-            if chord < 1e-9:
-                return None
-            step *= spacing_m / chord
-        return None
+        """A surface point within the spacing range of ``start``, about ``spacing_m`` away."""
+        return spaced_neighbour(
+            self.surface.closest, self.surface.normals, start, direction, spacing_m,
+            self.reach.finger_spacing_m,
+        )  # fmt: skip
 
     def _apart(self, contacts: list[Contact]) -> bool:
         """Index and ring no closer than the smallest spacing (not folded onto one side)."""
@@ -454,8 +445,7 @@ class _ContactSetDraw:
         )
 
     def _opposed(self, contacts: list[Contact]) -> bool:
-        mean = np.sum([n for _, n in contacts[1:]], axis=0)
-        return bool(contacts[0][1] @ mean <= -self.opposition_cos * np.linalg.norm(mean))
+        return thumb_opposes(contacts, self.opposition_cos)
 
     def _exposed(self, contacts: list[Contact]) -> bool:
         """No contact lies inside another shell of the object (parts of assembled solids)."""
@@ -497,6 +487,53 @@ def ray_exit(
         return None
     k = int(rng.choice(np.flatnonzero(exits)))
     return point_m + distances[k] * direction, face_normals[faces[k]]
+
+
+def spaced_neighbour(
+    closest: Callable[[FloatArray], tuple[FloatArray, int, float]],
+    face_normals: FloatArray,
+    start_m: FloatArray,
+    direction: FloatArray,
+    step_m: float,
+    chord_m: tuple[float, float],
+) -> Contact | None:
+    """A surface point whose chord from ``start_m`` is in ``chord_m``, about ``step_m`` away.
+
+    The point closest to ``start_m + step * direction``, ``step`` stretched while the surface
+    curves away from the tangent line.
+
+    Args:
+        closest: The closest surface point to a point: (point, face, distance), as
+            ``SurfaceMesh.closest`` gives.
+        face_normals: Outward unit normals of the mesh's faces.
+        start_m: Where the chord starts, on the surface [m].
+        direction: Unit tangent direction to step along.
+        step_m: The first step [m].
+        chord_m: Range of the chord's length [m].
+
+    Returns:
+        The point and its face's outward normal; None when no point in range is found.
+    """
+    lo, hi = chord_m
+    step = step_m
+    for _ in range(_SPACING_ITERATIONS):
+        point, face, _ = closest(start_m + step * direction)
+        chord = float(np.linalg.norm(point - start_m))
+        if lo <= chord <= hi:
+            return point, face_normals[face]
+        if chord < 1e-9:
+            return None
+        step *= step_m / chord
+    return None
+
+
+def thumb_opposes(contacts: list[Contact], opposition_cos: float) -> bool:
+    """Whether the first contact's normal opposes the other contacts' mean normal.
+
+    Within the angle whose cosine is ``opposition_cos``: ``n_0 . m <= -opposition_cos |m|``.
+    """
+    mean = np.sum([n for _, n in contacts[1:]], axis=0)
+    return bool(contacts[0][1] @ mean <= -opposition_cos * np.linalg.norm(mean))
 
 
 def _basis(axis: FloatArray) -> tuple[FloatArray, FloatArray]:

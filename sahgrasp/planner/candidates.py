@@ -35,7 +35,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from sahgrasp.objects.grasp_sampler import HandReach, SamplerSettings, SurfaceMesh, ray_exit
+from sahgrasp.objects.grasp_sampler import (
+    HandReach,
+    SamplerSettings,
+    SurfaceMesh,
+    ray_exit,
+    spaced_neighbour,
+    thumb_opposes,
+)
 from sahgrasp.objects.reach import derive_reach, finger_set, hand_reach
 from sahgrasp.quality.wrench import CONE_EDGES, force_closure, primitive_wrenches
 
@@ -53,7 +60,6 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 Contact = tuple[FloatArray, FloatArray]
 
-_SPACING_ITERATIONS = 4
 _RAY_EPS_M = 1e-7
 """Ray crossings this near the origin are its own face (as in :meth:`SurfaceMesh.ray_hits`)."""
 _OFF_SURFACE_M = 1e-6
@@ -262,20 +268,12 @@ class CandidateDraw:
         lo, hi = self.reach.finger_spacing_m
         if half:
             lo, hi = 0.5 * lo, 0.5 * hi
-        step = step_m
-        for _ in range(_SPACING_ITERATIONS):
-            closest, face, _ = self.nearest.closest(start + step * direction)
-            chord = float(np.linalg.norm(closest - start))
-            if lo <= chord <= hi:
-                return closest, self.surface.normals[face]
-            if chord < 1e-9:
-                return None
-            step *= step_m / chord
-        return None
+        return spaced_neighbour(
+            self.nearest.closest, self.surface.normals, start, direction, step_m, (lo, hi)
+        )
 
     def _opposed(self, contacts: list[Contact]) -> bool:
-        mean = np.sum([n for _, n in contacts[1:]], axis=0)
-        return bool(contacts[0][1] @ mean <= -self.opposition_cos * np.linalg.norm(mean))
+        return thumb_opposes(contacts, self.opposition_cos)
 
     def _exposed(self, contacts: list[Contact]) -> bool:
         if self.single_shell:  # one closed shell: no surface point is inside another
