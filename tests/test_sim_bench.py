@@ -53,7 +53,7 @@ def test_bench_plan_hold_summary_counts_targets_and_the_cross_check() -> None:
     assert summary["default_not_dexgraspbench"] == 1
     assert hold_summary([{"hold": None}]) is None
     cells = _hold_cells(rows[1]["hold"])
-    assert cells[:3] == (0.3, "80% (8/10)", "80% (8/10)") and cells[6] == 1
+    assert cells[:3] == (0.3, "80% (8/10)", "80% (8/10)") and cells[7] == 1
     # A row of an older document (default and light only) still makes a table row.
     old = {"default": strong["default"], "light": strong["light"], "mass_kg": 0.2}
-    assert _hold_cells(old)[3:7] == ("-", "-", "-", "-")
+    assert _hold_cells(old)[3:8] == ("-", "-", "-", "-", "-")

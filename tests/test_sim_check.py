@@ -201,15 +201,20 @@ def test_cli_defaults_are_the_library_defaults() -> None:
     assert _settings(light).squeeze_n == 1.0
 
 
-def test_no_slip_option_runs_the_no_slip_post_solver(
+def test_soft_friction_option_lets_friction_creep(
     capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, files: Path
 ) -> None:
     from sahgrasp.cli import _parser
-    from sahgrasp.cli.check import NOSLIP_ITERATIONS, _settings
+    from sahgrasp.cli.check import _settings
+    from sahgrasp.sim import soft_friction
 
-    args = _parser().parse_args(["check", "t.json", "r.json", "--no-slip"])
-    assert _settings(args).noslip_iterations == NOSLIP_ITERATIONS > 0
-    done = in_process(capsys, monkeypatch, files, "check", "plan.json", "--no-slip", "--json", "-")
-    assert done.returncode == 0, done.stderr
+    args = _parser().parse_args(["check", "t.json", "r.json", "--soft-friction"])
+    assert _settings(args) == soft_friction(HoldSettings())
+    assert (_settings(args).impratio, _settings(args).noslip_iterations) == (1.0, 0)
+    done = in_process(
+        capsys, monkeypatch, files, "check", "plan.json", "--soft-friction", "--json", "-"
+    )
+    assert done.returncode in (0, 1), done.stderr
     document = json.loads(done.stdout)
-    assert document["settings"]["noslip_iterations"] == NOSLIP_ITERATIONS
+    assert document["settings"]["noslip_iterations"] == 0
+    assert document["settings"]["impratio"] == 1.0

@@ -14,21 +14,22 @@ verified force-closure grasps per second and the speed-up.
 With MuJoCo (``sahgrasp[sim]``), the returned grasps are hold-tested (:mod:`sahgrasp.sim`)
 with the default settings and the light squeeze at the object's mass from the default density
 (1000 kg/m^3), the same two at the field's convention of 0.1 kg for every object
-(DexGraspBench's), and the default settings in DexGraspBench's MuJoCo solver settings
-(:func:`~sahgrasp.sim.settings.dexgraspbench_solver`), the independent cross-check: the count of
-grasps that hold by default but not there (``default_not_dexgraspbench``) should be 0. And each
-object is planned once more as ``plan --verify physics`` plans it (the planner keeps only the
-grasps that hold in the default hold test, ranked by their margin, drawing further batches of
-candidates while fewer than asked hold, up to four times the candidates:
+(DexGraspBench's), the default settings in DexGraspBench's MuJoCo solver settings
+(:func:`~sahgrasp.sim.settings.dexgraspbench_solver`), the cross-check: the count of grasps that
+hold by default but not there (``default_not_dexgraspbench``) should be 0, and with MuJoCo's
+soft, creeping friction (:func:`~sahgrasp.sim.settings.soft_friction`), the strictest set-up.
+And each object is planned once more as ``plan --verify physics`` plans it (the planner keeps
+only the grasps that hold in the default hold test, ranked by their margin, drawing further
+batches of candidates while fewer than asked hold, up to four times the candidates:
 :data:`sahgrasp.planner.settings.CHECK_CANDIDATES_FACTOR`): the grasps it returns (and how many
 of them passed after the first batch, what a plan without further batches returns), the seconds
 to the first holding grasp and in all (from before the object is loaded), and how many of the
 returned grasps hold in DexGraspBench's solver settings and with the light squeeze at 0.1 kg.
 
 The test meshes (:func:`write_test_meshes`) are trimesh primitives of graspable size (4-15 cm):
-boxes, a plate, a cube, cylinders, a sphere, a capsule, a cone, a torus, a tube, and a box written
-in millimetres (planned with ``scale = 1e-3``; left out of the folder run, whose files are in
-metres).
+boxes, a plate, a cube, cylinders, a sphere, a capsule, a cone, a torus, a tube, and a box
+written in millimetres (planned with ``scale = 1e-3``; left out of the folder run, whose files
+are in metres).
 """
 
 from __future__ import annotations
@@ -142,7 +143,9 @@ def _object_row(
     }
 
 
-HOLD_SETTINGS = ("default", "light", "default_0.1kg", "light_0.1kg", "dexgraspbench")
+HOLD_SETTINGS = (
+    "default", "light", "default_0.1kg", "light_0.1kg", "dexgraspbench", "soft_friction"
+)  # fmt: skip
 """The hold tests of the returned grasps (module docstring), keys of each row's ``hold``."""
 
 
@@ -154,6 +157,7 @@ def _hold_settings() -> dict[str, Any] | None:
             LIGHT_SQUEEZE_N,
             HoldSettings,
             dexgraspbench_solver,
+            soft_friction,
         )
     except ImportError:
         return None
@@ -164,6 +168,7 @@ def _hold_settings() -> dict[str, Any] | None:
         "default_0.1kg": HoldSettings(mass_kg=field),
         "light_0.1kg": HoldSettings(squeeze_n=LIGHT_SQUEEZE_N, mass_kg=field),
         "dexgraspbench": dexgraspbench_solver(HoldSettings()),
+        "soft_friction": soft_friction(HoldSettings()),
     }
 
 
@@ -615,7 +620,7 @@ def _verify_cells(v: dict[str, Any] | None) -> tuple[Any, ...]:
 
 def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
     if hold is None:
-        return ("-",) * 9
+        return ("-",) * 10
 
     def rate(row: dict[str, Any]) -> str:
         if not row["checked"]:
@@ -684,6 +689,7 @@ def format_table(doc: dict[str, Any]) -> str:
         "holds 0.1 kg",
         "holds light 0.1 kg",
         "holds (DexGraspBench solver)",
+        "holds (soft friction)",
         "default, not DGB",
         "failures (default)",
         "checks/CPU s",

@@ -70,9 +70,10 @@ def add_parser(sub: Any) -> None:
                       help="object mass [kg] (default: from --density)")  # fmt: skip
     mass.add_argument("--density", type=positive_float, default=1000.0,
                       help="object density [kg/m^3]")  # fmt: skip
-    p.add_argument("--no-slip", action="store_true",
-                   help="run MuJoCo's no-slip post-solver (5 iterations): contacts do not creep, "
-                   "a less strict verdict than the default (docs/methods/physics.md)")  # fmt: skip
+    p.add_argument("--soft-friction", action="store_true",
+                   help="MuJoCo's soft friction that creeps under a load (impratio 1, no no-slip "
+                   "solver, 10 ms steps): a stricter verdict than the default "
+                   "(docs/methods/physics.md)")  # fmt: skip
     add_mesh_path_argument(p)
     p.add_argument("--workers", type=positive_int, default=1, help="worker processes (>= 1)")
     add_json_argument(p, "every grasp's verdicts, per-direction motion and the summary")
@@ -80,16 +81,13 @@ def add_parser(sub: Any) -> None:
     p.set_defaults(run=run)
 
 
-NOSLIP_ITERATIONS = 5
-"""Iterations of MuJoCo's no-slip post-solver with ``--no-slip``."""
-
-
 def _settings(args: argparse.Namespace) -> Any:
-    from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings
+    from sahgrasp.sim import LIGHT_SQUEEZE_N, HoldSettings, soft_friction
 
     settings = HoldSettings(friction=args.friction, density_kg_m3=args.density,
-                            mass_kg=args.mass_kg,
-                            noslip_iterations=NOSLIP_ITERATIONS if args.no_slip else 0)  # fmt: skip
+                            mass_kg=args.mass_kg)  # fmt: skip
+    if args.soft_friction:
+        settings = soft_friction(settings)
     if args.light or args.squeeze is not None:
         squeeze = LIGHT_SQUEEZE_N if args.light else args.squeeze
         settings = dataclasses.replace(settings, squeeze_n=squeeze)

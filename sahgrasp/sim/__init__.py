@@ -28,6 +28,7 @@ from sahgrasp.sim.settings import (
     LIGHT_SQUEEZE_N,
     HoldSettings,
     dexgraspbench_solver,
+    soft_friction,
 )
 
 __all__ = [
@@ -50,5 +51,6 @@ __all__ = [
     "grasp_configuration",
     "hold_test",
     "read_grasps",
+    "soft_friction",
     "summarize",
 ]

@@ -52,6 +52,12 @@ _CHUNK_S = 0.02
 """Simulated time [s] between two checks of the object's motion (early exit on failure)."""
 _EDGES = 4
 """Edges of the linearised friction cone the squeeze may use to balance its forces."""
+_REST_WINDOW_S = 0.1
+"""Simulated time [s] over which a pull's object speed is measured for the early end at rest."""
+_REST_SPEED_M_S = 1e-3
+"""The object is at rest below this speed [m/s] (and :data:`_REST_SPEED_DEG_S`)."""
+_REST_SPEED_DEG_S = 1.0
+"""The object is at rest below this angular speed [deg/s] (and :data:`_REST_SPEED_M_S`)."""
 
 
 @dataclass(frozen=True)
@@ -396,13 +402,18 @@ class HoldTester:
     def _run(self, seconds: float, start: tuple[NDArray[np.float64], NDArray[np.float64]],
              stop: tuple[float, float],
              ramp: tuple[NDArray[np.float64], NDArray[np.float64], int] | None = None,
+             rest: tuple[float, float] | None = None,
              ) -> tuple[float, float, float, bool]:  # fmt: skip
         """Step ``seconds``; the largest motion from ``start`` (displacement [m], angle [deg]).
 
         Stops early once the motion passes ``stop`` (displacement, angle). ``ramp`` (from,
         to, steps): the servo targets go linearly from ``from`` to ``to`` over the first
-        ``steps`` steps. Returns the two maxima, the simulated time and whether the simulation
-        stayed trustworthy (finite accelerations, no contact dropped for want of memory).
+        ``steps`` steps. ``rest`` (displacement [m], angle [deg], the test's thresholds): stops
+        early once the object is at rest (:data:`_REST_SPEED_M_S`, :data:`_REST_SPEED_DEG_S`
+        over the last :data:`_REST_WINDOW_S`, path lengths sampled every :data:`_CHUNK_S`) and
+        even at that speed until the end it would stay below half of each threshold. Returns
+        the two maxima, the simulated time and whether the simulation stayed trustworthy
+        (finite accelerations, no contact dropped for want of memory).
         """
         m, d = self.sim.model, self.sim.data
         steps = max(1, round(seconds / m.opt.timestep))
@@ -415,6 +426,9 @@ class HoldTester:
         w0, i0, j0, k0 = (float(v) for v in start[1])
         bad_qacc = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
         full = d.warning[mujoco.mjtWarning.mjWARN_CNSTRFULL]  # contacts dropped: not trusted
+        window = max(1, round(_REST_WINDOW_S / (self._chunk * m.opt.timestep)))
+        path: list[tuple[float, float]] = []  # per chunk: distance [m] and angle [deg] moved
+        last = (x0, y0, z0, w0, i0, j0, k0)
         while done < steps:
             n = min(self._chunk, steps - done)
             if ramp is not None and done < ramp[2]:
@@ -437,6 +451,25 @@ class HoldTester:
             turned = max(turned, math.degrees(2.0 * math.acos(dot)))
             if moved >= stop[0] or turned >= stop[1]:
                 break
+            if rest is not None:
+                lx, ly, lz, lw, li, lj, lk = last
+                step_dot = min(1.0, abs(w * lw + i * li + j * lj + k * lk))
+                path.append((math.sqrt((x - lx) ** 2 + (y - ly) ** 2 + (z - lz) ** 2),
+                             math.degrees(2.0 * math.acos(step_dot))))  # fmt: skip
+                last = (x, y, z, w, i, j, k)
+                if len(path) >= 2 * window:
+                    # The object is damped and the pull constant: once it rests, it stays.
+                    span = window * self._chunk * m.opt.timestep
+                    speed = sum(p[0] for p in path[-window:]) / span
+                    spin = sum(p[1] for p in path[-window:]) / span
+                    left = (steps - done) * m.opt.timestep
+                    if (
+                        speed < _REST_SPEED_M_S
+                        and spin < _REST_SPEED_DEG_S
+                        and moved + speed * left < 0.5 * rest[0]
+                        and turned + spin * left < 0.5 * rest[1]
+                    ):
+                        break
         return moved, turned, done * m.opt.timestep, True
 
     def test(
@@ -515,7 +548,8 @@ class HoldTester:
                 continue
             mujoco.mj_setState(m, d, self._state, self._state_spec)
             d.xfrc_applied[sim.object_body, :3] = weight * (R_world_palm.T @ np.array(axis))
-            moved, turned, seconds, finite = self._run(s.pull_s, settled, stop)
+            at_rest = (s.max_displacement_m, s.max_rotation_deg) if s.stop_at_rest else None
+            moved, turned, seconds, finite = self._run(s.pull_s, settled, stop, rest=at_rest)
             d.xfrc_applied[sim.object_body, :3] = 0.0
             simulated += seconds
             if not finite:
