@@ -169,3 +169,23 @@ def test_the_merge_budget_leaves_the_rest_as_single_prisms(
     depth = solid.wall_thickness_m()[:, None, None] * solid.trimesh.face_normals[:, None, :]
     centroids = np.concatenate([corners, corners - depth], axis=1).mean(axis=1)
     assert np.all(signed_distances(pieces, IDENTITY, centroids) < 0.0)
+
+
+@pytest.mark.slow
+def test_simulation_pieces_merge_further_where_the_budget_stopped(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    shipped = _mesh("bottle.obj")
+    assert shipped.simulation_shapes() is shipped.collision_shapes()  # the merge completed
+    full = len(shipped.collision_shapes())
+    monkeypatch.setattr(mesh_file, "MERGE_BUDGET", 20_000)
+    copy = tmp_path / "bottle.obj"
+    copy.write_bytes((MESHES / "bottle.obj").read_bytes())
+    solid = load_mesh(copy).solids[0]
+    assert isinstance(solid, MeshSolid)
+    simulated = solid.simulation_shapes()
+    assert full <= len(simulated) < len(solid.collision_shapes())
+    corners = solid.vertices_m[solid.faces]
+    depth = solid.wall_thickness_m()[:, None, None] * solid.trimesh.face_normals[:, None, :]
+    centroids = np.concatenate([corners, corners - depth], axis=1).mean(axis=1)
+    assert np.all(signed_distances(simulated, IDENTITY, centroids) < 0.0)
