@@ -34,8 +34,12 @@ FloatArray = NDArray[np.float64]
 class PrismSolid(MeshSolid):
     """A :class:`MeshSolid` whose collision pieces are its triangles' prisms, unjoined."""
 
+    def _merge(self, budget: int) -> tuple[tuple[CollisionShape, ...], bool]:
+        """The prisms, unjoined whatever the budget (and no budget stopped anything)."""
+        return self._prisms, False
+
     @cached_property
-    def _shapes(self) -> tuple[CollisionShape, ...]:
+    def _prisms(self) -> tuple[CollisionShape, ...]:
         if self.collision == "hull" or self.trimesh.is_convex:
             return (convex_hull(self.vertices_m),)
         corners = self.vertices_m[self.faces]
