@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -207,19 +208,10 @@ def dexgraspbench_solver(settings: HoldSettings | None = None) -> HoldSettings:
     pulls' duration -- all as strict as this check's, so a grasp that holds here and not
     there fails for the step, the solver's iterations or the end at rest alone.
     """
-    import dataclasses
-
-    base = settings or HoldSettings()
     return dataclasses.replace(
-        base,
-        timestep_s=0.004,
-        contact_timeconst_s=0.008,
-        impratio=10.0,
-        noslip_iterations=2,
-        solver_iterations=100,
-        ls_iterations=50,
-        stop_at_rest=False,
-    )
+        settings or HoldSettings(), timestep_s=0.004, contact_timeconst_s=0.008, impratio=10.0,
+        noslip_iterations=2, solver_iterations=100, ls_iterations=50, stop_at_rest=False,
+    )  # fmt: skip
 
 
 def soft_friction(settings: HoldSettings | None = None) -> HoldSettings:
@@ -229,16 +221,10 @@ def soft_friction(settings: HoldSettings | None = None) -> HoldSettings:
     post-solver (MuJoCo's own defaults), a 10 ms step with a 20 ms contact time constant. A
     contact loaded inside its friction cone then creeps slowly (a pinch loaded at three
     quarters of its friction limit slides about 6 mm per second), so a grasp that holds here
-    holds for its whole pull however its contacts would creep; light objects (below some
-    20 g) spin under the 10 ms step. Reported beside the default by ``sahgrasp bench plan``.
+    holds for its whole pull however its contacts would creep; a light object such as the
+    9 g fork spins under the 10 ms step. Reported beside the default by ``sahgrasp bench plan``.
     """
-    import dataclasses
-
-    base = settings or HoldSettings()
     return dataclasses.replace(
-        base,
-        timestep_s=0.01,
-        contact_timeconst_s=0.02,
-        impratio=1.0,
+        settings or HoldSettings(), timestep_s=0.01, contact_timeconst_s=0.02, impratio=1.0,
         noslip_iterations=0,
-    )
+    )  # fmt: skip
