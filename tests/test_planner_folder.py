@@ -51,8 +51,24 @@ def test_folder_is_the_same_on_one_and_two_workers(folder: Path, tmp_path: Path)
     assert all(d["grasps"] for d in a)
 
 
+@pytest.fixture(scope="module")
+def slow_middle(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Three meshes whose second takes seconds to plan: a kill after the first is not a race."""
+    root = tmp_path_factory.mktemp("slow_middle")
+    trimesh.creation.box(extents=(0.05, 0.06, 0.08)).export(root / "a_box.stl")
+    torus = trimesh.creation.torus(0.045, 0.015, major_sections=160, minor_sections=60)
+    torus.export(root / "b_torus.obj")  # 19,200 triangles
+    trimesh.creation.icosphere(subdivisions=2, radius=0.035).export(root / "c_ball.ply")
+    return root
+
+
 @pytest.mark.slow
-def test_folder_resumed_after_a_kill_gives_the_same_documents(folder: Path, tmp_path: Path) -> None:
+def test_folder_resumed_after_a_kill_gives_the_same_documents(
+    slow_middle: Path, tmp_path: Path
+) -> None:
+    # One worker plans the files in name order: the header and the box's document are written
+    # while the torus is still being planned, seconds before the run could end.
+    folder = slow_middle
     whole = tmp_path / "whole.jsonl"
     assert main(["plan", str(folder), "--json", str(whole), *ARGS]) == 0
     out = tmp_path / "cut.jsonl"
