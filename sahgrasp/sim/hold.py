@@ -6,7 +6,9 @@ a balanced set of forces, then a force of ``mass x 9.81 N`` pulls the object for
 each of +-x, +-y, +-z (world axes), each pull from the same settled state. The grasp holds if
 the object's centre of mass moves less than ``max_displacement_m`` and the object turns less
 than ``max_rotation_deg`` during every pull (and while settling); BODex's verdict uses its own
-thresholds (50 mm, 15 deg). docs/methods/physics.md gives the model and every parameter.
+thresholds (50 mm, 15 deg). A pull ends early once the object has come to rest under it (a damped
+model at rest under a constant force stays at rest). docs/methods/physics.md gives the model and
+every parameter.
 """
 
 from __future__ import annotations
@@ -70,8 +72,9 @@ class DirectionResult:
         rotation_deg: Largest angle [deg] the object turned from its settled orientation.
         holds: Both below the test's thresholds.
         holds_bodex: Both below BODex's thresholds.
-        simulated_s: Simulated time [s] of the pull (less than ``pull_s`` when it stopped early
-            because the object had already left both thresholds).
+        simulated_s: Simulated time [s] of the pull (less than ``pull_s`` when it stopped early:
+            the object had already left both thresholds, or had come to rest,
+            ``HoldSettings.stop_at_rest``).
     """
 
     direction: str
