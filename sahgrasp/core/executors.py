@@ -38,6 +38,10 @@ from sahgrasp.core.parallel import (
 
 __all__ = ["WatchedExecutor", "open_executor"]
 
+_MUTED_LOGS = ("distributed.client", "tornado.application")
+"""Loggers muted while a scheduler's client is open: a lost scheduler is one
+:class:`SchedulerError` line, not their tracebacks."""
+
 
 @contextmanager
 def open_executor(spec: Any = None, workers: int | None = None) -> Iterator[Executor]:
@@ -91,9 +95,14 @@ def _dask_client(address: str) -> Iterator[Any]:
         raise SchedulerError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
     from dask.distributed import Client
 
-    log = logging.getLogger("distributed.client")
-    level = log.level
-    log.setLevel(logging.CRITICAL)
+    # Dask's client and its event loop (tornado's callbacks) log the lost connection and the
+    # futures it breaks, tracebacks included, also after the client is closed: once the
+    # scheduler is lost they stay muted.
+    logs = [logging.getLogger(name) for name in _MUTED_LOGS]
+    levels = [log.level for log in logs]
+    for log in logs:
+        log.setLevel(logging.CRITICAL)
+    lost = False
     try:
         try:
             client = Client(address, timeout=SCHEDULER_TIMEOUT_S)
@@ -105,15 +114,19 @@ def _dask_client(address: str) -> Iterator[Any]:
             try:
                 yield client
             except SchedulerLostError:
+                lost = True
                 raise
             except (CancelledError, OSError, RuntimeError):
                 # A lost scheduler cancels the chunks in flight (CancelledError); a submit after
                 # it fails on the closed connection. Either way the client is no longer running.
                 if client.status == "running":
                     raise  # cancelled on purpose, or another failure: not a lost scheduler
+                lost = True
                 raise SchedulerLostError(f"lost the Dask scheduler at {address} mid-run") from None
     finally:
-        log.setLevel(level)
+        if not lost:
+            for log, level in zip(logs, levels, strict=True):
+                log.setLevel(level)
 
 
 class WatchedExecutor(Executor):
