@@ -411,7 +411,7 @@ class HoldTester:
 
         Stops early once the motion passes ``stop`` (displacement, angle). ``ramp`` (from,
         to, steps): the servo targets go linearly from ``from`` to ``to`` over the first
-        ``steps`` steps. ``rest`` (displacement [m], angle [deg], the test's thresholds): stops
+        ``steps`` steps. ``rest`` (displacement [m], angle [deg], the smaller thresholds): stops
         early once the object is at rest (:data:`_REST_SPEED_M_S`, :data:`_REST_SPEED_DEG_S`
         over the last :data:`_REST_WINDOW_S`, path lengths sampled every :data:`_CHUNK_S`) and
         even at that speed until the end it would stay below half of each threshold. Returns
@@ -545,13 +545,18 @@ class HoldTester:
         mujoco.mj_getState(m, d, self._state, self._state_spec)
         weight = sim.mass_kg * s.gravity_m_s2
         R_world_palm = self.hand.wrist_pose(q).rotation
+        # A pull may end at rest only where both verdicts are then sure.
+        at_rest = (
+            (min(s.max_displacement_m, s.bodex_displacement_m),
+             min(s.max_rotation_deg, s.bodex_rotation_deg))
+            if s.stop_at_rest else None
+        )  # fmt: skip
         results: list[DirectionResult] = []
         for label, axis in DIRECTIONS:
             if label not in s.directions:
                 continue
             mujoco.mj_setState(m, d, self._state, self._state_spec)
             d.xfrc_applied[sim.object_body, :3] = weight * (R_world_palm.T @ np.array(axis))
-            at_rest = (s.max_displacement_m, s.max_rotation_deg) if s.stop_at_rest else None
             moved, turned, seconds, finite = self._run(s.pull_s, settled, stop, rest=at_rest)
             d.xfrc_applied[sim.object_body, :3] = 0.0
             simulated += seconds
