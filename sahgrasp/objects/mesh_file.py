@@ -164,7 +164,7 @@ class MeshSolid(BuiltOnce):
 
     def collision_shapes(self) -> tuple[CollisionShape, ...]:
         """Convex pieces whose union is the solid (built once)."""
-        return self._merged[0]
+        return self._pieces(MERGE_BUDGET)
 
     def simulation_shapes(self) -> tuple[CollisionShape, ...]:
         """Convex pieces for a physics simulation (built once).
@@ -173,28 +173,37 @@ class MeshSolid(BuiltOnce):
         :data:`SIMULATION_MERGE_BUDGET` and the same tolerance where :data:`MERGE_BUDGET`
         stopped their merge.
         """
-        return self._simulation_shapes
+        return self._pieces(SIMULATION_MERGE_BUDGET)
 
     @cached_property
-    def _merged(self) -> tuple[tuple[CollisionShape, ...], bool]:
-        """The pieces within :data:`MERGE_BUDGET`, and whether the budget stopped the merge."""
-        return self._merge(MERGE_BUDGET)
+    def _merges(self) -> dict[int, tuple[tuple[CollisionShape, ...], int]]:
+        """The merges made so far: per budget, the pieces and the triangle tests they took."""
+        return {}
 
-    @cached_property
-    def _simulation_shapes(self) -> tuple[CollisionShape, ...]:
-        shapes, stopped = self._merged
-        return self._merge(SIMULATION_MERGE_BUDGET)[0] if stopped else shapes
+    def _pieces(self, budget: int) -> tuple[CollisionShape, ...]:
+        """The pieces within ``budget`` triangle tests, from a merge already made if it serves.
 
-    def _merge(self, budget: int) -> tuple[tuple[CollisionShape, ...], bool]:
+        The merge is greedy and deterministic, and the budget only ever stops it: a merge that
+        took fewer tests than two budgets gives the same pieces under both.
+        """
+        for made, (shapes, tests) in self._merges.items():
+            if made == budget or tests < min(made, budget):
+                return shapes
+        shapes, tests = self._merge(budget)
+        self._merges[budget] = (shapes, tests)
+        return shapes
+
+    def _merge(self, budget: int) -> tuple[tuple[CollisionShape, ...], int]:
+        """The pieces within ``budget`` triangle tests, and the tests the merge took."""
         # A convex mesh is its own hull: exact, and the merge's worst case (one piece tested
         # against every triangle at each join) avoided.
         if self.collision == "hull" or self.trimesh.is_convex:
-            return (convex_hull(self.vertices_m),), False
+            return (convex_hull(self.vertices_m),), 0
         corners = self.vertices_m[self.faces]  # (M, 3, 3)
         depth = self.wall_thickness_m()[:, None, None] * self.trimesh.face_normals[:, None, :]
         prisms = np.concatenate([corners, corners - depth], axis=1)
         merger = _PrismMerger(self.trimesh, corners, budget)
-        return tuple(merger.merge(prisms)), merger.stopped
+        return tuple(merger.merge(prisms)), merger.tests
 
     def wall_thickness_m(self) -> FloatArray:
         """Per triangle, the solid's thickness [m] under it: shortest of four inward rays."""
@@ -263,6 +272,8 @@ class _PrismMerger:
             self._neighbours[a].append(b)
             self._neighbours[b].append(a)
         self._budget = budget
+        self.tests = 0
+        """Triangle tests made so far (the budget stops the merge once they reach it)."""
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._collision = coal.CollisionRequest()
@@ -277,7 +288,7 @@ class _PrismMerger:
             taken[seed] = True
             piece, points = convex_hull(prisms[seed]), prisms[seed]
             frontier = collections.deque(self._neighbours[seed])
-            while frontier and self._budget > 0:
+            while frontier and self.tests < self._budget:
                 face = frontier.popleft()
                 if taken[face]:
                     continue
@@ -290,11 +301,6 @@ class _PrismMerger:
             pieces.append(piece)
         return pieces
 
-    @property
-    def stopped(self) -> bool:
-        """Whether the budget ran out (some prisms may have stayed apart that would join)."""
-        return self._budget <= 0
-
     def _inside(self, piece: CollisionShape, points: FloatArray) -> bool:
         """Whether no triangle enters ``piece`` (vertices ``points``) deeper than the tolerance.
 
@@ -303,7 +309,7 @@ class _PrismMerger:
         low = points.min(axis=0) - MERGE_TOLERANCE_M
         high = points.max(axis=0) + MERGE_TOLERANCE_M
         near = np.all((self._lows <= high) & (self._highs >= low), axis=1)
-        self._budget -= int(np.count_nonzero(near))
+        self.tests += int(np.count_nonzero(near))
         at_piece = piece.transform(np.eye(4))
         for t in np.flatnonzero(near).tolist():
             sliver = self._triangles[t].geometry

@@ -34,9 +34,9 @@ FloatArray = NDArray[np.float64]
 class PrismSolid(MeshSolid):
     """A :class:`MeshSolid` whose collision pieces are its triangles' prisms, unjoined."""
 
-    def _merge(self, budget: int) -> tuple[tuple[CollisionShape, ...], bool]:
-        """The prisms, unjoined whatever the budget (and no budget stopped anything)."""
-        return self._prisms, False
+    def _merge(self, budget: int) -> tuple[tuple[CollisionShape, ...], int]:
+        """The prisms, unjoined whatever the budget (no triangle tests)."""
+        return self._prisms, 0
 
     @cached_property
     def _prisms(self) -> tuple[CollisionShape, ...]:
