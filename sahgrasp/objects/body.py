@@ -74,6 +74,19 @@ class GraspObject:
         """Convex coal pieces whose union is the object, in the object frame."""
         return tuple(shape for s in self.solids for shape in s.collision_shapes())
 
+    def simulation_shapes(self) -> tuple[CollisionShape, ...]:
+        """Convex pieces for a physics simulation, in the object frame.
+
+        A solid's ``simulation_shapes()`` where it has one (a mesh whose merge of collision
+        pieces stopped at its budget merges them further,
+        :meth:`~sahgrasp.objects.MeshSolid.simulation_shapes`), otherwise its collision pieces.
+        """
+        return tuple(
+            shape
+            for s in self.solids
+            for shape in getattr(s, "simulation_shapes", s.collision_shapes)()
+        )
+
     def surface_patches(self) -> tuple[Patch, ...]:
         """The solids' boundary patches in the world frame (parts inside other solids included)."""
         return tuple(p.placed(self.T_world_object) for s in self.solids for p in s.boundary())

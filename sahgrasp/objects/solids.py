@@ -66,7 +66,11 @@ class Solid(Protocol):
         ...
 
     def collision_shapes(self) -> tuple[CollisionShape, ...]:
-        """Convex pieces whose union is the solid, in the object frame."""
+        """Convex pieces whose union is the solid, in the object frame.
+
+        A solid may also offer ``simulation_shapes()``, coarser pieces for a physics
+        simulation (:meth:`GraspObject.simulation_shapes`).
+        """
         ...
 
 

@@ -8,9 +8,8 @@ equality constraints, and a position servo on each independent joint with the UR
 as its torque limit. The palm is fixed: the simulation's world frame is the palm frame, so the
 wrist is welded at the grasp's pose and one compiled model serves every grasp of an object (only
 the object's pose and the joint angles change). The object is a free body made of the convex
-pieces the project builds for coal (:meth:`~sahgrasp.objects.GraspObject.collision_shapes`; a
-mesh whose merge stopped at its budget is merged further,
-:meth:`~sahgrasp.objects.MeshSolid.simulation_shapes`).
+pieces the project builds for coal (:meth:`~sahgrasp.objects.GraspObject.simulation_shapes`: its
+collision pieces, a mesh's merged further where its budget stopped their merge).
 The hand collides with the object only (the IK already keeps the hand free of self-collision).
 """
 
@@ -29,7 +28,7 @@ from numpy.typing import NDArray
 
 from sahgrasp.core.errors import HandModelError, SahGraspError
 from sahgrasp.model.hand import Hand
-from sahgrasp.objects import GraspObject, MeshSolid
+from sahgrasp.objects import GraspObject
 from sahgrasp.sim.settings import HoldSettings
 
 __all__ = ["SimModel", "SimModelError", "build_model"]
@@ -225,22 +224,11 @@ def _hand_xml(hand: Hand, world: ET.Element, assets: ET.Element, actuators: ET.E
         element.set("conaffinity", str(_HAND_CONAFFINITY))
 
 
-def _simulation_shapes(obj: GraspObject) -> tuple[Any, ...]:
-    """The object's convex pieces, a mesh's merged further where its budget stopped the merge."""
-    return tuple(
-        shape
-        for solid in obj.solids
-        for shape in (
-            solid.simulation_shapes() if isinstance(solid, MeshSolid) else solid.collision_shapes()
-        )
-    )
-
-
 def _object_xml(obj: GraspObject, world: ET.Element, assets: ET.Element,
                 settings: HoldSettings) -> None:  # fmt: skip
     body = ET.SubElement(world, "body", {"name": "object"})
     ET.SubElement(body, "freejoint", {"name": "object"})
-    for k, shape in enumerate(_simulation_shapes(obj)):
+    for k, shape in enumerate(obj.simulation_shapes()):
         placement = pin.SE3(shape.placement[:3, :3], shape.placement[:3, 3])
         element = _geom(body, f"object/{k}", shape.geometry, placement, assets)
         element.set("contype", str(_OBJECT_CONTYPE))
