@@ -620,7 +620,8 @@ def _verify_cells(v: dict[str, Any] | None) -> tuple[Any, ...]:
 
 def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
     if hold is None:
-        return ("-",) * 10
+        # The mass, a rate per hold test, the cross-check count, the failures, the speed.
+        return ("-",) * (len(HOLD_SETTINGS) + 4)
 
     def rate(row: dict[str, Any]) -> str:
         if not row["checked"]:
@@ -628,7 +629,7 @@ def _hold_cells(hold: dict[str, Any] | None) -> tuple[Any, ...]:
         return f"{round(100 * row['hold_rate'])}% ({row['holds']}/{row['checked']})"
 
     speed = hold["default"]["checks_per_cpu_s"]
-    # Rows of an older document lack the 0.1 kg and solver cross-check columns.
+    # Rows of an older document lack the 0.1 kg, cross-check and soft-friction columns.
     extra = [rate(hold[k]) if k in hold else "-" for k in HOLD_SETTINGS[2:]]
     return (
         round(hold["mass_kg"], 3),
