@@ -204,6 +204,13 @@ def _tangents(n: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.f
     return t1, np.cross(n, t1)
 
 
+def _motion(a: tuple[float, ...], b: tuple[float, ...]) -> tuple[float, float]:
+    """Distance [m] and angle [deg] between two poses (x, y, z, then quaternion w, x, y, z)."""
+    distance = math.sqrt((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2 + (b[2] - a[2]) ** 2)
+    dot = min(1.0, abs(b[3] * a[3] + b[4] * a[4] + b[5] * a[5] + b[6] * a[6]))
+    return distance, math.degrees(2.0 * math.acos(dot))
+
+
 def balanced_forces(
     points_m: NDArray[np.float64],
     normals: NDArray[np.float64],
@@ -425,13 +432,12 @@ class HoldTester:
         centre = d.xipos[self.sim.object_body]
         a = self.sim.object_qpos
         quat = d.qpos[a + 3 : a + 7]
-        x0, y0, z0 = (float(v) for v in start[0])
-        w0, i0, j0, k0 = (float(v) for v in start[1])
+        origin = (*(float(v) for v in start[0]), *(float(v) for v in start[1]))
         bad_qacc = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
         full = d.warning[mujoco.mjtWarning.mjWARN_CNSTRFULL]  # contacts dropped: not trusted
         window = max(1, round(_REST_WINDOW_S / (self._chunk * m.opt.timestep)))
         path: list[tuple[float, float]] = []  # per chunk: distance [m] and angle [deg] moved
-        last = (x0, y0, z0, w0, i0, j0, k0)
+        last = origin
         while done < steps:
             n = min(self._chunk, steps - done)
             if ramp is not None and done < ramp[2]:
@@ -447,19 +453,14 @@ class HoldTester:
             done += n
             if bad_qacc.number > 0 or full.number > 0:
                 return moved, turned, done * m.opt.timestep, False
-            x, y, z = centre.tolist()
-            w, i, j, k = quat.tolist()
-            moved = max(moved, math.sqrt((x - x0) ** 2 + (y - y0) ** 2 + (z - z0) ** 2))
-            dot = min(1.0, abs(w * w0 + i * i0 + j * j0 + k * k0))
-            turned = max(turned, math.degrees(2.0 * math.acos(dot)))
+            pose = (*centre.tolist(), *quat.tolist())
+            distance, angle = _motion(origin, pose)
+            moved, turned = max(moved, distance), max(turned, angle)
             if moved >= stop[0] or turned >= stop[1]:
                 break
             if rest is not None:
-                lx, ly, lz, lw, li, lj, lk = last
-                step_dot = min(1.0, abs(w * lw + i * li + j * lj + k * lk))
-                path.append((math.sqrt((x - lx) ** 2 + (y - ly) ** 2 + (z - lz) ** 2),
-                             math.degrees(2.0 * math.acos(step_dot))))  # fmt: skip
-                last = (x, y, z, w, i, j, k)
+                path.append(_motion(last, pose))
+                last = pose
                 if len(path) >= 2 * window:
                     # The object is damped and the pull constant: once it rests, it stays.
                     span = window * self._chunk * m.opt.timestep
