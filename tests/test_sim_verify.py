@@ -68,6 +68,7 @@ def test_planner_keeps_only_grasps_that_hold_ranked_by_margin() -> None:
     rates = hold_rates(hand, can, [g.q for g in plan.grasps], {"default": HoldSettings()})
     assert rates["default"]["holds"] == len(plan.grasps)
     assert rates["default"]["held"] == [True] * len(plan.grasps)
+    assert rates["default"]["mass_kg"] == pytest.approx(0.379, rel=0.01)  # the can at 1000 kg/m^3
     # Without friction nothing holds: the check drops every grasp.
     frictionless = PhysicsCheck(hand, can, HoldSettings(friction=0.0))
     assert not plan_grasps(hand, can, settings, check=frictionless).grasps

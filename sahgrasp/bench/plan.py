@@ -183,7 +183,7 @@ def _hold_rates(hand: Any, obj: Any, qs: list[Any], fingers: list[Any]) -> dict[
     crossed = zip(rates["default"]["held"], rates["dexgraspbench"]["held"], strict=True)
     return {
         **rates,
-        "mass_kg": _mass_kg(hand, obj),
+        "mass_kg": rates["default"]["mass_kg"],
         "default_not_dexgraspbench": sum(a and not b for a, b in crossed),
     }
 
@@ -269,12 +269,6 @@ def _verified_physics(
         "light_0.1kg": {k: rates["light_0.1kg"][k] for k in ("checked", "holds", "held")},
         "returned_first_batch": first_batch,
     }
-
-
-def _mass_kg(hand: Any, obj: Any) -> float:
-    from sahgrasp.sim import HoldSettings, build_model
-
-    return build_model(hand, obj, HoldSettings()).mass_kg
 
 
 ATLAS_OBJECTS = ("can", "bottle")

@@ -136,8 +136,8 @@ def hold_rates(
 
     Returns, per name: ``checked``, ``holds``, ``hold_rate`` (None without grasps),
     ``holds_bodex``, the ``reasons`` of the failures counted, ``held`` (each grasp's verdict,
-    in the order of ``qs``) and ``checks_per_cpu_s`` (hold tests per CPU second of this
-    process, the models' compilation excluded).
+    in the order of ``qs``), ``checks_per_cpu_s`` (hold tests per CPU second of this
+    process, the models' compilation excluded) and ``mass_kg`` (the object's, in that test).
     """
     import time
     from collections import Counter
@@ -158,5 +158,6 @@ def hold_rates(
             "reasons": dict(sorted(Counter(r.reason for r in results if not r.holds).items())),
             "held": [r.holds for r in results],
             "checks_per_cpu_s": len(results) / cpu_s if results and cpu_s > 0 else None,
+            "mass_kg": tester.sim.mass_kg,
         }
     return out
