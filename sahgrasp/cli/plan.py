@@ -268,7 +268,7 @@ def run(args: argparse.Namespace) -> int:
     from sahgrasp.core.errors import InvalidSettingsError
 
     folder = Path(args.object).is_dir()
-    _hold_settings(args)  # the verify options checked before any work
+    hold = _hold_settings(args)  # the verify options checked before any work
     check_outputs([args.json, args.html], inputs=[args.object, args.hand])
     check_json_inputs(args.hand)
     if folder:
@@ -278,10 +278,10 @@ def run(args: argparse.Namespace) -> int:
             raise InvalidSettingsError("--html shows one object's grasps; give a mesh file")
         if args.json not in (None, "-") and not is_jsonl(args.json):
             raise InvalidSettingsError("a folder gives JSON Lines: give --json OUT.jsonl or -")
-        return _run_folder(args)
+        return _run_folder(args, hold)
     if args.resume:
         raise InvalidSettingsError("--resume continues a folder's JSON Lines output")
-    return _run_object(args)
+    return _run_object(args, hold)
 
 
 def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
@@ -314,7 +314,7 @@ def _load(args: argparse.Namespace) -> tuple[Any, dict[str, Any]]:
     return obj, data
 
 
-def _run_object(args: argparse.Namespace) -> int:
+def _run_object(args: argparse.Namespace, hold: Any) -> int:
     settings = _settings(args)
     from sahgrasp.model.hand import load_hand
     from sahgrasp.planner import plan_grasps
@@ -322,7 +322,6 @@ def _run_object(args: argparse.Namespace) -> int:
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     obj, spec = _load(args)
-    hold = _hold_settings(args)
     check = None
     if hold is not None:
         from sahgrasp.sim.verify import PhysicsCheck
@@ -384,7 +383,7 @@ def _lines(doc: dict[str, Any]) -> list[str]:
     return lines
 
 
-def _run_folder(args: argparse.Namespace) -> int:
+def _run_folder(args: argparse.Namespace, hold: Any) -> int:
     settings = _settings(args)
     from sahgrasp.ik.stream import ResultsWriter
     from sahgrasp.model.hand import load_hand
@@ -393,7 +392,6 @@ def _run_folder(args: argparse.Namespace) -> int:
     out = human_stream(args.json)
     hand = load_hand(args.hand)
     jobs = folder_jobs(args.object, settings, args.scale, hand.description.name)
-    hold = _hold_settings(args)
     make_check = None
     if hold is not None:
         from sahgrasp.sim.verify import PhysicsCheckFactory
@@ -403,7 +401,7 @@ def _run_folder(args: argparse.Namespace) -> int:
     done: set[str] = set()
     failed = 0
     if args.json not in (None, "-"):
-        header = _header(hand, settings, args)
+        header = _header(hand, settings, args, hold)
         writer = ResultsWriter(args.json, header, args.resume)
         for entry in writer.finished():
             done.add(str(entry.get("object_digest")))
@@ -448,7 +446,7 @@ def _run_folder(args: argparse.Namespace) -> int:
     return 0 if failed == 0 else 1
 
 
-def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any]:
+def _header(hand: Any, settings: Any, args: argparse.Namespace, hold: Any) -> dict[str, Any]:
     import hashlib
     import json
 
@@ -457,7 +455,7 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     data = {
         "hand": hand.description.name,
         "hand_digest": hand.description.digest(),
-        "settings": {**settings.to_dict(), "scale": args.scale, **_verify_header(args)},
+        "settings": {**settings.to_dict(), "scale": args.scale, **_verify_header(args, hold)},
         "sequence_digest": "plan",
     }
     digest = hashlib.sha256(json.dumps(data, sort_keys=True).encode("utf-8")).hexdigest()
@@ -469,11 +467,10 @@ def _header(hand: Any, settings: Any, args: argparse.Namespace) -> dict[str, Any
     }
 
 
-def _verify_header(args: argparse.Namespace) -> dict[str, Any]:
-    """The hold test's settings in a folder run's header (a resume must use the same)."""
+def _verify_header(args: argparse.Namespace, hold: Any) -> dict[str, Any]:
+    """The hold test's settings ``hold`` in a folder run's header (a resume must use the same)."""
     import dataclasses
 
-    hold = _hold_settings(args)
     if hold is None:
         return {}
     physics = dataclasses.asdict(hold)
