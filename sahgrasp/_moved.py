@@ -34,6 +34,7 @@ __all__ = [
 
 #: Old dotted module name -> its new name.
 MOVED: dict[str, str] = {
+    "sahgrasp.bench.extras": "sahgrasp.core.extras",
     "sahgrasp.contacts": "sahgrasp.model.contacts",
     "sahgrasp.errors": "sahgrasp.core.errors",
     "sahgrasp.fileio": "sahgrasp.core.fileio",

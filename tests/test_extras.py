@@ -6,13 +6,21 @@ import os
 import re
 import subprocess
 import sys
+from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from sahgrasp.core import extras
 from sahgrasp.core.errors import MissingExtraError, SahGraspError
-from sahgrasp.core.extras import has_extra, install_hint, require_extra
+from sahgrasp.core.extras import (
+    has_extra,
+    install_command,
+    install_hint,
+    is_editable_install,
+    require_extra,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -91,3 +99,49 @@ def test_the_scenes_colour_quality_without_matplotlib(tmp_path: Path) -> None:
 
     assert colors == str(quality_colors([0.0, 0.5, 1.0, -1.0], 0.0).round(4).tolist())
     assert loaded == "False"
+
+
+# The install command follows how sahgrasp was installed.
+class _Dist:
+    def __init__(self, direct_url: str | None) -> None:
+        self.direct_url = direct_url
+
+    def read_text(self, name: str) -> str | None:
+        return self.direct_url if name == "direct_url.json" else None
+
+
+@pytest.mark.parametrize(
+    ("direct_url", "editable"),
+    [
+        ('{"dir_info": {"editable": true}, "url": "file:///src/sahgrasp"}', True),
+        ('{"dir_info": {}, "url": "file:///src/sahgrasp"}', False),  # pip install .
+        (None, False),  # from the package index: no direct_url.json
+        ("not json", False),
+    ],
+)
+def test_editable_installs_are_told_apart(
+    monkeypatch: pytest.MonkeyPatch, direct_url: str | None, editable: bool
+) -> None:
+    monkeypatch.setattr(metadata, "distribution", lambda name: _Dist(direct_url))
+    assert is_editable_install() is editable
+    expected = 'pip install -e ".[bench]"' if editable else 'pip install "sahgrasp[bench]"'
+    assert install_command("bench") == expected
+
+
+def test_a_source_folder_without_install_counts_as_a_checkout(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def missing(name: str) -> Any:
+        raise metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(metadata, "distribution", missing)
+    assert install_command("sim") == 'pip install -e ".[sim]"'
+
+
+def test_the_bench_peers_say_the_command_that_fits(monkeypatch: pytest.MonkeyPatch) -> None:
+    from sahgrasp.bench import peers
+
+    monkeypatch.setattr(metadata, "distribution", lambda name: _Dist(None))
+    monkeypatch.setattr(peers, "_missing_module", lambda modules: modules[0])
+    skipped = peers.available_peers(["pink"])[1]
+    assert 'install it with pip install "sahgrasp[bench]"' in skipped["pink"]

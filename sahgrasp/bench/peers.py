@@ -20,8 +20,8 @@ import pinocchio as pin
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
-from sahgrasp.bench.extras import install_command
 from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.extras import install_command
 from sahgrasp.ik.initial import hang_from_thumb
 from sahgrasp.ik.solver import Attempt, ContactProblem, IKSettings, InnerSolver
 from sahgrasp.model.hand import Hand
@@ -31,7 +31,7 @@ __all__ = ["BENCH_EXTRA", "PEERS", "PEER_MODULES", "available_peers", "pink_atte
 
 BENCH_EXTRA = 'pip install "sahgrasp[bench]"'
 """How to install the optional peers (the ``bench`` extra of the package) from the package index;
-messages say :func:`sahgrasp.bench.extras.install_command`, which fits an editable install too."""
+messages say :func:`sahgrasp.core.extras.install_command`, which fits an editable install too."""
 
 
 def _finish(

@@ -26,9 +26,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from sahgrasp.bench.extras import install_command
 from sahgrasp.bench.report import progress_reporter
 from sahgrasp.core.errors import InvalidSettingsError
+from sahgrasp.core.extras import install_command
 from sahgrasp.core.progress import ProgressCallback
 from sahgrasp.ik import random_problems
 from sahgrasp.model.hand import load_hand
